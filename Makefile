@@ -1,0 +1,32 @@
+# slamrun: the two commands that work on a fresh machine are `make campaign` and `make test`.
+PYTHON ?= python3
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+SPEC   ?= configs/demo.yaml
+ARGS   ?=
+
+.PHONY: install campaign test bench lint images clean
+
+install: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e '.[dev]'
+	touch $@
+
+campaign: install
+	$(BIN)/slamrun campaign $(SPEC) $(ARGS)
+
+test: install
+	$(BIN)/python -m pytest $(ARGS)
+
+bench: install
+	$(BIN)/python -m bench $(ARGS)
+
+lint: install
+	$(BIN)/ruff check runner methods tests bench
+	$(BIN)/ruff format --check runner methods tests bench
+
+clean:
+	rm -rf $(VENV) results .cache

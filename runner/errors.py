@@ -1,0 +1,44 @@
+"""One exception family. The CLI catches `SlamRunError` and prints its one-line message."""
+
+from __future__ import annotations
+
+
+class SlamRunError(Exception):
+    """Root of every error this project raises on purpose."""
+
+
+class SpecError(SlamRunError):
+    """The campaign spec is invalid (lists every problem at once)."""
+
+    def __init__(self, source: str, problems: list[str]):
+        self.source = source
+        self.problems = problems
+        lines = "\n".join(f"  {p}" for p in problems)
+        super().__init__(f"{source}: {len(problems)} problem(s) in the spec:\n{lines}")
+
+
+class DatasetError(SlamRunError):
+    """A sequence folder or one of its files is missing or malformed."""
+
+
+class TrajectoryFormatError(SlamRunError):
+    """A trajectory file cannot be parsed; the message names the file and line."""
+
+
+class MethodFailure(SlamRunError):
+    """A method ran but produced no usable trajectory: this is data, not a bug.
+
+    `kind` is one of the method failure kinds (not_initialized, lost, no_output, crashed, timeout, oom).
+    """
+
+    def __init__(self, kind: str, message: str):
+        self.kind = kind
+        super().__init__(message)
+
+
+class InfraError(SlamRunError):
+    """An infrastructure fault (image missing, daemon gone, disk full): retried, never the method's result."""
+
+
+class LedgerLockedError(SlamRunError):
+    """Another runner holds the results directory."""

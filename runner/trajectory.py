@@ -1,0 +1,261 @@
+"""Trajectories: the TUM reader/writer pair and readers for the other formats methods write.
+
+A `Trajectory` holds camera-to-world poses sorted by time: timestamps (N,), positions (N, 3) and
+unit quaternions (N, 4) in `qx qy qz qw` order. The `qx qy qz qw` convention lives only here.
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from runner.errors import TrajectoryFormatError
+
+NON_UNIT_TOL = 1e-3  # |q| further than this from 1 counts as non-unit (renormalised)
+FAR_FROM_UNIT_TOL = 0.1  # |q| further than this from 1 counts as far from unit (a converter bug upstream)
+
+
+@dataclass(frozen=True)
+class ReadReport:
+    """What a reader had to repair, so that it is reported rather than hidden."""
+
+    n_rows: int = 0
+    was_unsorted: bool = False
+    n_duplicates_dropped: int = 0
+    n_quat_non_unit: int = 0
+    n_quat_far_from_unit: int = 0
+    max_quat_norm_error: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """Camera-to-world poses, sorted by strictly increasing timestamp."""
+
+    timestamps: np.ndarray
+    positions: np.ndarray
+    quaternions: np.ndarray  # qx qy qz qw, unit length
+    report: ReadReport = field(default_factory=ReadReport)
+
+    def __len__(self) -> int:
+        return len(self.timestamps)
+
+    def rotations(self) -> np.ndarray:
+        """Rotation matrices (N, 3, 3)."""
+        return quat_to_rotmat(self.quaternions)
+
+    def with_timestamps(self, timestamps: np.ndarray) -> Trajectory:
+        """The same poses at other times (re-sorted), e.g. mapping mirror time back to original time."""
+        return from_arrays(np.asarray(timestamps, float), self.positions, self.quaternions)
+
+
+def from_arrays(timestamps: np.ndarray, positions: np.ndarray, quaternions: np.ndarray) -> Trajectory:
+    """Build a trajectory from rows in any order: sort, drop duplicate timestamps, normalise quaternions."""
+    data = np.column_stack([timestamps, positions, quaternions]).astype(float, copy=False)
+    return _normalise(data, source="<arrays>")
+
+
+def from_matrices(timestamps: np.ndarray, matrices: np.ndarray) -> Trajectory:
+    """Build a trajectory from (N, 3, 4) or (N, 4, 4) camera-to-world matrices."""
+    matrices = np.asarray(matrices, float)
+    quats = rotmat_to_quat(matrices[:, :3, :3])
+    return from_arrays(np.asarray(timestamps, float), matrices[:, :3, 3], quats)
+
+
+# ---------------------------------------------------------------- readers
+
+
+def read_tum(path: str | Path) -> Trajectory:
+    """Read a TUM file (`timestamp tx ty tz qx qy qz qw`, `#` comments, blank lines allowed)."""
+    data = _read_table(path, ncols=8)
+    return _normalise(data, source=str(path))
+
+
+def read_kitti(path: str | Path, timestamps: np.ndarray) -> Trajectory:
+    """Read KITTI poses (12 numbers per row, a 3x4 [R|t] row-major); timestamps come from the frames."""
+    data = _read_table(path, ncols=12)
+    timestamps = np.asarray(timestamps, float)
+    if len(timestamps) != len(data):
+        raise TrajectoryFormatError(
+            f"{path}: {len(data)} KITTI poses but {len(timestamps)} timestamps; expected one pose per frame"
+        )
+    return from_matrices(timestamps, data.reshape(-1, 3, 4))
+
+
+def read_timestamped_3x4(path: str | Path) -> Trajectory:
+    """Read rows of `timestamp r11 r12 r13 tx r21 r22 r23 ty r31 r32 r33 tz` (13 numbers)."""
+    data = _read_table(path, ncols=13)
+    return from_matrices(data[:, 0], data[:, 1:].reshape(-1, 3, 4))
+
+
+def read_4x4_matrices(path: str | Path, timestamps: np.ndarray | None = None) -> Trajectory:
+    """Read 4x4 matrices: rows of 17 numbers (timestamp + 16) or of 16 numbers with given timestamps."""
+    text = _read_text(path)
+    first = next((ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+    ncols = len(first.replace(",", " ").split())
+    if ncols == 17:
+        data = _read_table(path, ncols=17, text=text)
+        return from_matrices(data[:, 0], data[:, 1:].reshape(-1, 4, 4))
+    if ncols == 4:  # one matrix row per line, four lines per matrix
+        rows = _read_table(path, ncols=4, text=text)
+        if len(rows) % 4:
+            raise TrajectoryFormatError(f"{path}: {len(rows)} rows of 4 numbers; expected a multiple of 4")
+        mats = rows.reshape(-1, 4, 4)
+    else:
+        mats = _read_table(path, ncols=16, text=text).reshape(-1, 4, 4)
+    if timestamps is None or len(timestamps) != len(mats):
+        n_ts = "no" if timestamps is None else len(timestamps)
+        raise TrajectoryFormatError(f"{path}: {len(mats)} matrices but {n_ts} timestamps; expected one each")
+    return from_matrices(np.asarray(timestamps, float), mats)
+
+
+def write_tum(path: str | Path, traj: Trajectory) -> None:
+    """Write a TUM file with full precision; `read_tum` reads it back exactly."""
+    data = np.column_stack([traj.timestamps, traj.positions, traj.quaternions])
+    buf = io.StringIO()
+    buf.write("# timestamp tx ty tz qx qy qz qw\n")
+    np.savetxt(buf, data, fmt="%.17g")
+    Path(path).write_text(buf.getvalue())
+
+
+# ---------------------------------------------------------------- rotations
+
+
+def rotmat_to_quat(rot: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) → unit quaternions (N, 4) `qx qy qz qw`, with qw >= 0.
+
+    Magnitudes by Sarabandi and Thomas (2018) with threshold eta = 0; signs taken relative to the
+    largest component, which stays well defined near 180 degrees where qw -> 0.
+    """
+    r = np.asarray(rot, float)
+    single = r.ndim == 2
+    r = r.reshape(-1, 3, 3)
+    r11, r12, r13 = r[:, 0, 0], r[:, 0, 1], r[:, 0, 2]
+    r21, r22, r23 = r[:, 1, 0], r[:, 1, 1], r[:, 1, 2]
+    r31, r32, r33 = r[:, 2, 0], r[:, 2, 1], r[:, 2, 2]
+    d32, d13, d21 = r32 - r23, r13 - r31, r21 - r12
+    s12, s13, s23 = r12 + r21, r13 + r31, r23 + r32
+
+    def component(diag: np.ndarray, num: np.ndarray, den: np.ndarray) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            alt = 0.5 * np.sqrt(np.maximum(num, 0.0) / den)
+        return np.where(diag > 0.0, 0.5 * np.sqrt(np.maximum(1.0 + diag, 0.0)), np.nan_to_num(alt))
+
+    w = component(r11 + r22 + r33, d32**2 + d13**2 + d21**2, 3.0 - r11 - r22 - r33)
+    x = component(r11 - r22 - r33, d32**2 + s12**2 + s13**2, 3.0 - r11 + r22 + r33)
+    y = component(-r11 + r22 - r33, d13**2 + s12**2 + s23**2, 3.0 + r11 - r22 + r33)
+    z = component(-r11 - r22 + r33, d21**2 + s13**2 + s23**2, 3.0 + r11 + r22 - r33)
+    q = np.stack([x, y, z, w], axis=1)
+
+    # Signs relative to the largest component (taken positive).
+    sign = np.ones_like(q)
+    ref = np.argmax(q, axis=1)
+    sgn = lambda v: np.where(v < 0.0, -1.0, 1.0)  # noqa: E731
+    for idx, cols in (
+        (3, {0: d32, 1: d13, 2: d21}),
+        (0, {3: d32, 1: s12, 2: s13}),
+        (1, {3: d13, 0: s12, 2: s23}),
+        (2, {3: d21, 0: s13, 1: s23}),
+    ):
+        m = ref == idx
+        for col, v in cols.items():
+            sign[m, col] = sgn(v[m])
+    q = q * sign
+    q *= np.where(q[:, 3:4] < 0.0, -1.0, 1.0)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    return q[0] if single else q
+
+
+def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
+    """Unit quaternions (N, 4) `qx qy qz qw` → rotation matrices (N, 3, 3)."""
+    q = np.asarray(q, float)
+    single = q.ndim == 1
+    q = q.reshape(-1, 4)
+    x, y, z, w = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    r = np.empty((len(q), 3, 3))
+    r[:, 0, 0] = 1 - 2 * (y * y + z * z)
+    r[:, 0, 1] = 2 * (x * y - z * w)
+    r[:, 0, 2] = 2 * (x * z + y * w)
+    r[:, 1, 0] = 2 * (x * y + z * w)
+    r[:, 1, 1] = 1 - 2 * (x * x + z * z)
+    r[:, 1, 2] = 2 * (y * z - x * w)
+    r[:, 2, 0] = 2 * (x * z - y * w)
+    r[:, 2, 1] = 2 * (y * z + x * w)
+    r[:, 2, 2] = 1 - 2 * (x * x + y * y)
+    return r[0] if single else r
+
+
+# ---------------------------------------------------------------- internals
+
+
+def _read_text(path: str | Path) -> str:
+    try:
+        return Path(path).read_text()
+    except FileNotFoundError:
+        raise TrajectoryFormatError(f"{path}: no such trajectory file") from None
+    except UnicodeDecodeError:
+        raise TrajectoryFormatError(f"{path}: not a text file; expected numbers in rows") from None
+
+
+def _read_table(path: str | Path, ncols: int, text: str | None = None) -> np.ndarray:
+    """Parse rows of `ncols` numbers separated by spaces or commas; errors name the file and line."""
+    text = _read_text(path) if text is None else text
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+            data = np.loadtxt(io.StringIO(text.replace(",", " ")), comments="#", ndmin=2, dtype=float)
+    except ValueError:
+        data = None
+    if data is not None and (data.size == 0 or data.shape[1] == ncols):
+        return data.reshape(-1, ncols)
+    # Slow path: find the first offending line for the message.
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        body = line.split("#", 1)[0].replace(",", " ").split()
+        if not body:
+            continue
+        if len(body) != ncols:
+            raise TrajectoryFormatError(
+                f"{path}:{lineno}: {len(body)} values, expected {ncols}: {line.strip()[:80]!r}"
+            )
+        try:
+            [float(v) for v in body]
+        except ValueError:
+            raise TrajectoryFormatError(f"{path}:{lineno}: not a number in {line.strip()[:80]!r}") from None
+    raise TrajectoryFormatError(f"{path}: cannot parse as rows of {ncols} numbers")
+
+
+def _normalise(data: np.ndarray, source: str) -> Trajectory:
+    n_rows = len(data)
+    if n_rows == 0:
+        empty = np.zeros((0, 3)), np.zeros((0, 4))
+        return Trajectory(np.zeros(0), *empty, report=ReadReport())
+    t = data[:, 0]
+    was_unsorted = bool(np.any(np.diff(t) < 0))
+    order = np.argsort(t, kind="stable")
+    data = data[order]
+    keep = np.ones(len(data), bool)
+    keep[1:] = np.diff(data[:, 0]) != 0
+    n_dup = int(np.count_nonzero(~keep))
+    data = data[keep]
+    quat = data[:, 4:8]
+    norm = np.linalg.norm(quat, axis=1)
+    finite = np.isfinite(norm)
+    if np.any(finite & (norm < 1e-12)):
+        bad = int(np.flatnonzero(finite & (norm < 1e-12))[0])
+        raise TrajectoryFormatError(f"{source}: zero quaternion at timestamp {data[bad, 0]!r}")
+    err = np.abs(norm - 1.0)
+    finite_err = err[finite]
+    report = ReadReport(
+        n_rows=n_rows,
+        was_unsorted=was_unsorted,
+        n_duplicates_dropped=n_dup,
+        n_quat_non_unit=int(np.count_nonzero(finite_err > NON_UNIT_TOL)),
+        n_quat_far_from_unit=int(np.count_nonzero(finite_err > FAR_FROM_UNIT_TOL)),
+        max_quat_norm_error=float(finite_err.max()) if finite_err.size else 0.0,
+    )
+    with np.errstate(invalid="ignore"):
+        quat = quat / norm[:, None]
+    return Trajectory(data[:, 0].copy(), data[:, 1:4].copy(), quat, report=report)

@@ -1,0 +1,175 @@
+"""TUM-Mono metrics against values built independently (known Sim(3) transforms), ATE against evo."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from runner.evaluation import EvalStatus, ate, rpe, tum_mono
+from runner.trajectory import Trajectory, from_arrays, read_tum
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def ground_truth(n: int = 400, seed: int = 0, nan_middle: bool = True) -> Trajectory:
+    """A loop-like path with GT only in the first and last 20 %, as in groundtruthSync.txt."""
+    t = 1000.0 + np.arange(n) * 0.05
+    phase = np.linspace(0, 2 * np.pi, n)
+    pos = np.column_stack([np.cos(phase) * 2, np.sin(phase) * 1.5, 0.3 * np.sin(3 * phase)])
+    pos += np.random.default_rng(seed).normal(scale=0.02, size=pos.shape)
+    quat = Rotation.from_euler("zyx", np.column_stack([phase, 0.1 * np.sin(phase), 0.05 * phase])).as_quat()
+    if nan_middle:
+        mid = slice(int(0.2 * n), int(0.8 * n))
+        pos[mid] = np.nan
+        quat[mid] = np.nan
+    return Trajectory(t, pos, quat)
+
+
+def sim3(scale: float, rotvec, trans) -> tuple[float, np.ndarray, np.ndarray]:
+    return scale, Rotation.from_rotvec(rotvec).as_matrix(), np.asarray(trans, float)
+
+
+def inverse_apply(s: float, r: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Points p with s R p + t = x."""
+    return (x - t) @ r / s
+
+
+def estimate_from(gt: Trajectory, est_pos: np.ndarray, keep: np.ndarray | None = None) -> Trajectory:
+    keep = np.ones(len(gt), bool) if keep is None else keep
+    quat = np.tile([0, 0, 0, 1.0], (int(keep.sum()), 1))
+    return from_arrays(gt.timestamps[keep], est_pos[keep], quat)
+
+
+def test_exact_similarity_gives_zero_errors():
+    gt = ground_truth(nan_middle=False)
+    s, r, t = sim3(3.7, [0.3, -1.2, 0.5], [5, -2, 1])
+    est = estimate_from(gt, inverse_apply(s, r, t, gt.positions))
+    res = tum_mono(gt, est)
+    assert res.status is EvalStatus.ok
+    for name in ("e_t", "e_r", "e_align", "e_start", "e_end", "e_rmse"):
+        assert getattr(res, name) == pytest.approx(0, abs=1e-9), name
+    assert res.e_s == pytest.approx(1, abs=1e-12)
+    a = ate(gt, est)
+    assert a.rmse == pytest.approx(0, abs=1e-9) and a.scale == pytest.approx(3.7, rel=1e-12)
+
+
+def test_known_drift_between_segments():
+    """Start segment seen through S_a, end through S_b: e_s = s_a/s_b, e_r = angle(R_b R_a^T), e_t = |t(S_b S_a^-1)|."""
+    gt = ground_truth()
+    n = len(gt)
+    sa = sim3(2.0, [0.1, 0.2, -0.3], [1, 2, 3])
+    sb = sim3(2.5, [0.1, 0.2, -0.3 + np.radians(7)], [1.5, 1.0, 3.2])
+    est_pos = np.empty_like(gt.positions)
+    half = n // 2
+    est_pos[:half] = inverse_apply(*sa, gt.positions[:half])
+    est_pos[half:] = inverse_apply(*sb, gt.positions[half:])
+    est_pos[np.isnan(est_pos)] = 0.0  # the middle: any finite positions
+    est = estimate_from(gt, est_pos)
+    res = tum_mono(gt, est)
+    assert res.status is EvalStatus.ok
+    assert res.e_s == pytest.approx(2.0 / 2.5, rel=1e-9)
+    expected_r = np.degrees(Rotation.from_matrix(sb[1] @ sa[1].T).magnitude())
+    assert res.e_r == pytest.approx(expected_r, rel=1e-9)
+    # S_b S_a^-1 translation, written out independently: t_b - (s_b/s_a) R_b R_a^T t_a
+    t_drift = sb[2] - (sb[0] / sa[0]) * sb[1] @ sa[1].T @ sa[2]
+    assert res.e_t == pytest.approx(np.linalg.norm(t_drift), rel=1e-9)
+    assert res.e_start == pytest.approx(0, abs=1e-9) and res.e_end == pytest.approx(0, abs=1e-9)
+    # e_align over all estimated positions, computed point by point
+    d = [(sb[0] * sb[1] @ p + sb[2]) - (sa[0] * sa[1] @ p + sa[2]) for p in est.positions]
+    assert res.e_align == pytest.approx(np.sqrt(np.mean(np.sum(np.square(d), axis=1))), rel=1e-9)
+    assert res.e_rmse > 0.01
+    assert res.e_s_sym == pytest.approx(1.25)
+
+
+def test_noise_gives_segment_rmse():
+    gt = ground_truth(nan_middle=False)
+    noise = np.random.default_rng(5).normal(scale=0.01, size=gt.positions.shape)
+    res = tum_mono(gt, estimate_from(gt, gt.positions + noise))
+    assert 0.005 < res.e_start < 0.02 and 0.005 < res.e_end < 0.02
+
+
+def test_segment_split_follows_gt_rows():
+    """With n GT rows, start = rows 1..floor(n/2), end = rows ceil(n/2)..n (odd n shares the middle row)."""
+    gt = ground_truth(n=401, nan_middle=False)
+    keep = np.zeros(401, bool)
+    keep[[198, 199, 200]] = True  # 1-based rows 199..201: only row 201 is in both segments
+    keep[[0, 1, 2, 398, 399, 400]] = True
+    res = tum_mono(gt, estimate_from(gt, gt.positions, keep))
+    assert res.status is EvalStatus.ok
+
+
+def test_failure_cases():
+    gt = ground_truth()
+    ok = estimate_from(gt, np.nan_to_num(gt.positions))
+    assert tum_mono(gt, ok).status is EvalStatus.ok
+    empty = Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4)))
+    assert tum_mono(gt, empty).status is EvalStatus.empty
+    with_nan = np.nan_to_num(gt.positions)
+    with_nan[5, 1] = np.nan
+    assert tum_mono(gt, estimate_from(gt, with_nan)).status is EvalStatus.nan
+    shifted = from_arrays(ok.timestamps + 0.0011, ok.positions, ok.quaternions)
+    res = tum_mono(gt, shifted)
+    assert res.status is EvalStatus.unassociated and np.isnan(res.e_t)
+    within = from_arrays(ok.timestamps + 0.0009, ok.positions, ok.quaternions)
+    assert tum_mono(gt, within).status is EvalStatus.ok
+    start_only = np.arange(len(gt)) < len(gt) // 2
+    res = tum_mono(gt, estimate_from(gt, np.nan_to_num(gt.positions), start_only))
+    assert res.status is EvalStatus.incomplete
+    assert res.to_dict()["e_t"] is None and res.to_dict()["status"] == "incomplete"
+    middle_only = (np.arange(len(gt)) > 100) & (np.arange(len(gt)) < 300)
+    assert tum_mono(gt, estimate_from(gt, np.nan_to_num(gt.positions), middle_only)).status is EvalStatus.incomplete
+
+
+def test_backward_order_does_not_matter():
+    gt = ground_truth()
+    est = estimate_from(gt, np.nan_to_num(gt.positions) * 2 + 1)
+    rev = from_arrays(est.timestamps[::-1], est.positions[::-1], est.quaternions[::-1])
+    assert tum_mono(gt, est) == tum_mono(gt, rev)
+
+
+def test_rpe_zero_for_similar_and_positive_for_noise():
+    gt = ground_truth(nan_middle=False)
+    s, r, t = sim3(0.5, [0.0, 0.0, 0.0], [1, 1, 1])
+    est = Trajectory(gt.timestamps, inverse_apply(s, r, t, gt.positions), gt.quaternions)
+    res = rpe(gt, est)
+    assert res.status is EvalStatus.ok and res.trans_rmse == pytest.approx(0, abs=1e-9)
+    assert res.rot_rmse_deg == pytest.approx(0, abs=1e-6)
+    noisy = Trajectory(gt.timestamps, est.positions + 0.01, gt.quaternions)
+    assert rpe(gt, noisy).trans_rmse == pytest.approx(0, abs=1e-9)  # a constant offset is no relative error
+
+
+@pytest.mark.parametrize("name", ["sequence_01.txt", "sequence_29.txt"])
+def test_ate_matches_evo_on_real_files(name):
+    """ATE (Sim(3)-aligned RMSE) against evo's APE, ground truth made from a perturbed real file."""
+    evo_core = pytest.importorskip("evo.core")
+    from evo.core import metrics, sync
+    from evo.core.trajectory import PoseTrajectory3D
+
+    est = read_tum(DATA / "dso_tum_mono_examples" / name)
+    rng = np.random.default_rng(7)
+    s, r, t = sim3(1.7, [0.2, 0.1, -0.4], [3, 1, -2])
+    gt_pos = s * est.positions @ r.T + t + rng.normal(scale=0.05, size=est.positions.shape)
+    gt = Trajectory(est.timestamps, gt_pos, est.quaternions)
+    ours = ate(gt, est)
+
+    ref = PoseTrajectory3D(gt.positions, gt.quaternions[:, [3, 0, 1, 2]], gt.timestamps)
+    e = PoseTrajectory3D(est.positions, est.quaternions[:, [3, 0, 1, 2]], est.timestamps)
+    ref, e = sync.associate_trajectories(ref, e, max_diff=0.001)
+    e.align(ref, correct_scale=True)
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data((ref, e))
+    assert evo_core is not None
+    assert ours.rmse == pytest.approx(ape.get_statistic(metrics.StatisticsType.rmse), rel=1e-9)
+
+
+def test_real_backward_file_evaluates_against_its_own_segments():
+    """A real DSO backward file: GT = its own poses with NaN in the middle gives zero segment errors."""
+    est = read_tum(DATA / "study_trajectories" / "dso_bw__sequence_47_9.txt")
+    n = len(est)
+    gt_pos = est.positions.copy()
+    gt_pos[int(0.2 * n) : int(0.8 * n)] = np.nan
+    gt = Trajectory(est.timestamps, gt_pos, est.quaternions)
+    res = tum_mono(gt, est)
+    assert res.status is EvalStatus.ok
+    assert res.e_start == pytest.approx(0, abs=1e-9) and res.e_s == pytest.approx(1, abs=1e-9)

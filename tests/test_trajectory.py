@@ -1,0 +1,147 @@
+"""Trajectory readers and writers, on synthetic values and on the real files in shared/data."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from runner.errors import TrajectoryFormatError
+from runner.trajectory import (
+    from_arrays,
+    read_4x4_matrices,
+    read_kitti,
+    read_timestamped_3x4,
+    read_tum,
+    rotmat_to_quat,
+    write_tum,
+)
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+REAL_FILES = sorted(DATA.glob("*/*.txt"))
+
+
+def _same_rotation(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """|<q1, q2>| == 1 when both quaternions encode the same rotation."""
+    return np.abs(np.sum(q1 * q2, axis=1))
+
+
+def test_rotmat_to_quat_random_matches_scipy():
+    rots = Rotation.random(5000, random_state=1)
+    q = rotmat_to_quat(rots.as_matrix())
+    np.testing.assert_allclose(_same_rotation(q, rots.as_quat()), 1.0, atol=1e-12)
+    assert (q[:, 3] >= 0).all()
+
+
+@pytest.mark.parametrize("eps", [0.0, 1e-12, 1e-9, 1e-6, 1e-3])
+def test_rotmat_to_quat_near_180_degrees(eps):
+    rng = np.random.default_rng(2)
+    axes = rng.normal(size=(500, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    rots = Rotation.from_rotvec(axes * (np.pi - eps))
+    q = rotmat_to_quat(rots.as_matrix())
+    np.testing.assert_allclose(_same_rotation(q, rots.as_quat()), 1.0, atol=1e-9)
+    np.testing.assert_allclose(Rotation.from_quat(q).as_matrix(), rots.as_matrix(), atol=1e-9)
+
+
+def test_rotmat_to_quat_identity_and_axes():
+    for axis in np.eye(3):
+        for angle in (0.0, np.pi / 2, np.pi):
+            r = Rotation.from_rotvec(axis * angle)
+            q = rotmat_to_quat(r.as_matrix()[None])[0]
+            assert abs(abs(q @ r.as_quat()) - 1) < 1e-12
+
+
+def test_tum_round_trip(tmp_path):
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.uniform(0, 100, 200))
+    traj = from_arrays(t, rng.normal(size=(200, 3)), Rotation.random(200, random_state=3).as_quat())
+    write_tum(tmp_path / "a.txt", traj)
+    back = read_tum(tmp_path / "a.txt")
+    np.testing.assert_array_equal(back.timestamps, traj.timestamps)
+    np.testing.assert_array_equal(back.positions, traj.positions)
+    np.testing.assert_allclose(back.quaternions, traj.quaternions, rtol=0, atol=1e-15)
+
+
+def test_sorts_drops_duplicates_and_normalises(tmp_path):
+    f = tmp_path / "t.txt"
+    f.write_text("# comment\n\n3 0 0 0 0 0 0 2\n1 1 0 0 0 0 0 1\n1 9 9 9 0 0 0 1\n2,2,0,0,0,0,0,1\n")
+    traj = read_tum(f)
+    np.testing.assert_array_equal(traj.timestamps, [1, 2, 3])
+    assert traj.positions[0, 0] == 1  # the first of the duplicates is kept
+    assert traj.report.was_unsorted and traj.report.n_duplicates_dropped == 1
+    assert traj.report.n_quat_non_unit == 1 and traj.report.n_quat_far_from_unit == 1
+    np.testing.assert_allclose(np.linalg.norm(traj.quaternions, axis=1), 1.0)
+
+
+@pytest.mark.parametrize(
+    "content, where",
+    [("1 2 3\n", ":1: 3 values, expected 8"), ("1 0 0 0 0 0 0 1\n2 0 0 x 0 0 0 1\n", ":2: not a number")],
+)
+def test_bad_rows_name_file_and_line(tmp_path, content, where):
+    f = tmp_path / "bad.txt"
+    f.write_text(content)
+    with pytest.raises(TrajectoryFormatError, match=f"bad.txt{where}"):
+        read_tum(f)
+
+
+def test_zero_quaternion_and_missing_file(tmp_path):
+    f = tmp_path / "z.txt"
+    f.write_text("1 0 0 0 0 0 0 0\n")
+    with pytest.raises(TrajectoryFormatError, match="zero quaternion"):
+        read_tum(f)
+    with pytest.raises(TrajectoryFormatError, match="no such trajectory file"):
+        read_tum(tmp_path / "missing.txt")
+
+
+def test_empty_file_is_an_empty_trajectory(tmp_path):
+    f = tmp_path / "e.txt"
+    f.write_text("# nothing\n")
+    assert len(read_tum(f)) == 0
+
+
+def test_matrix_formats_agree(tmp_path):
+    rots = Rotation.random(20, random_state=4)
+    pos = np.arange(60, dtype=float).reshape(20, 3)
+    t = np.arange(20) * 0.05
+    m34 = np.concatenate([rots.as_matrix(), pos[:, :, None]], axis=2)
+    np.savetxt(tmp_path / "kitti.txt", m34.reshape(20, 12))
+    np.savetxt(tmp_path / "ts34.txt", np.column_stack([t, m34.reshape(20, 12)]))
+    m44 = np.tile(np.eye(4), (20, 1, 1))
+    m44[:, :3, :] = m34
+    np.savetxt(tmp_path / "ts44.txt", np.column_stack([t, m44.reshape(20, 16)]))
+    np.savetxt(tmp_path / "rows44.txt", m44.reshape(80, 4))
+    for traj in (
+        read_kitti(tmp_path / "kitti.txt", t),
+        read_timestamped_3x4(tmp_path / "ts34.txt"),
+        read_4x4_matrices(tmp_path / "ts44.txt"),
+        read_4x4_matrices(tmp_path / "rows44.txt", t),
+    ):
+        np.testing.assert_allclose(traj.positions, pos)
+        np.testing.assert_allclose(_same_rotation(traj.quaternions, rots.as_quat()), 1, atol=1e-12)
+    with pytest.raises(TrajectoryFormatError, match="20 KITTI poses but 3 timestamps"):
+        read_kitti(tmp_path / "kitti.txt", t[:3])
+
+
+@pytest.mark.parametrize("path", REAL_FILES, ids=lambda p: p.name)
+def test_every_real_file_parses(path):
+    traj = read_tum(path)
+    assert len(traj) > 100
+    assert np.all(np.diff(traj.timestamps) > 0)
+    np.testing.assert_allclose(np.linalg.norm(traj.quaternions, axis=1), 1.0, atol=1e-12)
+    rows = [ln for ln in path.read_text().splitlines() if ln.strip() and not ln.startswith("#")]
+    raw = np.array([[float(v) for v in ln.split()] for ln in rows])
+    assert traj.report.n_rows == len(raw)
+    assert traj.report.was_unsorted == bool(np.any(np.diff(raw[:, 0]) < 0))
+    assert traj.report.n_duplicates_dropped == len(raw) - len(np.unique(raw[:, 0]))
+    norm_err = np.abs(np.linalg.norm(raw[:, 4:8], axis=1) - 1)
+    assert traj.report.n_quat_far_from_unit == np.count_nonzero(norm_err > 0.1)
+
+
+def test_real_file_facts():
+    """Facts stated in shared/data/README.md: backward runs decrease; some CNN-SVO norms are in the thousands."""
+    assert read_tum(DATA / "study_trajectories/dso_bw__sequence_47_9.txt").report.was_unsorted
+    assert read_tum(DATA / "study_trajectories/dsm_bw__sequence_47_6.txt").report.was_unsorted
+    cnn = read_tum(DATA / "study_trajectories/cnn-svo_fw__sequence_48_8.txt").report
+    assert cnn.max_quat_norm_error > 1000 and cnn.n_quat_far_from_unit > 500
+    assert not read_tum(DATA / "dso_tum_mono_examples/sequence_01.txt").report.was_unsorted
