@@ -1,0 +1,74 @@
+"""The method contract: a small class with configure, command and read_trajectory."""
+
+from __future__ import annotations
+
+import re
+from abc import ABC, abstractmethod
+from pathlib import Path
+from typing import ClassVar
+
+from pydantic import BaseModel, ConfigDict
+
+from runner.datasets.views import PreparedView, Profile
+from runner.errors import MethodFailure
+from runner.trajectory import Trajectory, read_tum
+
+
+class NoParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Method(ABC):
+    """One SLAM/VO method. Subclasses set the class attributes and implement `command`.
+
+    Paths given to `configure`, `command` and `read_trajectory` are as the method's process sees
+    them: on the host for the local backend, /data and /work inside a container.
+    """
+
+    name: ClassVar[str]
+    image: ClassVar[str | None] = None  # Docker tag; None for a method that only runs natively
+    profile: ClassVar[Profile] = Profile.native  # which prepared view it consumes
+    needs_gpu: ClassVar[bool] = False
+    loop_closure_switch: ClassVar[str | None] = None  # how the image turns loop closure off, if it has one
+    native: ClassVar[bool] = False  # runs as a local process without an image
+    Params: ClassVar[type[BaseModel]] = NoParams
+    output_file: ClassVar[str] = "trajectory.txt"
+    # Log lines that tell why a run produced nothing usable (case-insensitive regular expressions).
+    not_initialized_pattern: ClassVar[str | None] = None
+    lost_pattern: ClassVar[str | None] = None
+
+    def __init__(self, params: BaseModel | dict | None = None):
+        self.params = params if isinstance(params, BaseModel) else self.Params.model_validate(params or {})
+
+    def configure(self, view: PreparedView, workdir: Path) -> None:
+        """Write the method's own config files into workdir (nothing by default)."""
+
+    @abstractmethod
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        """The argv that runs the method (never a shell string)."""
+
+    def read_trajectory(self, workdir: Path, view: PreparedView) -> Trajectory:
+        """The method's output as a trajectory with ORIGINAL timestamps; MethodFailure when unusable."""
+        return view.to_original(read_tum_output(workdir / self.output_file))
+
+    def accepts_exit(self, exit_code: int, workdir: Path) -> bool:
+        """Whether this exit code still means the output is complete (LDSO exits 139 after writing)."""
+        return exit_code == 0
+
+    def failure_from_log(self, log_tail: str) -> str | None:
+        """`not_initialized` or `lost` when the log says so."""
+        if self.not_initialized_pattern and re.search(self.not_initialized_pattern, log_tail, re.I | re.M):
+            return "not_initialized"
+        if self.lost_pattern and re.search(self.lost_pattern, log_tail, re.I | re.M):
+            return "lost"
+        return None
+
+
+def read_tum_output(path: Path) -> Trajectory:
+    """A method's TUM output, with the method-failure kinds for a missing or empty file."""
+    if not path.exists():
+        raise MethodFailure("no_output", f"the method wrote no {path.name}")
+    traj = read_tum(path)
+    if len(traj) == 0:
+        raise MethodFailure("not_initialized", f"{path.name} holds no pose")
+    return traj

@@ -1,0 +1,90 @@
+"""`external`: any executable given in the spec, for local builds of a method and for tests.
+
+The argv is a list of strings with placeholders filled from the prepared view and the run's work
+directory: {python} {view} {images} {times} {rgb} {images_list} {times_single} {camera} {pcalib}
+{vignette} {workdir} {out}. The output is read in the given format with view timestamps.
+"""
+
+from __future__ import annotations
+
+import sys
+from enum import Enum
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from methods.base import Method, read_tum_output
+from runner.datasets.views import PreparedView, Profile
+from runner.errors import MethodFailure
+from runner.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
+
+
+class OutputFormat(str, Enum):
+    tum = "tum"
+    kitti = "kitti"  # 12 numbers per frame, one row per view frame
+    timestamped_3x4 = "timestamped_3x4"
+    matrices_4x4 = "matrices_4x4"
+
+
+class ExternalParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    argv: list[str] = Field(min_length=1, description="Command and arguments, with {placeholders}.")
+    output: str = Field("trajectory.txt", description="Output file, relative to the work directory.")
+    format: OutputFormat = Field(OutputFormat.tum, description="Format of the output file.")
+    profile: Profile = Field(Profile.native, description="Prepared view the executable consumes.")
+    cwd: str | None = Field(None, description="Working directory (default: the run's work directory).")
+    not_initialized_pattern: str | None = Field(None, description="Log regex meaning 'never initialised'.")
+    lost_pattern: str | None = Field(None, description="Log regex meaning 'lost'.")
+
+
+class External(Method):
+    name = "external"
+    native = True
+    Params = ExternalParams
+
+    @property
+    def profile(self) -> Profile:  # type: ignore[override]
+        return self.params.profile
+
+    @property
+    def not_initialized_pattern(self) -> str | None:  # type: ignore[override]
+        return self.params.not_initialized_pattern
+
+    @property
+    def lost_pattern(self) -> str | None:  # type: ignore[override]
+        return self.params.lost_pattern
+
+    def placeholders(self, view: PreparedView, workdir: Path) -> dict[str, str]:
+        v = view
+        return {
+            "python": sys.executable, "view": str(v.root), "images": str(v.path(v.images_dir)),
+            "times": str(v.path(v.times)), "rgb": str(v.path(v.rgb)), "images_list": str(v.path(v.images_list)),
+            "times_single": str(v.path(v.times_single)), "camera": str(v.path(v.camera)),
+            "pcalib": str(v.path(v.pcalib)), "vignette": str(v.path(v.vignette)), "workdir": str(workdir),
+            "out": str(workdir / self.params.output),
+        }
+
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        values = self.placeholders(view, workdir)
+        try:
+            return [arg.format_map(values) for arg in self.params.argv]
+        except KeyError as exc:
+            raise MethodFailure("crashed", f"unknown placeholder {exc} in argv; known: {sorted(values)}") from None
+
+    def read_trajectory(self, workdir: Path, view: PreparedView) -> Trajectory:
+        path = workdir / self.params.output
+        fmt = self.params.format
+        if fmt is OutputFormat.tum:
+            traj = read_tum_output(path)
+        elif not path.exists():
+            raise MethodFailure("no_output", f"the method wrote no {path.name}")
+        elif fmt is OutputFormat.kitti:
+            traj = read_kitti(path, view.view_timestamps())
+        elif fmt is OutputFormat.timestamped_3x4:
+            traj = read_timestamped_3x4(path)
+        else:
+            traj = read_4x4_matrices(path, np.asarray(view.view_timestamps()))
+        if len(traj) == 0:
+            raise MethodFailure("not_initialized", f"{path.name} holds no pose")
+        return view.to_original(traj)

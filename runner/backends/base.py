@@ -1,0 +1,51 @@
+"""What every backend takes and gives back."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+from runner.datasets.views import PreparedView
+
+
+@dataclass(frozen=True)
+class ExecRequest:
+    """One run's process, as the scheduler asks for it."""
+
+    argv: list[str]
+    workdir: Path  # host path of the run's work directory (read-write)
+    view: PreparedView  # host path of the prepared view (read-only)
+    log_path: Path
+    resources_path: Path
+    timeout_s: float
+    cpus: tuple[int, ...] | None = None
+    memory_mb: int | None = None
+    log_cap_bytes: int = 20 * 2**20
+    image: str | None = None
+    needs_gpu: bool = False
+    labels: dict[str, str] = field(default_factory=dict)
+    env: dict[str, str] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class ExecResult:
+    exit_code: int | None
+    wall_s: float
+    timed_out: bool = False
+    oom: bool = False
+    cancelled: bool = False
+    log_truncated: bool = False
+    resources: dict = field(default_factory=dict)
+
+
+class Backend(Protocol):
+    name: str
+
+    def check(self) -> None:
+        """Raise InfraError before any run starts when the backend cannot work (daemon unreachable, ...)."""
+
+    def execute(self, req: ExecRequest, cancel: threading.Event,
+                on_start: callable = None) -> ExecResult:  # type: ignore[valid-type]
+        """Run to completion, timeout or cancel; always leaves no process behind."""

@@ -1,0 +1,111 @@
+"""A campaign from spec to results: datasets, lock, ledger, recovery, plan, preparation, runs, export."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from runner.backends.base import Backend
+from runner.datasets import synth
+from runner.datasets.tum_mono import open_sequence
+from runner.datasets.views import prepare
+from runner.errors import DatasetError
+from runner.ledger import Ledger, ResultsLock
+from runner.plan import PlannedRun, plan
+from runner.results import export
+from runner.scheduler import Event, Scheduler, recover
+from runner.spec import CampaignSpec
+
+
+@dataclass
+class CampaignResult:
+    results: Path
+    results_csv: Path
+    counts: dict[str, int]
+    recovered: dict[str, int]
+    added: int
+    infra_failures: int
+    interrupted: bool
+
+
+def ensure_datasets(spec: CampaignSpec, log=print) -> None:
+    """Generate the synthetic sequences a spec asks for and that are not on disk yet."""
+    for ds in spec.datasets:
+        if ds.synthetic is None:
+            continue
+        for i, seq in enumerate(ds.sequences):
+            folder = ds.path / seq
+            if (folder / "times.txt").exists():
+                continue
+            log(f"generating synthetic sequence {folder} ({ds.synthetic.frames} frames)")
+            synth.generate(folder, frames=ds.synthetic.frames, seed=ds.synthetic.seed + i,
+                           size=ds.synthetic.size_wh, scene_kind=ds.synthetic.scene.value)
+
+
+def make_backend(spec: CampaignSpec) -> Backend:
+    if spec.backend == "local":
+        from runner.backends.local import LocalBackend
+
+        return LocalBackend()
+    from runner.backends.docker import DockerBackend  # noqa: PLC0415 (optional dependency)
+
+    return DockerBackend()
+
+
+def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], log=print) -> dict:
+    views = {}
+    for r in runs:
+        k = (str(r.sequence_dir), r.key.direction, r.profile)
+        if r.key.id in keys and k not in views:
+            views[k] = prepare(r.sequence_dir, r.key.direction, r.profile, spec.cache)
+    return views
+
+
+def load_groundtruths(runs: list[PlannedRun]) -> dict:
+    gts = {}
+    for r in runs:
+        k = str(r.sequence_dir)
+        if k not in gts:
+            try:
+                gts[k] = open_sequence(r.sequence_dir).groundtruth()
+            except DatasetError:
+                raise
+    return gts
+
+
+def run_campaign(spec: CampaignSpec, backend: Backend | None = None, on_event: Event | None = None,
+                 scheduler_hook=None, log=print) -> CampaignResult:
+    results = spec.results
+    assert results is not None
+    ensure_datasets(spec, log)
+    lock = ResultsLock(results)
+    lock.acquire()
+    try:
+        ledger = Ledger(results / "ledger.sqlite")
+        ledger.set_meta("campaign", spec.name)
+        ledger.set_meta("spec", spec.model_dump(mode="json"))
+        (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()),
+                                                                   sort_keys=False))
+        recovered = recover(ledger, results)
+        runs = plan(spec)
+        added = ledger.sync_plan(runs)
+        backend = backend or make_backend(spec)
+        backend.check()
+        pending = set(ledger.pending_keys())
+        views = prepare_views(spec, runs, pending, log)
+        gts = load_groundtruths(runs) if spec.evaluate else {}
+        sched = Scheduler(spec, ledger, backend, views, gts, on_event)
+        if scheduler_hook:
+            scheduler_hook(sched)
+        ledger.set_meta("eta", {"pending": len(pending), "lanes": spec.lanes})
+        sched.run(runs)
+        csv = export(ledger, results)
+        counts = ledger.counts()
+        infra = sum(1 for r in ledger.rows(state="failed") if r["failure"] == "infra")
+        ledger.close()
+        return CampaignResult(results, csv, counts, recovered, added, infra, sched.stop.is_set())
+    finally:
+        lock.release()

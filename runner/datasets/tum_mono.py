@@ -1,0 +1,230 @@
+"""Open and validate a TUM-Mono sequence folder; every problem is reported with its file."""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from runner.camera import CameraFile, read_camera_txt
+from runner.errors import DatasetError
+from runner.trajectory import Trajectory, read_tum
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
+REQUIRED = ("times.txt", "camera.txt")
+
+
+@dataclass(frozen=True, eq=False)
+class Sequence:
+    """A validated sequence: frame names in order, their timestamps and exposures, its calibration."""
+
+    root: Path
+    frame_names: tuple[str, ...]
+    timestamps: np.ndarray
+    exposures_ms: np.ndarray | None
+    camera: CameraFile
+    zip_path: Path | None  # None when frames are in images/
+
+    @property
+    def name(self) -> str:
+        return self.root.name
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frame_names)
+
+    @property
+    def pcalib(self) -> Path | None:
+        p = self.root / "pcalib.txt"
+        return p if p.exists() else None
+
+    @property
+    def vignette(self) -> Path | None:
+        p = self.root / "vignette.png"
+        return p if p.exists() else None
+
+    @property
+    def groundtruth_path(self) -> Path | None:
+        p = self.root / "groundtruthSync.txt"
+        return p if p.exists() else None
+
+    def groundtruth(self) -> Trajectory | None:
+        """groundtruthSync.txt, NaN rows kept (they split the segments by row count)."""
+        p = self.groundtruth_path
+        if p is None:
+            return None
+        data = np.loadtxt(p, comments="#", ndmin=2)
+        if data.shape[1] != 8:
+            raise DatasetError(f"{p}: {data.shape[1]} columns, expected 'timestamp tx ty tz qx qy qz qw'")
+        if np.any(np.diff(data[:, 0]) <= 0):
+            raise DatasetError(f"{p}: timestamps are not strictly increasing")
+        return Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
+
+    def read_bytes(self) -> Iterator[tuple[str, bytes]]:
+        """(name, encoded bytes) of every frame, in order."""
+        if self.zip_path is not None:
+            with zipfile.ZipFile(self.zip_path) as zf:
+                for name in self.frame_names:
+                    yield name, zf.read(name)
+        else:
+            for name in self.frame_names:
+                yield name, (self.root / "images" / name).read_bytes()
+
+    def frames(self) -> Iterator[np.ndarray]:
+        """Decoded 8-bit grayscale frames, in order."""
+        for name, data in self.read_bytes():
+            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                raise DatasetError(f"{self.root}: frame {name} cannot be decoded")
+            yield img
+
+
+def open_sequence(root: str | Path) -> Sequence:
+    """Open a sequence folder and validate it; raises one DatasetError listing every problem."""
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: sequence folder not found")
+    problems: list[str] = []
+    for name in REQUIRED:
+        if not (root / name).exists():
+            problems.append(f"{root / name}: missing")
+
+    names, zip_path = _frame_names(root, problems)
+    timestamps, exposures = _read_times(root / "times.txt", problems)
+    camera = None
+    if (root / "camera.txt").exists():
+        try:
+            camera = read_camera_txt(root / "camera.txt")
+        except DatasetError as exc:
+            problems.append(str(exc))
+
+    if names is not None and timestamps is not None and len(names) != len(timestamps):
+        problems.append(
+            f"{root / 'times.txt'}: {len(timestamps)} lines but {len(names)} images; they must be equal "
+            "(DSO silently writes zero timestamps otherwise)"
+        )
+    if timestamps is not None and len(timestamps) > 1 and np.any(np.diff(timestamps) <= 0):
+        i = int(np.flatnonzero(np.diff(timestamps) <= 0)[0]) + 2
+        problems.append(f"{root / 'times.txt'}:{i}: timestamps not strictly increasing")
+    if names and camera is not None:
+        _check_image_size(root, names, zip_path, camera, problems)
+    _check_pcalib(root / "pcalib.txt", problems)
+    if camera is not None:
+        _check_vignette(root / "vignette.png", camera, problems)
+    if problems:
+        raise DatasetError(f"{root}: invalid sequence:\n  " + "\n  ".join(problems))
+    assert names is not None and timestamps is not None and camera is not None
+    return Sequence(root, tuple(names), timestamps, exposures, camera, zip_path)
+
+
+def _frame_names(root: Path, problems: list[str]) -> tuple[list[str] | None, Path | None]:
+    zip_path = root / "images.zip"
+    if zip_path.exists():
+        try:
+            with zipfile.ZipFile(zip_path) as zf:
+                names = sorted(n for n in zf.namelist() if n.lower().endswith(IMAGE_SUFFIXES))
+                bad = zf.testzip() if zip_path.stat().st_size < 50_000_000 else None
+            if bad:
+                problems.append(f"{zip_path}: member {bad} is corrupt; re-download the sequence")
+        except (zipfile.BadZipFile, OSError) as exc:
+            problems.append(f"{zip_path}: not a readable zip ({exc}); re-download or unpack it into images/")
+            return None, None
+        if not names:
+            problems.append(f"{zip_path}: holds no images ({', '.join(IMAGE_SUFFIXES)})")
+        return names, zip_path
+    folder = root / "images"
+    if folder.is_dir():
+        names = sorted(p.name for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not names:
+            problems.append(f"{folder}: holds no images")
+        return names, None
+    problems.append(f"{root}: neither images.zip nor images/ found")
+    return None, None
+
+
+def _read_times(path: Path, problems: list[str]) -> tuple[np.ndarray | None, np.ndarray | None]:
+    if not path.exists():
+        return None, None
+    rows = []
+    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        body = line.split("#", 1)[0].split()
+        if not body:
+            continue
+        try:
+            rows.append([float(v) for v in body])
+        except ValueError:
+            problems.append(f"{path}:{lineno}: not a number in {line.strip()[:60]!r}")
+            return None, None
+        if len(rows[-1]) not in (2, 3):
+            problems.append(f"{path}:{lineno}: {len(rows[-1])} values, expected 'id timestamp [exposure_ms]'")
+            return None, None
+    if not rows:
+        problems.append(f"{path}: empty")
+        return None, None
+    width = {len(r) for r in rows}
+    if len(width) > 1:
+        problems.append(f"{path}: rows of mixed length; expected 'id timestamp exposure_ms' on every line")
+        return None, None
+    data = np.array(rows)
+    return data[:, 1], (data[:, 2] if data.shape[1] == 3 else None)
+
+
+def _check_image_size(root: Path, names: list[str], zip_path: Path | None, cam: CameraFile, problems: list[str]):
+    try:
+        if zip_path is not None:
+            with zipfile.ZipFile(zip_path) as zf:
+                data = zf.read(names[0])
+        else:
+            data = (root / "images" / names[0]).read_bytes()
+    except (zipfile.BadZipFile, OSError, KeyError) as exc:
+        problems.append(f"{root}: first image {names[0]} unreadable ({exc})")
+        return
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        problems.append(f"{root}: first image {names[0]} cannot be decoded")
+        return
+    h, w = img.shape[:2]
+    if (w, h) != (cam.camera.width, cam.camera.height):
+        problems.append(
+            f"{root / 'camera.txt'}: input size {cam.camera.width}x{cam.camera.height} but {names[0]} is {w}x{h}"
+        )
+
+
+def _check_pcalib(path: Path, problems: list[str]) -> None:
+    if not path.exists():
+        return
+    try:
+        values = np.array(path.read_text().split(), dtype=float)
+    except ValueError:
+        problems.append(f"{path}: not numbers; expected 256 values of the inverse response")
+        return
+    if len(values) != 256:
+        problems.append(f"{path}: {len(values)} values, expected 256")
+    elif np.any(np.diff(values) <= 0):
+        problems.append(f"{path}: values not strictly increasing (the inverse response must be)")
+
+
+def _check_vignette(path: Path, cam: CameraFile, problems: list[str]) -> None:
+    if not path.exists():
+        return
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        problems.append(f"{path}: cannot be decoded as an image")
+        return
+    h, w = img.shape[:2]
+    if (w, h) != (cam.camera.width, cam.camera.height):
+        problems.append(f"{path}: {w}x{h}, expected the input size {cam.camera.width}x{cam.camera.height}")
+
+
+def read_pcalib(path: Path) -> np.ndarray:
+    return np.array(path.read_text().split(), dtype=float)
+
+
+def read_vignette(path: Path) -> np.ndarray:
+    """Vignette normalised to a maximum of 1."""
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED).astype(np.float32)
+    return img / img.max()

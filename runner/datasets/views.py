@@ -1,0 +1,216 @@
+"""Prepared views: what a method sees of a sequence, built once per (sequence, direction, profile).
+
+A view folder holds the frames in presentation order (`images/000000.<ext>`), the timestamp files
+methods need (times.txt `id t exposure`, rgb.txt, images.txt, times_single.txt), and calibration
+(camera.txt for the view's images; for `native` also pcalib.txt and vignette.png; for `rectified` the
+pinhole K in camera_pinhole.json). Backward views present reversed frames with mirror time
+t' = t_first + t_last - t, so every view has increasing timestamps; `to_original` maps poses back.
+
+Views live in a content-addressed cache, are built in a temporary folder and renamed, and a file lock
+makes concurrent requests for the same view wait for one builder.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import hashlib
+import json
+import os
+import shutil
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from runner.camera import rectification_maps, rectified_pinhole
+from runner.datasets.tum_mono import Sequence, open_sequence
+from runner.errors import DatasetError
+from runner.trajectory import Trajectory
+
+VIEW_FORMAT_VERSION = 1
+
+
+class Direction(str, Enum):
+    forward = "forward"
+    backward = "backward"
+
+
+class Profile(str, Enum):
+    native = "native"  # original frames + FOV camera.txt, pcalib, vignette (DSO family, LSD-SLAM, SVO)
+    rectified = "rectified"  # pinhole frames by the camera.txt output rule, zero distortion
+
+
+@dataclass(frozen=True)
+class PreparedView:
+    """A prepared view on disk. Paths are relative to `root`, so a container can see it at /data."""
+
+    root: Path
+    sequence: str
+    direction: Direction
+    profile: Profile
+    n_frames: int
+    t_first: float
+    t_last: float
+    width: int
+    height: int
+    pinhole: tuple[float, float, float, float] | None  # fx fy cx cy in pixels, for rectified views
+
+    images_dir = "images"
+    times = "times.txt"
+    rgb = "rgb.txt"
+    images_list = "images.txt"
+    times_single = "times_single.txt"
+    camera = "camera.txt"
+    pcalib = "pcalib.txt"
+    vignette = "vignette.png"
+
+    def path(self, name: str) -> Path:
+        return self.root / name
+
+    def at(self, root: Path | str) -> PreparedView:
+        """The same view seen at another mount point (e.g. /data inside a container)."""
+        return PreparedView(**{**self.__dict__, "root": Path(root)})
+
+    def view_time(self, original: np.ndarray) -> np.ndarray:
+        """Original timestamps → the view's timestamps."""
+        return original if self.direction is Direction.forward else self.t_first + self.t_last - original
+
+    def to_original(self, traj: Trajectory) -> Trajectory:
+        """A trajectory in view time → the same poses at their original frame timestamps."""
+        if self.direction is Direction.forward:
+            return traj
+        return traj.with_timestamps(self.t_first + self.t_last - traj.timestamps)
+
+    def view_timestamps(self) -> np.ndarray:
+        data = np.loadtxt(self.root / self.times, ndmin=2)
+        return data[:, 1]
+
+    @classmethod
+    def load(cls, root: Path) -> PreparedView:
+        meta = json.loads((root / "view.json").read_text())
+        return cls(
+            root=root,
+            sequence=meta["sequence"],
+            direction=Direction(meta["direction"]),
+            profile=Profile(meta["profile"]),
+            n_frames=meta["n_frames"],
+            t_first=meta["t_first"],
+            t_last=meta["t_last"],
+            width=meta["width"],
+            height=meta["height"],
+            pinhole=tuple(meta["pinhole"]) if meta["pinhole"] else None,
+        )
+
+
+def view_key(seq: Sequence, direction: Direction, profile: Profile) -> str:
+    """Content-addressed key: the small files in full, the images by name, size and modification time."""
+    h = hashlib.sha256()
+    h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}".encode())
+    for name in ("times.txt", "camera.txt", "pcalib.txt"):
+        p = seq.root / name
+        h.update(p.read_bytes() if p.exists() else b"-")
+    for p in [seq.zip_path, seq.vignette] if seq.zip_path else [seq.root / "images", seq.vignette]:
+        if p is not None and p.exists():
+            st = p.stat()
+            h.update(f"{p.name}|{st.st_size}|{st.st_mtime_ns}".encode())
+    h.update("|".join(seq.frame_names).encode())
+    return f"{seq.name}-{direction.value}-{profile.value}-{h.hexdigest()[:12]}"
+
+
+def prepare(sequence_dir: Path | str, direction: Direction, profile: Profile, cache_dir: Path | str,
+            workers: int = 2) -> PreparedView:
+    """The prepared view, built now if the cache lacks it (safe across threads and processes)."""
+    seq = open_sequence(sequence_dir)
+    cache_dir = Path(cache_dir)
+    cache_dir.mkdir(parents=True, exist_ok=True)
+    key = view_key(seq, direction, profile)
+    final = cache_dir / key
+    if (final / "view.json").exists():
+        return PreparedView.load(final)
+    with open(cache_dir / f".{key}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # one builds, the others wait here and then find it built
+        if (final / "view.json").exists():
+            return PreparedView.load(final)
+        tmp = cache_dir / f".{key}.tmp-{os.getpid()}"
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        tmp.mkdir()
+        try:
+            _build(seq, direction, profile, tmp, workers)
+            os.rename(tmp, final)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+    return PreparedView.load(final)
+
+
+def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, workers: int) -> None:
+    n = seq.n_frames
+    order = np.arange(n) if direction is Direction.forward else np.arange(n)[::-1]
+    t_orig = seq.timestamps
+    t_first, t_last = float(t_orig[0]), float(t_orig[-1])
+    t_view = t_orig[order] if direction is Direction.forward else t_first + t_last - t_orig[order]
+    exposure = seq.exposures_ms[order] if seq.exposures_ms is not None else np.ones(n)
+    images = out / PreparedView.images_dir
+    images.mkdir()
+
+    cam = seq.camera
+    if profile is Profile.native:
+        ext = Path(seq.frame_names[0]).suffix.lower()
+        names = [f"{i:06d}{ext}" for i in range(n)]
+        inverse = {orig: i for i, orig in enumerate(order)}
+        for j, (_, data) in enumerate(seq.read_bytes()):
+            (images / names[inverse[j]]).write_bytes(data)
+        shutil.copyfile(seq.root / "camera.txt", out / PreparedView.camera)
+        for opt in ("pcalib.txt", "vignette.png"):
+            if (seq.root / opt).exists():
+                shutil.copyfile(seq.root / opt, out / opt)
+        width, height, pinhole = cam.camera.width, cam.camera.height, None
+    else:
+        mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
+        dst = rectified_pinhole(cam.camera, mode, cam.out_width, cam.out_height)
+        map_x, map_y = rectification_maps(cam.camera, dst)
+        names = [f"{i:06d}.png" for i in range(n)]
+        frames = list(enumerate(seq.read_bytes()))
+        inverse = {orig: i for i, orig in enumerate(order)}
+
+        def work(item: tuple[int, tuple[str, bytes]]) -> None:
+            j, (name, data) = item
+            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                raise DatasetError(f"{seq.root}: frame {name} cannot be decoded")
+            rect = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            cv2.imwrite(str(images / names[inverse[j]]), rect, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+
+        with ThreadPoolExecutor(max(1, workers)) as pool:
+            list(pool.map(work, frames))
+        (out / PreparedView.camera).write_text(dst.camera_txt())
+        width, height, pinhole = dst.width, dst.height, (dst.fx, dst.fy, dst.cx, dst.cy)
+        (out / "camera_pinhole.json").write_text(json.dumps(
+            {"width": dst.width, "height": dst.height, "fx": dst.fx, "fy": dst.fy, "cx": dst.cx, "cy": dst.cy,
+             "K": dst.K().tolist(), "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]}, indent=1))
+
+    with open(out / PreparedView.times, "w") as f:
+        for i in range(n):
+            f.write(f"{i:06d} {t_view[i]:.6f} {exposure[i]:.6f}\n")
+    with open(out / PreparedView.times_single, "w") as f:
+        f.writelines(f"{t_view[i]:.6f}\n" for i in range(n))
+    with open(out / PreparedView.rgb, "w") as f:
+        f.write(f"# prepared view of {seq.name} ({direction.value})\n# frames in presentation order\n"
+                "# timestamp filename\n")
+        f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
+    with open(out / PreparedView.images_list, "w") as f:
+        f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
+    meta = {
+        "sequence": seq.name, "source": str(seq.root), "direction": direction.value, "profile": profile.value,
+        "n_frames": n, "t_first": t_first, "t_last": t_last, "width": width, "height": height,
+        "pinhole": list(pinhole) if pinhole else None, "format_version": VIEW_FORMAT_VERSION,
+    }
+    (out / "view.json").write_text(json.dumps(meta, indent=1))
+
+
+def disk_usage(path: Path) -> int:
+    return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())

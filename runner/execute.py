@@ -1,0 +1,142 @@
+"""One run, start to finish: configure, execute, read, evaluate, write, rename.
+
+A run's folder appears (by rename) only when all its files are written, so a half-finished run never
+looks complete. Method failures come back as data; infrastructure faults raise InfraError.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from methods.base import Method
+from runner.backends.base import Backend, ExecRequest
+from runner.datasets.views import PreparedView
+from runner.errors import InfraError, MethodFailure, TrajectoryFormatError
+from runner.evaluation import EvalStatus, tum_mono
+from runner.logcap import tail
+from runner.paths import RunPaths
+from runner.plan import PlannedRun
+from runner.trajectory import Trajectory, write_tum
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    state: str  # done | failed | cancelled
+    values: dict  # ledger columns
+
+
+def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Backend, paths: RunPaths,
+                attempt: int, cancel: threading.Event, cpus: tuple[int, ...] | None = None,
+                memory_mb: int | None = None, log_cap_bytes: int = 20 * 2**20, groundtruth: Trajectory | None = None,
+                campaign: str = "", on_start=None) -> RunOutcome:
+    paths.clear_staging()
+    stage = paths.staging(attempt)
+    raw = RunPaths.raw(stage)
+    raw.mkdir(parents=True)
+    started = time.time()
+    try:
+        method.configure(view, raw)
+        argv = method.command(view, raw)
+    except MethodFailure as exc:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise InfraError(f"{run.key.id}: cannot configure {run.method}: {exc}") from None
+    req = ExecRequest(argv=argv, workdir=raw, view=view, log_path=RunPaths.log(stage),
+                      resources_path=RunPaths.resources(stage), timeout_s=run.timeout_s, cpus=cpus,
+                      memory_mb=memory_mb, log_cap_bytes=log_cap_bytes, image=type(method).image,
+                      needs_gpu=type(method).needs_gpu,
+                      labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id})
+    try:
+        result = backend.execute(req, cancel, on_start)
+    except InfraError:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    except OSError as exc:  # disk full and friends are the machine's fault, not the method's
+        shutil.rmtree(stage, ignore_errors=True)
+        raise InfraError(f"{run.key.id}: {exc}") from None
+    if result.cancelled:
+        shutil.rmtree(stage, ignore_errors=True)
+        return RunOutcome("cancelled", {})
+
+    log_tail = tail(RunPaths.log(stage))
+    failure, message, traj = _classify(result, method, raw, view, log_tail)
+    values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
+    if traj is not None and len(traj):
+        write_tum(RunPaths.trajectory(stage), traj)
+        values["n_poses"] = len(traj)
+        if groundtruth is not None:
+            ev = tum_mono(groundtruth, traj)
+            values["eval_status"] = ev.status.value
+            if ev.status is EvalStatus.ok:
+                values.update(e_t=ev.e_t, e_r=ev.e_r, e_s=ev.e_s, e_s_sym=ev.e_s_sym, e_align=ev.e_align,
+                              e_start=ev.e_start, e_end=ev.e_end, e_rmse=ev.e_rmse)
+            elif not values["message"]:
+                values["message"] = f"evaluation {ev.status.value}: {ev.detail}"
+    if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
+        recovered = values.get("eval_status") == EvalStatus.ok.value
+        failure = None if recovered else "lost"
+        values["failure"] = failure
+    state = "failed" if failure else "done"
+    values["ended_at"] = time.time()
+    record = {
+        "key": run.key.id, "label": run.key.label, "method": run.method, "dataset": run.dataset,
+        "sequence": run.key.sequence, "direction": run.key.direction.value, "trial": run.key.trial,
+        "settings": run.key.settings, "params": method.params.model_dump(mode="json"), "state": state,
+        "attempt": attempt, "argv": argv, "started_at": started, "view": str(view.root),
+        "sequence_dir": str(run.sequence_dir), "cpus": list(cpus) if cpus else None, "backend": backend.name,
+        "timed_out": result.timed_out, "oom": result.oom, "log_truncated": result.log_truncated,
+        "trajectory_report": traj.report.__dict__ if traj is not None else None, **values,
+    }
+    RunPaths.run_json(stage).write_text(json.dumps(record, indent=1, default=_json_default))
+    final = paths.final
+    if final.exists():  # an earlier attempt renamed but its ledger update was lost: replace it
+        shutil.rmtree(final)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    os.rename(stage, final)
+    values["run_dir"] = str(final)
+    return RunOutcome(state, values)
+
+
+def _classify(result, method: Method, raw: Path, view: PreparedView,
+              log_tail: str) -> tuple[str | None, str | None, Trajectory | None]:
+    """(failure kind or None, message, trajectory or None) from what the process left behind."""
+    if result.oom:
+        return "oom", "killed: out of memory", None
+    if result.timed_out:
+        traj = _try_read(method, raw, view)
+        return "timeout", f"killed at the timeout ({result.wall_s:.0f} s)", traj
+    if not method.accepts_exit(result.exit_code, raw):
+        kind = method.failure_from_log(log_tail) or "crashed"
+        last = " | ".join(line.strip() for line in log_tail.strip().splitlines()[-3:])
+        return kind, f"exit code {result.exit_code}: {last[-300:]}", _try_read(method, raw, view)
+    try:
+        traj = method.read_trajectory(raw, view)
+    except MethodFailure as exc:
+        return method.failure_from_log(log_tail) or exc.kind, str(exc), None
+    except TrajectoryFormatError as exc:
+        return "no_output", f"unreadable output: {exc}", None
+    if method.failure_from_log(log_tail) == "lost":
+        return "lost?", "the method reported it was lost", traj
+    return None, None, traj
+
+
+def _try_read(method: Method, raw: Path, view: PreparedView) -> Trajectory | None:
+    try:
+        return method.read_trajectory(raw, view)
+    except (MethodFailure, TrajectoryFormatError):
+        return None
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(type(o))

@@ -1,0 +1,187 @@
+"""The ledger: one SQLite row per run, the campaign's truth. WAL mode, safe to read while a runner writes."""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import sqlite3
+import threading
+import time
+from collections.abc import Iterable
+from pathlib import Path
+
+from runner.errors import LedgerLockedError, SlamRunError
+from runner.plan import PlannedRun
+
+STATES = ("pending", "running", "done", "failed")
+METHOD_FAILURES = ("not_initialized", "lost", "no_output", "crashed", "timeout", "oom")
+FAILURES = METHOD_FAILURES + ("infra",)
+METRIC_COLUMNS = ("e_t", "e_r", "e_s", "e_s_sym", "e_align", "e_start", "e_end", "e_rmse", "n_poses")
+RESOURCE_COLUMNS = ("wall_s", "fps", "cpu_mean_pct", "cpu_peak_pct", "ram_peak_mb", "gpu_mem_peak_mb",
+                    "gpu_util_mean_pct", "n_frames")
+KEY_COLUMNS = ("key", "label", "method", "dataset", "sequence", "direction", "trial", "settings")
+STATE_COLUMNS = ("active", "state", "attempts", "failure", "message", "exit_code", "eval_status",
+                 "started_at", "ended_at", "pid", "pid_start", "run_dir")
+ALL_COLUMNS = KEY_COLUMNS + STATE_COLUMNS + METRIC_COLUMNS + RESOURCE_COLUMNS
+
+_TYPES = {"trial": "INTEGER", "active": "INTEGER", "attempts": "INTEGER", "exit_code": "INTEGER", "pid": "INTEGER",
+          "n_poses": "INTEGER", "n_frames": "INTEGER"}
+_REAL = set(METRIC_COLUMNS + RESOURCE_COLUMNS + ("started_at", "ended_at", "pid_start")) - set(_TYPES)
+
+
+def _coltype(c: str) -> str:
+    return _TYPES.get(c, "REAL" if c in _REAL else "TEXT")
+
+
+class ResultsLock:
+    """An exclusive lock on a results directory, naming the holder's PID to whoever else asks."""
+
+    def __init__(self, results: Path):
+        self.path = results / "runner.lock"
+        self._fh = None
+
+    def acquire(self) -> None:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fh = open(self.path, "a+")
+        try:
+            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            fh.seek(0)
+            holder = fh.read().strip() or "unknown"
+            fh.close()
+            raise LedgerLockedError(
+                f"{self.path.parent}: another slamrun (PID {holder}) is running this campaign; "
+                "wait for it or stop it first"
+            ) from None
+        fh.seek(0)
+        fh.truncate()
+        fh.write(str(os.getpid()))
+        fh.flush()
+        self._fh = fh
+
+    def release(self) -> None:
+        if self._fh is not None:
+            fcntl.flock(self._fh, fcntl.LOCK_UN)
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> ResultsLock:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+class Ledger:
+    def __init__(self, path: Path):
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self._db = sqlite3.connect(self.path, check_same_thread=False, timeout=30, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+        except sqlite3.DatabaseError as exc:
+            raise SlamRunError(f"{self.path}: not a readable ledger ({exc}); move it aside to start afresh") from None
+        self._db.row_factory = sqlite3.Row
+        self._lock = threading.Lock()
+        cols = ", ".join(f"{c} {_coltype(c)}" for c in ALL_COLUMNS if c != "key")
+        with self._lock:
+            self._db.execute(f"CREATE TABLE IF NOT EXISTS runs (key TEXT PRIMARY KEY, {cols})")
+            self._db.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT)")
+            self._db.execute("CREATE INDEX IF NOT EXISTS runs_state ON runs(active, state)")
+
+    def close(self) -> None:
+        self._db.close()
+
+    # ------------------------------------------------------------ writing
+    def set_meta(self, name: str, value) -> None:
+        with self._lock:
+            self._db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (name, json.dumps(value)))
+
+    def meta(self, name: str, default=None):
+        row = self._db.execute("SELECT value FROM meta WHERE name = ?", (name,)).fetchone()
+        return json.loads(row[0]) if row else default
+
+    def sync_plan(self, runs: Iterable[PlannedRun]) -> int:
+        """Insert planned runs not yet in the ledger as pending; mark exactly the plan's runs active.
+
+        Finished runs are never touched; returns how many runs were added.
+        """
+        rows = [(r.key.id, r.key.label, r.method, r.dataset, r.key.sequence, r.key.direction.value, r.key.trial,
+                 r.key.settings) for r in runs]
+        with self._lock, self._db:
+            self._db.execute("BEGIN")
+            before = self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+            self._db.execute("UPDATE runs SET active = 0")
+            self._db.executemany(
+                "INSERT OR IGNORE INTO runs (key, label, method, dataset, sequence, direction, trial, settings, "
+                "active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)", rows)
+            self._db.executemany("UPDATE runs SET active = 1 WHERE key = ?", [(r[0],) for r in rows])
+            after = self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
+        return after - before
+
+    def stale_running(self) -> list[sqlite3.Row]:
+        return self._db.execute("SELECT * FROM runs WHERE state = 'running'").fetchall()
+
+    def reset_to_pending(self, key: str, keep_attempts: bool = True) -> None:
+        with self._lock:
+            self._db.execute(
+                "UPDATE runs SET state = 'pending', pid = NULL, pid_start = NULL"
+                + ("" if keep_attempts else ", attempts = 0, failure = NULL, message = NULL")
+                + " WHERE key = ?", (key,))
+
+    def reset_infra_failures(self) -> int:
+        """Infrastructure failures are not results: a new campaign start tries them again."""
+        with self._lock:
+            cur = self._db.execute("UPDATE runs SET state = 'pending', attempts = 0, failure = NULL, message = NULL "
+                                   "WHERE state = 'failed' AND failure = 'infra'")
+            return cur.rowcount
+
+    def mark_running(self, key: str, run_dir: str) -> int:
+        """Mark a run started; returns its attempt number (1-based)."""
+        with self._lock:
+            self._db.execute("UPDATE runs SET state = 'running', attempts = attempts + 1, started_at = ?, "
+                             "ended_at = NULL, run_dir = ? WHERE key = ?", (time.time(), run_dir, key))
+            return self._db.execute("SELECT attempts FROM runs WHERE key = ?", (key,)).fetchone()[0]
+
+    def set_process(self, key: str, pid: int, pid_start: float) -> None:
+        with self._lock:
+            self._db.execute("UPDATE runs SET pid = ?, pid_start = ? WHERE key = ?", (pid, pid_start, key))
+
+    def finish(self, key: str, state: str, values: dict) -> None:
+        """Record a finished run (done or failed) with its metrics and resources, in one statement."""
+        if state not in ("done", "failed"):
+            raise ValueError(state)
+        values = {k: v for k, v in values.items() if k in ALL_COLUMNS and k not in KEY_COLUMNS}
+        values.update(state=state, ended_at=values.get("ended_at") or time.time(), pid=None, pid_start=None)
+        sets = ", ".join(f"{k} = ?" for k in values)
+        with self._lock:
+            self._db.execute(f"UPDATE runs SET {sets} WHERE key = ?", (*values.values(), key))
+
+    # ------------------------------------------------------------ reading
+    def rows(self, active_only: bool = True, state: str | None = None) -> list[dict]:
+        sql = "SELECT * FROM runs"
+        cond, args = [], []
+        if active_only:
+            cond.append("active = 1")
+        if state:
+            cond.append("state = ?")
+            args.append(state)
+        if cond:
+            sql += " WHERE " + " AND ".join(cond)
+        return [dict(r) for r in self._db.execute(sql + " ORDER BY key", args).fetchall()]
+
+    def get(self, key: str) -> dict | None:
+        row = self._db.execute("SELECT * FROM runs WHERE key = ?", (key,)).fetchone()
+        return dict(row) if row else None
+
+    def pending_keys(self) -> list[str]:
+        return [r[0] for r in self._db.execute("SELECT key FROM runs WHERE active = 1 AND state = 'pending'")]
+
+    def counts(self) -> dict[str, int]:
+        out = dict.fromkeys(STATES, 0)
+        for state, n in self._db.execute("SELECT state, COUNT(*) FROM runs WHERE active = 1 GROUP BY state"):
+            out[state] = n
+        return out

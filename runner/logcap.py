@@ -1,0 +1,77 @@
+"""A log sink with a size cap: keeps the head and the tail, says how much was dropped between."""
+
+from __future__ import annotations
+
+import threading
+from collections import deque
+from pathlib import Path
+from typing import BinaryIO
+
+
+class CappedLog:
+    def __init__(self, path: Path, cap_bytes: int):
+        self.path = path
+        self.head_cap = cap_bytes // 2
+        self.tail_cap = cap_bytes - self.head_cap
+        self._fh = open(path, "wb")
+        self._head_written = 0
+        self._tail: deque[bytes] = deque()
+        self._tail_size = 0
+        self.dropped = 0
+
+    @property
+    def truncated(self) -> bool:
+        return self.dropped > 0
+
+    def write(self, data: bytes) -> None:
+        if self._head_written < self.head_cap:
+            take = data[: self.head_cap - self._head_written]
+            self._fh.write(take)
+            self._fh.flush()
+            self._head_written += len(take)
+            data = data[len(take):]
+        if not data:
+            return
+        self._tail.append(data)
+        self._tail_size += len(data)
+        while self._tail_size > self.tail_cap:
+            first = self._tail[0]
+            excess = self._tail_size - self.tail_cap
+            if len(first) <= excess:
+                self._tail.popleft()
+                self._tail_size -= len(first)
+                self.dropped += len(first)
+            else:
+                self._tail[0] = first[excess:]
+                self._tail_size -= excess
+                self.dropped += excess
+
+    def close(self) -> None:
+        if self.dropped:
+            self._fh.write(f"\n[slamrun: log capped, {self.dropped} bytes dropped here]\n".encode())
+        for chunk in self._tail:
+            self._fh.write(chunk)
+        self._fh.close()
+
+    def pump(self, stream: BinaryIO) -> threading.Thread:
+        """Copy a stream into the log in a background thread until EOF."""
+
+        def loop() -> None:
+            while chunk := stream.read1(65536) if hasattr(stream, "read1") else stream.read(65536):
+                self.write(chunk)
+
+        t = threading.Thread(target=loop, daemon=True, name="log-pump")
+        t.start()
+        return t
+
+
+def tail(path: Path, n_bytes: int = 4000) -> str:
+    """The last bytes of a log, decoded leniently."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, 2)
+            size = f.tell()
+            f.seek(max(0, size - n_bytes))
+            return f.read().decode(errors="replace")
+    except OSError:
+        return ""

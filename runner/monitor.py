@@ -1,0 +1,164 @@
+"""Resource sampling shared by the backends: CPU % (100 % = one core), memory, GPU where NVML exists.
+
+`ResourceSeries` turns samples into the per-run summary columns; GPU columns stay empty (None) when
+there is no GPU, never zero.
+"""
+
+from __future__ import annotations
+
+import csv
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import psutil
+
+SAMPLE_INTERVAL_S = 0.5
+FIELDS = ("t_s", "cpu_pct", "ram_mb", "n_procs", "gpu_mem_mb", "gpu_util_pct")
+
+
+@dataclass
+class Sample:
+    t_s: float
+    cpu_pct: float
+    ram_mb: float
+    n_procs: int
+    gpu_mem_mb: float | None = None
+    gpu_util_pct: float | None = None
+
+
+@dataclass
+class ResourceSeries:
+    samples: list[Sample] = field(default_factory=list)
+
+    def summary(self, wall_s: float, n_frames: int | None) -> dict:
+        cpu = [s.cpu_pct for s in self.samples[1:]] or [s.cpu_pct for s in self.samples]
+        gpu_mem = [s.gpu_mem_mb for s in self.samples if s.gpu_mem_mb is not None]
+        gpu_util = [s.gpu_util_pct for s in self.samples if s.gpu_util_pct is not None]
+        return {
+            "wall_s": wall_s,
+            "fps": (n_frames / wall_s) if n_frames and wall_s > 0 else None,
+            "cpu_mean_pct": sum(cpu) / len(cpu) if cpu else None,
+            "cpu_peak_pct": max(cpu) if cpu else None,
+            "ram_peak_mb": max((s.ram_mb for s in self.samples), default=None),
+            "gpu_mem_peak_mb": max(gpu_mem) if gpu_mem else None,
+            "gpu_util_mean_pct": sum(gpu_util) / len(gpu_util) if gpu_util else None,
+            "n_frames": n_frames,
+        }
+
+    def write_csv(self, path: Path) -> None:
+        with open(path, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(FIELDS)
+            for s in self.samples:
+                w.writerow([f"{s.t_s:.3f}", f"{s.cpu_pct:.2f}", f"{s.ram_mb:.2f}", s.n_procs,
+                            "" if s.gpu_mem_mb is None else f"{s.gpu_mem_mb:.1f}",
+                            "" if s.gpu_util_pct is None else f"{s.gpu_util_pct:.1f}"])
+
+
+class Gpu:
+    """Per-process GPU memory and device utilisation through NVML, when a GPU and nvidia-ml-py exist."""
+
+    def __init__(self) -> None:
+        self.handles = []
+        try:
+            import pynvml  # type: ignore[import-not-found]
+
+            pynvml.nvmlInit()
+            self.nvml = pynvml
+            self.handles = [pynvml.nvmlDeviceGetHandleByIndex(i) for i in range(pynvml.nvmlDeviceGetCount())]
+        except Exception:  # no library, no driver or no device: the GPU columns stay empty
+            self.handles = []
+
+    @property
+    def available(self) -> bool:
+        return bool(self.handles)
+
+    def sample(self, pids: set[int]) -> tuple[float | None, float | None]:
+        if not self.handles:
+            return None, None
+        mem, util = 0.0, 0.0
+        for h in self.handles:
+            for p in self.nvml.nvmlDeviceGetComputeRunningProcesses(h):
+                if p.pid in pids and p.usedGpuMemory:
+                    mem += p.usedGpuMemory / 2**20
+            util = max(util, float(self.nvml.nvmlDeviceGetUtilizationRates(h).gpu))
+        return mem, util
+
+
+class ProcessTreeMonitor:
+    """Samples a process and all its descendants in a background thread."""
+
+    def __init__(self, pid: int, interval_s: float = SAMPLE_INTERVAL_S, gpu: Gpu | None = None):
+        self.root = psutil.Process(pid)
+        self.interval_s = interval_s
+        self.gpu = gpu
+        self.series = ResourceSeries()
+        self.known: dict[int, psutil.Process] = {pid: self.root}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True, name=f"monitor-{pid}")
+        self._t0 = time.monotonic()
+        self._last_cpu: float | None = None
+        self._last_t = self._t0
+
+    def start(self) -> ProcessTreeMonitor:
+        self._thread.start()
+        return self
+
+    def stop(self) -> ResourceSeries:
+        self._stop.set()
+        self._thread.join()
+        return self.series
+
+    def descendants(self) -> list[psutil.Process]:
+        """Every live process of the tree seen so far (the monitor remembers re-parented children)."""
+        return [p for p in self.known.values() if _alive(p)]
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            self.sample()
+            self._stop.wait(self.interval_s)
+        self.sample()
+
+    def sample(self) -> None:
+        try:
+            for child in self.root.children(recursive=True):
+                self.known.setdefault(child.pid, child)
+        except psutil.Error:
+            pass
+        cpu_total, rss, procs = 0.0, 0, 0
+        for p in list(self.known.values()):
+            try:
+                with p.oneshot():
+                    t = p.cpu_times()
+                    cpu_total += t.user + t.system + t.children_user + t.children_system
+                    rss += p.memory_info().rss
+                    procs += 1
+            except psutil.Error:
+                continue
+        now = time.monotonic()
+        if self._last_cpu is None:
+            cpu_pct = 0.0
+        else:
+            cpu_pct = max(0.0, (cpu_total - self._last_cpu) / max(now - self._last_t, 1e-6) * 100.0)
+        self._last_cpu, self._last_t = max(cpu_total, self._last_cpu or 0.0), now
+        gmem, gutil = self.gpu.sample(set(self.known)) if self.gpu else (None, None)
+        self.series.samples.append(Sample(now - self._t0, cpu_pct, rss / 2**20, procs, gmem, gutil))
+
+
+def _alive(p: psutil.Process) -> bool:
+    try:
+        return p.is_running() and p.status() != psutil.STATUS_ZOMBIE
+    except psutil.Error:
+        return False
+
+
+def poll_until(predicate: Callable[[], bool], timeout_s: float, interval_s: float = 0.02) -> bool:
+    end = time.monotonic() + timeout_s
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(interval_s)
+    return predicate()

@@ -1,0 +1,72 @@
+"""Expand a spec into runs with stable keys."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import methods
+from runner.datasets.views import Direction, Profile
+from runner.spec import CampaignSpec, MethodSpec
+
+
+@dataclass(frozen=True)
+class RunKey:
+    """(method label, sequence, direction, trial, settings hash): the ledger's primary key."""
+
+    label: str
+    sequence: str
+    direction: Direction
+    trial: int
+    settings: str  # hash of the settings that change results
+
+    @property
+    def id(self) -> str:
+        return f"{self.label}@{self.settings}/{self.sequence}/{self.direction.value}/{self.trial:02d}"
+
+    @property
+    def relpath(self) -> Path:
+        """runs/<label>@<settings>/<sequence>/<direction>/<trial>: a new setting never reuses a folder."""
+        return Path("runs") / f"{self.label}@{self.settings}" / self.sequence / self.direction.value / f"{self.trial:02d}"
+
+
+@dataclass(frozen=True)
+class PlannedRun:
+    key: RunKey
+    method_index: int  # into spec.methods
+    method: str  # registry name
+    dataset: str
+    sequence_dir: Path
+    profile: Profile
+    timeout_s: float
+
+
+def settings_hash(m: MethodSpec) -> str:
+    """Hash of what changes a method's results: its name and its (validated, defaulted) parameters."""
+    cls = methods.get(m.name)
+    params = cls.Params.model_validate(m.params).model_dump(mode="json")
+    blob = json.dumps({"method": m.name, "params": params}, sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()[:10]
+
+
+def plan(spec: CampaignSpec) -> list[PlannedRun]:
+    """Every run of the campaign, trials outermost so a partial campaign covers all methods evenly."""
+    runs: list[tuple[tuple, PlannedRun]] = []
+    for mi, m in enumerate(spec.methods):
+        cls = methods.get(m.name)
+        method = cls(m.params)
+        h = settings_hash(m)
+        trials = m.trials or spec.trials
+        directions = m.directions or spec.directions
+        for ds in spec.datasets:
+            for seq in ds.sequences:
+                for direction in directions:
+                    for trial in range(trials):
+                        key = RunKey(m.run_label, seq, direction, trial, h)
+                        run = PlannedRun(key, mi, m.name, ds.name, ds.path / seq, method.profile,
+                                         m.timeout_s or spec.timeout_s)
+                        runs.append(((trial, mi, seq, direction.value), run))
+    runs.sort(key=lambda r: r[0])
+    return [r for _, r in runs]

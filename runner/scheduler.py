@@ -1,0 +1,157 @@
+"""The scheduler: lanes pull pending runs, each lane pinned to its own CPU set.
+
+Method failures are recorded as data and never retried; infrastructure failures are retried with a
+doubling backoff up to the configured count. `stop` stops new runs from starting; `cancel` stops the
+runs in flight (they go back to pending).
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from methods import get as get_method
+from runner.backends.base import Backend
+from runner.datasets.views import PreparedView
+from runner.errors import InfraError
+from runner.execute import execute_run
+from runner.ledger import Ledger
+from runner.paths import RunPaths
+from runner.plan import PlannedRun
+from runner.spec import CampaignSpec
+from runner.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class Lane:
+    index: int
+    cpus: tuple[int, ...] | None
+
+
+def make_lanes(n: int, cpus_per_lane: int | None = None, exclusive: bool = False) -> list[Lane]:
+    """Split the CPUs this process may use into `n` lanes (exclusive mode: one lane, every CPU)."""
+    available = sorted(os.sched_getaffinity(0))
+    if exclusive:
+        return [Lane(0, tuple(available))]
+    per = cpus_per_lane or max(1, len(available) // n)
+    return [Lane(i, tuple(available[(i * per + j) % len(available)] for j in range(per))) for i in range(n)]
+
+
+Event = Callable[[str, PlannedRun, Lane, dict], None]  # (started|finished|retry|requeued, run, lane, info)
+
+
+class Scheduler:
+    def __init__(self, spec: CampaignSpec, ledger: Ledger, backend: Backend, views: dict[tuple, PreparedView],
+                 groundtruths: dict[str, Trajectory | None], on_event: Event | None = None):
+        self.spec = spec
+        self.ledger = ledger
+        self.backend = backend
+        self.views = views
+        self.groundtruths = groundtruths
+        self.on_event = on_event or (lambda *a: None)
+        self.stop = threading.Event()  # no new runs
+        self.cancel = threading.Event()  # stop runs in flight
+        self._queue: list[PlannedRun] = []
+        self._qlock = threading.Lock()
+        self._methods = {i: get_method(m.name)(m.params) for i, m in enumerate(spec.methods)}
+
+    def run(self, runs: list[PlannedRun]) -> None:
+        pending = set(self.ledger.pending_keys())
+        self._queue = [r for r in runs if r.key.id in pending]
+        exclusive = self.spec.measurement == "exclusive"
+        lanes = make_lanes(1 if exclusive else self.spec.lanes, self.spec.cpus_per_lane, exclusive)
+        threads = [threading.Thread(target=self._lane_loop, args=(lane,), name=f"lane-{lane.index}", daemon=True)
+                   for lane in lanes]
+        for t in threads:
+            t.start()
+        stop_seen_at = None
+        while any(t.is_alive() for t in threads):
+            for t in threads:
+                t.join(timeout=0.1)
+            if self.stop.is_set() and stop_seen_at is None:
+                stop_seen_at = time.monotonic()
+            if stop_seen_at is not None and time.monotonic() - stop_seen_at > self.spec.stop_grace_s:
+                self.cancel.set()
+
+    def request_stop(self, now: bool = False) -> None:
+        self.stop.set()
+        if now:
+            self.cancel.set()
+
+    def _next(self) -> PlannedRun | None:
+        with self._qlock:
+            return self._queue.pop(0) if self._queue and not self.stop.is_set() else None
+
+    def _lane_loop(self, lane: Lane) -> None:
+        while (run := self._next()) is not None:
+            try:
+                self._run_with_retries(run, lane)
+            except Exception:  # a bug: keep the traceback, record it, let the other runs go on
+                msg = traceback.format_exc()
+                self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": msg[-2000:]})
+                self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": msg})
+
+    def _run_with_retries(self, run: PlannedRun, lane: Lane) -> None:
+        method = self._methods[run.method_index]
+        view = self.views[(str(run.sequence_dir), run.key.direction, run.profile)]
+        paths = RunPaths(self.spec.results, run.key)
+        for retry in range(self.spec.retries + 1):
+            attempt = self.ledger.mark_running(run.key.id, str(paths.final))
+            self.on_event("started", run, lane, {"attempt": attempt})
+            try:
+                outcome = execute_run(
+                    run, method, view, self.backend, paths, attempt, self.cancel, cpus=lane.cpus,
+                    memory_mb=self.spec.memory_limit_mb, log_cap_bytes=int(self.spec.log_cap_mb * 2**20),
+                    groundtruth=self.groundtruths.get(str(run.sequence_dir)) if self.spec.evaluate else None,
+                    campaign=self.spec.name,
+                    on_start=lambda pid, t0: self.ledger.set_process(run.key.id, pid, t0),
+                )
+            except InfraError as exc:
+                if retry < self.spec.retries and not self.stop.is_set():
+                    delay = self.spec.retry_backoff_s * 2**retry
+                    self.ledger.reset_to_pending(run.key.id)
+                    self.on_event("retry", run, lane, {"message": str(exc), "delay_s": delay})
+                    if self.stop.wait(delay):
+                        return
+                    continue
+                self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": str(exc)})
+                self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": str(exc)})
+                return
+            if outcome.state == "cancelled":
+                self.ledger.reset_to_pending(run.key.id)
+                self.on_event("requeued", run, lane, {})
+                return
+            self.ledger.finish(run.key.id, outcome.state, outcome.values)
+            self.on_event("finished", run, lane, {"state": outcome.state, **outcome.values})
+            return
+
+
+def recover(ledger: Ledger, results: Path) -> dict[str, int]:
+    """After a crash: finished-but-unrecorded runs are imported, stale `running` rows go back to pending."""
+    import json
+
+    from runner.backends.local import kill_stale
+
+    imported = requeued = killed = 0
+    for row in ledger.stale_running():
+        if row["pid"]:
+            killed += kill_stale(row["pid"], row["pid_start"])
+        run_json = Path(row["run_dir"] or "") / "run.json"
+        if row["run_dir"] and run_json.exists():
+            try:
+                rec = json.loads(run_json.read_text())
+            except ValueError:
+                rec = None
+            if rec and rec.get("key") == row["key"] and rec.get("state") in ("done", "failed"):
+                ledger.finish(row["key"], rec["state"], {**rec, "run_dir": row["run_dir"]})
+                imported += 1
+                continue
+        ledger.reset_to_pending(row["key"])
+        requeued += 1
+    return {"imported": imported, "requeued": requeued, "killed": killed,
+            "infra_reset": ledger.reset_infra_failures()}

@@ -1,0 +1,192 @@
+"""The campaign spec: typed, self-documenting, validated all at once.
+
+Relative paths in a spec file are resolved against the folder that holds the spec.
+"""
+
+from __future__ import annotations
+
+import os
+from enum import Enum
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+import methods
+from runner.datasets.views import Direction
+from runner.errors import SpecError
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class SceneKind(str, Enum):
+    indoor = "indoor"
+    outdoor = "outdoor"
+
+
+class SynthSpec(Strict):
+    """Generate the dataset's sequences on first use (cached in its folder)."""
+
+    frames: int = Field(300, ge=30, description="Frames per sequence.")
+    seed: int = Field(0, description="Seed of the first sequence; the i-th sequence uses seed + i.")
+    size: str = Field("640x480", pattern=r"^\d+x\d+$", description="Image size WIDTHxHEIGHT.")
+    scene: SceneKind = Field(SceneKind.indoor, description="Room scale (indoor) or courtyard scale (outdoor).")
+
+    @property
+    def size_wh(self) -> tuple[int, int]:
+        w, h = self.size.split("x")
+        return int(w), int(h)
+
+
+class DatasetSpec(Strict):
+    name: str = Field(description="Dataset name, e.g. tum-mono.")
+    path: Path = Field(description="Folder holding one folder per sequence.")
+    sequences: list[str] = Field(min_length=1, description="Sequence folder names, e.g. sequence_01.")
+    synthetic: SynthSpec | None = Field(None, description="Generate missing sequences with `slamrun synth`.")
+
+
+class MethodSpec(Strict):
+    name: str = Field(description="Registry name (see `slamrun list-methods`).")
+    label: str | None = Field(None, description="Name in results (default: name); unique per spec.")
+    params: dict[str, Any] = Field(default_factory=dict, description="Method parameters (checked by the method).")
+    trials: int | None = Field(None, ge=1, description="Trials for this method (default: the campaign's).")
+    directions: list[Direction] | None = Field(None, description="Directions for this method (default: campaign).")
+    timeout_s: float | None = Field(None, gt=0, description="Per-run timeout for this method (default: campaign).")
+
+    @property
+    def run_label(self) -> str:
+        return self.label or self.name
+
+
+class CampaignSpec(Strict):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Campaign name.")
+    results: Path | None = Field(None, description="Results directory (default: results/<name>).")
+    cache: Path | None = Field(None, description="Prepared-view cache (default: .cache/views beside results).")
+    datasets: list[DatasetSpec] = Field(min_length=1)
+    methods: list[MethodSpec] = Field(min_length=1)
+    directions: list[Direction] = Field(default_factory=lambda: [Direction.forward, Direction.backward])
+    trials: int = Field(10, ge=1, description="Runs per (method, sequence, direction).")
+    timeout_s: float = Field(1800.0, gt=0, description="Wall-clock limit of one run.")
+    lanes: int = Field(1, ge=1, description="Runs in parallel, each pinned to its own CPU set.")
+    cpus_per_lane: int | None = Field(None, ge=1, description="CPUs per lane (default: all CPUs split evenly).")
+    memory_limit_mb: int | None = Field(None, ge=64, description="Memory limit per run (containers).")
+    backend: Literal["local", "docker"] = Field("local", description="Where runs execute.")
+    measurement: Literal["parallel", "exclusive"] = Field(
+        "parallel", description="exclusive: one run at a time, nothing else (for timing)."
+    )
+    retries: int = Field(2, ge=0, description="Retries of infrastructure failures (never of method failures).")
+    retry_backoff_s: float = Field(5.0, ge=0, description="First retry delay; doubles each retry.")
+    evaluate: bool = Field(True, description="Evaluate each finished run against the ground truth.")
+    stop_grace_s: float = Field(30.0, ge=0, description="On SIGINT/SIGTERM, time in-flight runs get to finish.")
+    log_cap_mb: float = Field(20.0, gt=0, description="Size cap of one run's log.txt.")
+    report: bool = Field(True, description="Write the report when the campaign ends.")
+
+    @field_validator("directions")
+    @classmethod
+    def _unique_directions(cls, v: list[Direction]) -> list[Direction]:
+        if len(set(v)) != len(v):
+            raise ValueError("directions repeat")
+        return v
+
+
+def _loc(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out or "<top>"
+
+
+def load_spec(path: str | Path, check_files: bool = True) -> CampaignSpec:
+    """Read, validate and resolve a spec file; raises SpecError listing every problem."""
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise SpecError(str(path), ["file not found"]) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        raise SpecError(str(path), [f"{where}not valid YAML ({getattr(exc, 'problem', exc)})"]) from None
+    if not isinstance(raw, dict):
+        raise SpecError(str(path), ["expected a mapping at the top (name, datasets, methods, ...)"])
+    return validate_spec(raw, base_dir=path.resolve().parent, source=str(path), check_files=check_files)
+
+
+def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files: bool = True) -> CampaignSpec:
+    problems: list[str] = []
+    try:
+        spec = CampaignSpec.model_validate(raw)
+    except ValidationError as exc:
+        for err in exc.errors():
+            msg = err["msg"]
+            if err["type"] == "extra_forbidden":
+                msg = "unknown key"
+            problems.append(f"{_loc(err['loc'])}: {msg}")
+        spec = None
+    # Method checks also run when other parts failed, so that every problem is listed at once.
+    raw_methods = raw.get("methods") if isinstance(raw.get("methods"), list) else []
+    labels: dict[str, int] = {}
+    for i, m in enumerate(raw_methods):
+        if not isinstance(m, dict) or not isinstance(m.get("name"), str):
+            continue
+        try:
+            cls = methods.get(m["name"])
+        except KeyError as exc:
+            problems.append(f"methods[{i}].name: {exc.args[0]}")
+            continue
+        try:
+            cls.Params.model_validate(m.get("params") or {})
+        except ValidationError as exc:
+            for err in exc.errors():
+                msg = "unknown parameter" if err["type"] == "extra_forbidden" else err["msg"]
+                problems.append(f"methods[{i}].params.{_loc(err['loc'])}: {msg}")
+        label = m.get("label") or m["name"]
+        if label in labels:
+            problems.append(f"methods[{i}].label: {label!r} used by methods[{labels[label]}] too; give a label")
+        labels[label] = i
+    if spec is not None:
+        spec = _resolve(spec, base_dir)
+        if check_files:
+            problems += _file_problems(spec)
+        seen: dict[str, str] = {}
+        for d, ds in enumerate(spec.datasets):
+            for s, seq in enumerate(ds.sequences):
+                if seq in seen:
+                    problems.append(f"datasets[{d}].sequences[{s}]: {seq!r} also in dataset {seen[seq]!r}")
+                seen[seq] = ds.name
+    if problems:
+        raise SpecError(source, problems)
+    assert spec is not None
+    return spec
+
+
+def _resolve(spec: CampaignSpec, base: Path) -> CampaignSpec:
+    def res(p: Path) -> Path:
+        p = Path(os.path.expanduser(str(p)))
+        return p if p.is_absolute() else (base / p).resolve()
+
+    results = res(spec.results) if spec.results else (Path.cwd() / "results" / spec.name).resolve()
+    cache = res(spec.cache) if spec.cache else results.parent / ".cache" / "views"
+    datasets = [ds.model_copy(update={"path": res(ds.path)}) for ds in spec.datasets]
+    return spec.model_copy(update={"results": results, "cache": cache, "datasets": datasets})
+
+
+def _file_problems(spec: CampaignSpec) -> list[str]:
+    problems = []
+    for d, ds in enumerate(spec.datasets):
+        if ds.synthetic is not None:
+            continue
+        if not ds.path.is_dir():
+            problems.append(f"datasets[{d}].path: folder {ds.path} not found (download it: slamrun dataset download)")
+            continue
+        for s, seq in enumerate(ds.sequences):
+            if not (ds.path / seq).is_dir():
+                problems.append(f"datasets[{d}].sequences[{s}]: {ds.path / seq} not found")
+    return problems
+
+
+def json_schema() -> dict:
+    return CampaignSpec.model_json_schema()

@@ -1,0 +1,46 @@
+"""Shared fixtures: a tiny synthetic sequence and spec builders around the fake method."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from runner.datasets.synth import generate
+
+FAKE = Path(__file__).parent / "fixtures" / "fake_method.py"
+SHARED = Path(__file__).resolve().parents[2] / "shared"
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory) -> Path:
+    """A dataset folder with two tiny synthetic sequences (40 frames, 160x120)."""
+    root = tmp_path_factory.mktemp("data")
+    generate(root / "seq_a", frames=40, seed=1, size=(160, 120))
+    generate(root / "seq_b", frames=40, seed=2, size=(160, 120))
+    return root
+
+
+def fake_method(mode: str = "ok", sleep: float = 0.0, label: str | None = None, extra: list[str] | None = None,
+                **kw) -> dict:
+    argv = [sys.executable, str(FAKE), "--times", "{times}", "--out", "{out}", "--view", "{view}",
+            "--mode", mode, "--sleep", str(sleep), *(extra or [])]
+    m = {"name": "external", "params": {"argv": argv, **kw}}
+    if label:
+        m["label"] = label
+    return m
+
+
+def write_spec(tmp_path: Path, dataset: Path, methods: list[dict], **kw) -> Path:
+    spec = {
+        "name": "t", "results": str(tmp_path / "results"), "cache": str(tmp_path / "cache"),
+        "datasets": [{"name": "synth", "path": str(dataset), "sequences": ["seq_a", "seq_b"]}],
+        "methods": methods, "trials": 1, "timeout_s": 60, "lanes": 2, "retry_backoff_s": 0.01,
+        "stop_grace_s": 5, "report": False,
+    }
+    spec.update(kw)
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
