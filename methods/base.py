@@ -42,6 +42,7 @@ class Method(ABC):
 
     def configure(self, view: PreparedView, workdir: Path) -> None:
         """Write the method's own config files into workdir (nothing by default)."""
+        return None
 
     @abstractmethod
     def command(self, view: PreparedView, workdir: Path) -> list[str]:

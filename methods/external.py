@@ -8,7 +8,7 @@ directory: {python} {view} {images} {times} {rgb} {images_list} {times_single} {
 from __future__ import annotations
 
 import sys
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +20,7 @@ from runner.errors import MethodFailure
 from runner.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
 
 
-class OutputFormat(str, Enum):
+class OutputFormat(StrEnum):
     tum = "tum"
     kitti = "kitti"  # 12 numbers per frame, one row per view frame
     timestamped_3x4 = "timestamped_3x4"
@@ -58,10 +58,17 @@ class External(Method):
     def placeholders(self, view: PreparedView, workdir: Path) -> dict[str, str]:
         v = view
         return {
-            "python": sys.executable, "view": str(v.root), "images": str(v.path(v.images_dir)),
-            "times": str(v.path(v.times)), "rgb": str(v.path(v.rgb)), "images_list": str(v.path(v.images_list)),
-            "times_single": str(v.path(v.times_single)), "camera": str(v.path(v.camera)),
-            "pcalib": str(v.path(v.pcalib)), "vignette": str(v.path(v.vignette)), "workdir": str(workdir),
+            "python": sys.executable,
+            "view": str(v.root),
+            "images": str(v.path(v.images_dir)),
+            "times": str(v.path(v.times)),
+            "rgb": str(v.path(v.rgb)),
+            "images_list": str(v.path(v.images_list)),
+            "times_single": str(v.path(v.times_single)),
+            "camera": str(v.path(v.camera)),
+            "pcalib": str(v.path(v.pcalib)),
+            "vignette": str(v.path(v.vignette)),
+            "workdir": str(workdir),
             "out": str(workdir / self.params.output),
         }
 

@@ -177,8 +177,9 @@ def rectified_pinhole(cam: FovCamera, mode: str, out_width: int, out_height: int
         return PinholeCamera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
     if cam.omega == 0:
         sx, sy = out_width / cam.width, out_height / cam.height
-        return PinholeCamera(out_width, out_height, cam.fx * sx, cam.fy * sy, (cam.cx + 0.5) * sx - 0.5,
-                             (cam.cy + 0.5) * sy - 0.5)
+        return PinholeCamera(
+            out_width, out_height, cam.fx * sx, cam.fy * sy, (cam.cx + 0.5) * sx - 0.5, (cam.cy + 0.5) * sy - 0.5
+        )
     if mode == "crop":
         # Radii of the border midpoints, in normalised distorted coordinates, and their undistorted values.
         left = cam.cx / cam.fx
@@ -195,10 +196,14 @@ def rectified_pinhole(cam: FovCamera, mode: str, out_width: int, out_height: int
         n = 200
         u = np.linspace(0, cam.width - 1, n)
         v = np.linspace(0, cam.height - 1, n)
-        border = np.concatenate([
-            np.column_stack([u, np.zeros(n)]), np.column_stack([u, np.full(n, cam.height - 1.0)]),
-            np.column_stack([np.zeros(n), v]), np.column_stack([np.full(n, cam.width - 1.0), v]),
-        ])
+        border = np.concatenate(
+            [
+                np.column_stack([u, np.zeros(n)]),
+                np.column_stack([u, np.full(n, cam.height - 1.0)]),
+                np.column_stack([np.zeros(n), v]),
+                np.column_stack([np.full(n, cam.width - 1.0), v]),
+            ]
+        )
         und = cam.unproject(border)
         (xmin, ymin), (xmax, ymax) = und.min(axis=0), und.max(axis=0)
         fx = (out_width - 1) / (xmax - xmin)
@@ -212,12 +217,15 @@ def rectification_maps(src: FovCamera, dst: PinholeCamera) -> tuple[np.ndarray, 
     u, v = np.meshgrid(np.arange(dst.width, dtype=float), np.arange(dst.height, dtype=float))
     xy = dst.unproject(np.column_stack([u.ravel(), v.ravel()]))
     uv = src.pinhole.project(src.distort(xy))
-    return (uv[:, 0].reshape(dst.height, dst.width).astype(np.float32),
-            uv[:, 1].reshape(dst.height, dst.width).astype(np.float32))
+    return (
+        uv[:, 0].reshape(dst.height, dst.width).astype(np.float32),
+        uv[:, 1].reshape(dst.height, dst.width).astype(np.float32),
+    )
 
 
-def photometric_correct(image: np.ndarray, inverse_response: np.ndarray, vignette: np.ndarray,
-                        exposure_ms: float) -> np.ndarray:
+def photometric_correct(
+    image: np.ndarray, inverse_response: np.ndarray, vignette: np.ndarray, exposure_ms: float
+) -> np.ndarray:
     """Irradiance B = G^-1(I) / (t V(x)) as float32; G^-1 given for pixel values 0..255."""
     g_inv = np.asarray(inverse_response, np.float32)
     return g_inv[image] / (np.float32(exposure_ms) * np.maximum(vignette.astype(np.float32), 1e-3))

@@ -41,8 +41,13 @@ def ensure_datasets(spec: CampaignSpec, log=print) -> None:
             if (folder / "times.txt").exists():
                 continue
             log(f"generating synthetic sequence {folder} ({ds.synthetic.frames} frames)")
-            synth.generate(folder, frames=ds.synthetic.frames, seed=ds.synthetic.seed + i,
-                           size=ds.synthetic.size_wh, scene_kind=ds.synthetic.scene.value)
+            synth.generate(
+                folder,
+                frames=ds.synthetic.frames,
+                seed=ds.synthetic.seed + i,
+                size=ds.synthetic.size_wh,
+                scene_kind=ds.synthetic.scene.value,
+            )
 
 
 def make_backend(spec: CampaignSpec) -> Backend:
@@ -76,8 +81,9 @@ def load_groundtruths(runs: list[PlannedRun]) -> dict:
     return gts
 
 
-def run_campaign(spec: CampaignSpec, backend: Backend | None = None, on_event: Event | None = None,
-                 scheduler_hook=None, log=print) -> CampaignResult:
+def run_campaign(
+    spec: CampaignSpec, backend: Backend | None = None, on_event: Event | None = None, scheduler_hook=None, log=print
+) -> CampaignResult:
     results = spec.results
     assert results is not None
     ensure_datasets(spec, log)
@@ -87,8 +93,7 @@ def run_campaign(spec: CampaignSpec, backend: Backend | None = None, on_event: E
         ledger = Ledger(results / "ledger.sqlite")
         ledger.set_meta("campaign", spec.name)
         ledger.set_meta("spec", spec.model_dump(mode="json"))
-        (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()),
-                                                                   sort_keys=False))
+        (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
         recovered = recover(ledger, results)
         runs = plan(spec)
         added = ledger.sync_plan(runs)

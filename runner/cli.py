@@ -103,19 +103,28 @@ def cmd_campaign(args) -> int:
             raise KeyboardInterrupt
         again = sched.stop.is_set()
         sched.request_stop(now=again)
-        progress.note(f"{signal.Signals(signum).name}: " + (
-            "stopping the runs in flight" if again else
-            f"no new runs; in-flight runs get {spec.stop_grace_s:.0f} s (signal again to stop them now)"))
+        progress.note(
+            f"{signal.Signals(signum).name}: "
+            + (
+                "stopping the runs in flight"
+                if again
+                else f"no new runs; in-flight runs get {spec.stop_grace_s:.0f} s (signal again to stop them now)"
+            )
+        )
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     t0 = time.monotonic()
-    result = run_campaign(spec, on_event=progress.event, scheduler_hook=lambda s: sched_ref.update(s=s),
-                          log=progress.note)
+    result = run_campaign(
+        spec, on_event=progress.event, scheduler_hook=lambda s: sched_ref.update(s=s), log=progress.note
+    )
     progress.close()
     _print_summary(result.results, result.results_csv)
-    console.print(f"{sum(result.counts.values())} runs: " + ", ".join(f"{k} {v}" for k, v in result.counts.items())
-                  + f" ({time.monotonic() - t0:.0f} s)")
+    console.print(
+        f"{sum(result.counts.values())} runs: "
+        + ", ".join(f"{k} {v}" for k, v in result.counts.items())
+        + f" ({time.monotonic() - t0:.0f} s)"
+    )
     if spec.report and not result.interrupted:
         try:
             from runner.analysis.report import write_report
@@ -129,8 +138,10 @@ def cmd_campaign(args) -> int:
         console.print("stopped before the end: run the same command again to resume")
         return 130
     if result.infra_failures:
-        console.print(f"{result.infra_failures} run(s) failed for infrastructure reasons (see message column); "
-                      "run again to retry them")
+        console.print(
+            f"{result.infra_failures} run(s) failed for infrastructure reasons (see message column); "
+            "run again to retry them"
+        )
         return 3
     return 0
 
@@ -148,9 +159,14 @@ class _Progress:
         if tty:
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-            self._progress = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                      TextColumn("failed {task.fields[failed]}"), TimeRemainingColumn(),
-                                      console=console)
+            self._progress = Progress(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("failed {task.fields[failed]}"),
+                TimeRemainingColumn(),
+                console=console,
+            )
             self._task = self._progress.add_task("runs", total=None, failed=0)
             self._progress.start()
 
@@ -174,8 +190,9 @@ class _Progress:
             self.note(f"[lane {lane.index}] {run.key.id}: {kind} {info.get('message', '')}")
         if self._progress:
             lanes = " | ".join(f"L{i}: {v}" for i, v in sorted(self.lanes.items()))
-            self._progress.update(self._task, completed=self.done, failed=self.failed,
-                                  description=f"runs [{lanes}]" if lanes else "runs")
+            self._progress.update(
+                self._task, completed=self.done, failed=self.failed, description=f"runs [{lanes}]" if lanes else "runs"
+            )
 
     def close(self) -> None:
         if self._progress:
@@ -192,10 +209,21 @@ def _print_summary(results: Path, csv: Path) -> None:
         return
     summ = method_summary(df)
     t = Table(title=f"per method ({results.name})")
-    cols = ["method", "runs", "done", "failed", "success_pct", "median_e_t", "median_e_r", "median_e_s_sym",
-            "median_e_align", "median_fps"]
-    fails = [k for k in ("not_initialized", "lost", "no_output", "crashed", "timeout", "oom", "infra")
-             if summ[k].sum() > 0]
+    cols = [
+        "method",
+        "runs",
+        "done",
+        "failed",
+        "success_pct",
+        "median_e_t",
+        "median_e_r",
+        "median_e_s_sym",
+        "median_e_align",
+        "median_fps",
+    ]
+    fails = [
+        k for k in ("not_initialized", "lost", "no_output", "crashed", "timeout", "oom", "infra") if summ[k].sum() > 0
+    ]
     for c in cols + fails:
         t.add_column(c.replace("median_", "med "), justify="right" if c != "method" else "left")
     for _, r in summ.iterrows():
@@ -270,8 +298,14 @@ def cmd_list_methods(args) -> int:
         t.add_column(c)
     for name, cls in sorted(methods.REGISTRY.items()):
         prof = cls.profile if isinstance(cls.profile, str) else getattr(cls.profile, "value", "per spec")
-        t.add_row(name, str(prof), cls.image or "-", "yes" if cls.needs_gpu else "no",
-                  "yes" if cls.native else "no", cls.loop_closure_switch or "-")
+        t.add_row(
+            name,
+            str(prof),
+            cls.image or "-",
+            "yes" if cls.needs_gpu else "no",
+            "yes" if cls.native else "no",
+            cls.loop_closure_switch or "-",
+        )
     console.print(t)
     return 0
 
@@ -292,8 +326,12 @@ def cmd_evaluate(args) -> int:
             d = tum_mono(gt, read_tum(f)).to_dict()
         except TrajectoryFormatError as exc:
             d = {"status": "unreadable", "detail": str(exc)}
-        d = {"file": str(f), **{k: d.get(k) for k in ("status", "e_t", "e_r", "e_s", "e_align", "e_start", "e_end",
-                                                      "e_rmse", "n_poses")}}
+        d = {
+            "file": str(f),
+            **{
+                k: d.get(k) for k in ("status", "e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse", "n_poses")
+            },
+        }
         if args.json:
             print(json.dumps(d))
         else:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from enum import Enum
+from enum import StrEnum
 
 import numpy as np
 
@@ -21,7 +21,7 @@ MIN_SEGMENT_POSES = 3  # a Sim(3) alignment needs at least three poses to be det
 METRIC_NAMES = ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse")
 
 
-class EvalStatus(str, Enum):
+class EvalStatus(StrEnum):
     ok = "ok"
     empty = "empty"  # no pose at all
     nan = "nan"  # a NaN or infinite value in the estimate
@@ -184,7 +184,9 @@ def rpe(gt: Trajectory, est: Trajectory, delta: int = 1) -> RpeResult:
     r_err = np.einsum("nji,njk->nik", rg, re)
     p_err = np.einsum("nji,nj->ni", rg, pe - pg)
     cos = (np.trace(r_err, axis1=1, axis2=2) - 1.0) / 2.0
-    axis = np.stack([r_err[:, 2, 1] - r_err[:, 1, 2], r_err[:, 0, 2] - r_err[:, 2, 0], r_err[:, 1, 0] - r_err[:, 0, 1]], 1)
+    axis = np.stack(
+        [r_err[:, 2, 1] - r_err[:, 1, 2], r_err[:, 0, 2] - r_err[:, 2, 0], r_err[:, 1, 0] - r_err[:, 0, 1]], 1
+    )
     angle = np.arctan2(np.linalg.norm(axis, axis=1) / 2.0, cos)
     return RpeResult(
         EvalStatus.ok,

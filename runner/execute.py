@@ -33,10 +33,21 @@ class RunOutcome:
     values: dict  # ledger columns
 
 
-def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Backend, paths: RunPaths,
-                attempt: int, cancel: threading.Event, cpus: tuple[int, ...] | None = None,
-                memory_mb: int | None = None, log_cap_bytes: int = 20 * 2**20, groundtruth: Trajectory | None = None,
-                campaign: str = "", on_start=None) -> RunOutcome:
+def execute_run(
+    run: PlannedRun,
+    method: Method,
+    view: PreparedView,
+    backend: Backend,
+    paths: RunPaths,
+    attempt: int,
+    cancel: threading.Event,
+    cpus: tuple[int, ...] | None = None,
+    memory_mb: int | None = None,
+    log_cap_bytes: int = 20 * 2**20,
+    groundtruth: Trajectory | None = None,
+    campaign: str = "",
+    on_start=None,
+) -> RunOutcome:
     paths.clear_staging()
     stage = paths.staging(attempt)
     raw = RunPaths.raw(stage)
@@ -48,11 +59,20 @@ def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Ba
     except MethodFailure as exc:
         shutil.rmtree(stage, ignore_errors=True)
         raise InfraError(f"{run.key.id}: cannot configure {run.method}: {exc}") from None
-    req = ExecRequest(argv=argv, workdir=raw, view=view, log_path=RunPaths.log(stage),
-                      resources_path=RunPaths.resources(stage), timeout_s=run.timeout_s, cpus=cpus,
-                      memory_mb=memory_mb, log_cap_bytes=log_cap_bytes, image=type(method).image,
-                      needs_gpu=type(method).needs_gpu,
-                      labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id})
+    req = ExecRequest(
+        argv=argv,
+        workdir=raw,
+        view=view,
+        log_path=RunPaths.log(stage),
+        resources_path=RunPaths.resources(stage),
+        timeout_s=run.timeout_s,
+        cpus=cpus,
+        memory_mb=memory_mb,
+        log_cap_bytes=log_cap_bytes,
+        image=type(method).image,
+        needs_gpu=type(method).needs_gpu,
+        labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id},
+    )
     try:
         result = backend.execute(req, cancel, on_start)
     except InfraError:
@@ -75,8 +95,16 @@ def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Ba
             ev = tum_mono(groundtruth, traj)
             values["eval_status"] = ev.status.value
             if ev.status is EvalStatus.ok:
-                values.update(e_t=ev.e_t, e_r=ev.e_r, e_s=ev.e_s, e_s_sym=ev.e_s_sym, e_align=ev.e_align,
-                              e_start=ev.e_start, e_end=ev.e_end, e_rmse=ev.e_rmse)
+                values.update(
+                    e_t=ev.e_t,
+                    e_r=ev.e_r,
+                    e_s=ev.e_s,
+                    e_s_sym=ev.e_s_sym,
+                    e_align=ev.e_align,
+                    e_start=ev.e_start,
+                    e_end=ev.e_end,
+                    e_rmse=ev.e_rmse,
+                )
             elif not values["message"]:
                 values["message"] = f"evaluation {ev.status.value}: {ev.detail}"
     if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
@@ -86,13 +114,28 @@ def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Ba
     state = "failed" if failure else "done"
     values["ended_at"] = time.time()
     record = {
-        "key": run.key.id, "label": run.key.label, "method": run.method, "dataset": run.dataset,
-        "sequence": run.key.sequence, "direction": run.key.direction.value, "trial": run.key.trial,
-        "settings": run.key.settings, "params": method.params.model_dump(mode="json"), "state": state,
-        "attempt": attempt, "argv": argv, "started_at": started, "view": str(view.root),
-        "sequence_dir": str(run.sequence_dir), "cpus": list(cpus) if cpus else None, "backend": backend.name,
-        "timed_out": result.timed_out, "oom": result.oom, "log_truncated": result.log_truncated,
-        "trajectory_report": traj.report.__dict__ if traj is not None else None, **values,
+        "key": run.key.id,
+        "label": run.key.label,
+        "method": run.method,
+        "dataset": run.dataset,
+        "sequence": run.key.sequence,
+        "direction": run.key.direction.value,
+        "trial": run.key.trial,
+        "settings": run.key.settings,
+        "params": method.params.model_dump(mode="json"),
+        "state": state,
+        "attempt": attempt,
+        "argv": argv,
+        "started_at": started,
+        "view": str(view.root),
+        "sequence_dir": str(run.sequence_dir),
+        "cpus": list(cpus) if cpus else None,
+        "backend": backend.name,
+        "timed_out": result.timed_out,
+        "oom": result.oom,
+        "log_truncated": result.log_truncated,
+        "trajectory_report": traj.report.__dict__ if traj is not None else None,
+        **values,
     }
     RunPaths.run_json(stage).write_text(json.dumps(record, indent=1, default=_json_default))
     final = paths.final
@@ -104,8 +147,9 @@ def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Ba
     return RunOutcome(state, values)
 
 
-def _classify(result, method: Method, raw: Path, view: PreparedView,
-              log_tail: str) -> tuple[str | None, str | None, Trajectory | None]:
+def _classify(
+    result, method: Method, raw: Path, view: PreparedView, log_tail: str
+) -> tuple[str | None, str | None, Trajectory | None]:
     """(failure kind or None, message, trajectory or None) from what the process left behind."""
     if result.oom:
         return "oom", "killed: out of memory", None

@@ -18,15 +18,42 @@ STATES = ("pending", "running", "done", "failed")
 METHOD_FAILURES = ("not_initialized", "lost", "no_output", "crashed", "timeout", "oom")
 FAILURES = METHOD_FAILURES + ("infra",)
 METRIC_COLUMNS = ("e_t", "e_r", "e_s", "e_s_sym", "e_align", "e_start", "e_end", "e_rmse", "n_poses")
-RESOURCE_COLUMNS = ("wall_s", "fps", "cpu_mean_pct", "cpu_peak_pct", "ram_peak_mb", "gpu_mem_peak_mb",
-                    "gpu_util_mean_pct", "n_frames")
+RESOURCE_COLUMNS = (
+    "wall_s",
+    "fps",
+    "cpu_mean_pct",
+    "cpu_peak_pct",
+    "ram_peak_mb",
+    "gpu_mem_peak_mb",
+    "gpu_util_mean_pct",
+    "n_frames",
+)
 KEY_COLUMNS = ("key", "label", "method", "dataset", "sequence", "direction", "trial", "settings")
-STATE_COLUMNS = ("active", "state", "attempts", "failure", "message", "exit_code", "eval_status",
-                 "started_at", "ended_at", "pid", "pid_start", "run_dir")
+STATE_COLUMNS = (
+    "active",
+    "state",
+    "attempts",
+    "failure",
+    "message",
+    "exit_code",
+    "eval_status",
+    "started_at",
+    "ended_at",
+    "pid",
+    "pid_start",
+    "run_dir",
+)
 ALL_COLUMNS = KEY_COLUMNS + STATE_COLUMNS + METRIC_COLUMNS + RESOURCE_COLUMNS
 
-_TYPES = {"trial": "INTEGER", "active": "INTEGER", "attempts": "INTEGER", "exit_code": "INTEGER", "pid": "INTEGER",
-          "n_poses": "INTEGER", "n_frames": "INTEGER"}
+_TYPES = {
+    "trial": "INTEGER",
+    "active": "INTEGER",
+    "attempts": "INTEGER",
+    "exit_code": "INTEGER",
+    "pid": "INTEGER",
+    "n_poses": "INTEGER",
+    "n_frames": "INTEGER",
+}
 _REAL = set(METRIC_COLUMNS + RESOURCE_COLUMNS + ("started_at", "ended_at", "pid_start")) - set(_TYPES)
 
 
@@ -109,15 +136,28 @@ class Ledger:
 
         Finished runs are never touched; returns how many runs were added.
         """
-        rows = [(r.key.id, r.key.label, r.method, r.dataset, r.key.sequence, r.key.direction.value, r.key.trial,
-                 r.key.settings) for r in runs]
+        rows = [
+            (
+                r.key.id,
+                r.key.label,
+                r.method,
+                r.dataset,
+                r.key.sequence,
+                r.key.direction.value,
+                r.key.trial,
+                r.key.settings,
+            )
+            for r in runs
+        ]
         with self._lock, self._db:
             self._db.execute("BEGIN")
             before = self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
             self._db.execute("UPDATE runs SET active = 0")
             self._db.executemany(
                 "INSERT OR IGNORE INTO runs (key, label, method, dataset, sequence, direction, trial, settings, "
-                "active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)", rows)
+                "active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)",
+                rows,
+            )
             self._db.executemany("UPDATE runs SET active = 1 WHERE key = ?", [(r[0],) for r in rows])
             after = self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
         return after - before
@@ -130,20 +170,27 @@ class Ledger:
             self._db.execute(
                 "UPDATE runs SET state = 'pending', pid = NULL, pid_start = NULL"
                 + ("" if keep_attempts else ", attempts = 0, failure = NULL, message = NULL")
-                + " WHERE key = ?", (key,))
+                + " WHERE key = ?",
+                (key,),
+            )
 
     def reset_infra_failures(self) -> int:
         """Infrastructure failures are not results: a new campaign start tries them again."""
         with self._lock:
-            cur = self._db.execute("UPDATE runs SET state = 'pending', attempts = 0, failure = NULL, message = NULL "
-                                   "WHERE state = 'failed' AND failure = 'infra'")
+            cur = self._db.execute(
+                "UPDATE runs SET state = 'pending', attempts = 0, failure = NULL, message = NULL "
+                "WHERE state = 'failed' AND failure = 'infra'"
+            )
             return cur.rowcount
 
     def mark_running(self, key: str, run_dir: str) -> int:
         """Mark a run started; returns its attempt number (1-based)."""
         with self._lock:
-            self._db.execute("UPDATE runs SET state = 'running', attempts = attempts + 1, started_at = ?, "
-                             "ended_at = NULL, run_dir = ? WHERE key = ?", (time.time(), run_dir, key))
+            self._db.execute(
+                "UPDATE runs SET state = 'running', attempts = attempts + 1, started_at = ?, "
+                "ended_at = NULL, run_dir = ? WHERE key = ?",
+                (time.time(), run_dir, key),
+            )
             return self._db.execute("SELECT attempts FROM runs WHERE key = ?", (key,)).fetchone()[0]
 
     def set_process(self, key: str, pid: int, pid_start: float) -> None:

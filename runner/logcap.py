@@ -29,7 +29,7 @@ class CappedLog:
             self._fh.write(take)
             self._fh.flush()
             self._head_written += len(take)
-            data = data[len(take):]
+            data = data[len(take) :]
         if not data:
             return
         self._tail.append(data)

@@ -53,9 +53,16 @@ class ResourceSeries:
             w = csv.writer(f)
             w.writerow(FIELDS)
             for s in self.samples:
-                w.writerow([f"{s.t_s:.3f}", f"{s.cpu_pct:.2f}", f"{s.ram_mb:.2f}", s.n_procs,
-                            "" if s.gpu_mem_mb is None else f"{s.gpu_mem_mb:.1f}",
-                            "" if s.gpu_util_pct is None else f"{s.gpu_util_pct:.1f}"])
+                w.writerow(
+                    [
+                        f"{s.t_s:.3f}",
+                        f"{s.cpu_pct:.2f}",
+                        f"{s.ram_mb:.2f}",
+                        s.n_procs,
+                        "" if s.gpu_mem_mb is None else f"{s.gpu_mem_mb:.1f}",
+                        "" if s.gpu_util_pct is None else f"{s.gpu_util_pct:.1f}",
+                    ]
+                )
 
 
 class Gpu:

@@ -29,7 +29,9 @@ class RunKey:
     @property
     def relpath(self) -> Path:
         """runs/<label>@<settings>/<sequence>/<direction>/<trial>: a new setting never reuses a folder."""
-        return Path("runs") / f"{self.label}@{self.settings}" / self.sequence / self.direction.value / f"{self.trial:02d}"
+        return (
+            Path("runs") / f"{self.label}@{self.settings}" / self.sequence / self.direction.value / f"{self.trial:02d}"
+        )
 
 
 @dataclass(frozen=True)
@@ -65,8 +67,9 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
                 for direction in directions:
                     for trial in range(trials):
                         key = RunKey(m.run_label, seq, direction, trial, h)
-                        run = PlannedRun(key, mi, m.name, ds.name, ds.path / seq, method.profile,
-                                         m.timeout_s or spec.timeout_s)
+                        run = PlannedRun(
+                            key, mi, m.name, ds.name, ds.path / seq, method.profile, m.timeout_s or spec.timeout_s
+                        )
                         runs.append(((trial, mi, seq, direction.value), run))
     runs.sort(key=lambda r: r[0])
     return [r for _, r in runs]

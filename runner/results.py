@@ -10,9 +10,25 @@ import pandas as pd
 
 from runner.ledger import FAILURES, METRIC_COLUMNS, RESOURCE_COLUMNS, Ledger
 
-COLUMNS = ("method", "sequence", "direction", "trial", "status", "failure", "eval_status", *METRIC_COLUMNS,
-           *RESOURCE_COLUMNS, "method_name", "dataset", "settings", "attempts", "exit_code", "message", "run_dir",
-           "key")
+COLUMNS = (
+    "method",
+    "sequence",
+    "direction",
+    "trial",
+    "status",
+    "failure",
+    "eval_status",
+    *METRIC_COLUMNS,
+    *RESOURCE_COLUMNS,
+    "method_name",
+    "dataset",
+    "settings",
+    "attempts",
+    "exit_code",
+    "message",
+    "run_dir",
+    "key",
+)
 
 
 def results_frame(ledger: Ledger) -> pd.DataFrame:

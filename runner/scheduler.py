@@ -46,8 +46,15 @@ Event = Callable[[str, PlannedRun, Lane, dict], None]  # (started|finished|retry
 
 
 class Scheduler:
-    def __init__(self, spec: CampaignSpec, ledger: Ledger, backend: Backend, views: dict[tuple, PreparedView],
-                 groundtruths: dict[str, Trajectory | None], on_event: Event | None = None):
+    def __init__(
+        self,
+        spec: CampaignSpec,
+        ledger: Ledger,
+        backend: Backend,
+        views: dict[tuple, PreparedView],
+        groundtruths: dict[str, Trajectory | None],
+        on_event: Event | None = None,
+    ):
         self.spec = spec
         self.ledger = ledger
         self.backend = backend
@@ -65,8 +72,10 @@ class Scheduler:
         self._queue = [r for r in runs if r.key.id in pending]
         exclusive = self.spec.measurement == "exclusive"
         lanes = make_lanes(1 if exclusive else self.spec.lanes, self.spec.cpus_per_lane, exclusive)
-        threads = [threading.Thread(target=self._lane_loop, args=(lane,), name=f"lane-{lane.index}", daemon=True)
-                   for lane in lanes]
+        threads = [
+            threading.Thread(target=self._lane_loop, args=(lane,), name=f"lane-{lane.index}", daemon=True)
+            for lane in lanes
+        ]
         for t in threads:
             t.start()
         stop_seen_at = None
@@ -105,8 +114,16 @@ class Scheduler:
             self.on_event("started", run, lane, {"attempt": attempt})
             try:
                 outcome = execute_run(
-                    run, method, view, self.backend, paths, attempt, self.cancel, cpus=lane.cpus,
-                    memory_mb=self.spec.memory_limit_mb, log_cap_bytes=int(self.spec.log_cap_mb * 2**20),
+                    run,
+                    method,
+                    view,
+                    self.backend,
+                    paths,
+                    attempt,
+                    self.cancel,
+                    cpus=lane.cpus,
+                    memory_mb=self.spec.memory_limit_mb,
+                    log_cap_bytes=int(self.spec.log_cap_mb * 2**20),
                     groundtruth=self.groundtruths.get(str(run.sequence_dir)) if self.spec.evaluate else None,
                     campaign=self.spec.name,
                     on_start=lambda pid, t0: self.ledger.set_process(run.key.id, pid, t0),
@@ -153,5 +170,4 @@ def recover(ledger: Ledger, results: Path) -> dict[str, int]:
                 continue
         ledger.reset_to_pending(row["key"])
         requeued += 1
-    return {"imported": imported, "requeued": requeued, "killed": killed,
-            "infra_reset": ledger.reset_infra_failures()}
+    return {"imported": imported, "requeued": requeued, "killed": killed, "infra_reset": ledger.reset_infra_failures()}

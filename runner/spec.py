@@ -6,7 +6,7 @@ Relative paths in a spec file are resolved against the folder that holds the spe
 from __future__ import annotations
 
 import os
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Any, Literal
 
@@ -22,7 +22,7 @@ class Strict(BaseModel):
     model_config = ConfigDict(extra="forbid")
 
 
-class SceneKind(str, Enum):
+class SceneKind(StrEnum):
     indoor = "indoor"
     outdoor = "outdoor"
 

@@ -217,9 +217,7 @@ def _read_table(path: str | Path, ncols: int, text: str | None = None) -> np.nda
         if not body:
             continue
         if len(body) != ncols:
-            raise TrajectoryFormatError(
-                f"{path}:{lineno}: {len(body)} values, expected {ncols}: {line.strip()[:80]!r}"
-            )
+            raise TrajectoryFormatError(f"{path}:{lineno}: {len(body)} values, expected {ncols}: {line.strip()[:80]!r}")
         try:
             [float(v) for v in body]
         except ValueError:

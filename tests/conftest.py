@@ -23,10 +23,24 @@ def tiny_dataset(tmp_path_factory) -> Path:
     return root
 
 
-def fake_method(mode: str = "ok", sleep: float = 0.0, label: str | None = None, extra: list[str] | None = None,
-                **kw) -> dict:
-    argv = [sys.executable, str(FAKE), "--times", "{times}", "--out", "{out}", "--view", "{view}",
-            "--mode", mode, "--sleep", str(sleep), *(extra or [])]
+def fake_method(
+    mode: str = "ok", sleep: float = 0.0, label: str | None = None, extra: list[str] | None = None, **kw
+) -> dict:
+    argv = [
+        sys.executable,
+        str(FAKE),
+        "--times",
+        "{times}",
+        "--out",
+        "{out}",
+        "--view",
+        "{view}",
+        "--mode",
+        mode,
+        "--sleep",
+        str(sleep),
+        *(extra or []),
+    ]
     m = {"name": "external", "params": {"argv": argv, **kw}}
     if label:
         m["label"] = label
@@ -35,10 +49,17 @@ def fake_method(mode: str = "ok", sleep: float = 0.0, label: str | None = None, 
 
 def write_spec(tmp_path: Path, dataset: Path, methods: list[dict], **kw) -> Path:
     spec = {
-        "name": "t", "results": str(tmp_path / "results"), "cache": str(tmp_path / "cache"),
+        "name": "t",
+        "results": str(tmp_path / "results"),
+        "cache": str(tmp_path / "cache"),
         "datasets": [{"name": "synth", "path": str(dataset), "sequences": ["seq_a", "seq_b"]}],
-        "methods": methods, "trials": 1, "timeout_s": 60, "lanes": 2, "retry_backoff_s": 0.01,
-        "stop_grace_s": 5, "report": False,
+        "methods": methods,
+        "trials": 1,
+        "timeout_s": 60,
+        "lanes": 2,
+        "retry_backoff_s": 0.01,
+        "stop_grace_s": 5,
+        "report": False,
     }
     spec.update(kw)
     path = tmp_path / "spec.yaml"

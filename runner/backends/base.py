@@ -46,6 +46,5 @@ class Backend(Protocol):
     def check(self) -> None:
         """Raise InfraError before any run starts when the backend cannot work (daemon unreachable, ...)."""
 
-    def execute(self, req: ExecRequest, cancel: threading.Event,
-                on_start: callable = None) -> ExecResult:  # type: ignore[valid-type]
+    def execute(self, req: ExecRequest, cancel: threading.Event, on_start: callable = None) -> ExecResult:  # type: ignore[valid-type]
         """Run to completion, timeout or cancel; always leaves no process behind."""

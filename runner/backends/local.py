@@ -39,8 +39,16 @@ class LocalBackend:
         log = CappedLog(req.log_path, req.log_cap_bytes)
         t0 = time.monotonic()
         try:
-            proc = subprocess.Popen(req.argv, cwd=req.workdir, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                    stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=pin, env=env)
+            proc = subprocess.Popen(
+                req.argv,
+                cwd=req.workdir,
+                stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+                preexec_fn=pin,
+                env=env,
+            )
         except (FileNotFoundError, PermissionError) as exc:
             log.close()
             raise InfraError(f"cannot start {req.argv[0]!r}: {exc}; check the method's executable") from None
@@ -71,8 +79,14 @@ class LocalBackend:
         proc.stdout.close()
         log.close()
         series.write_csv(req.resources_path)
-        return ExecResult(exit_code=exit_code, wall_s=wall_s, timed_out=timed_out, cancelled=cancelled,
-                          log_truncated=log.truncated, resources=series.summary(wall_s, req.view.n_frames))
+        return ExecResult(
+            exit_code=exit_code,
+            wall_s=wall_s,
+            timed_out=timed_out,
+            cancelled=cancelled,
+            log_truncated=log.truncated,
+            resources=series.summary(wall_s, req.view.n_frames),
+        )
 
 
 def kill_tree(proc: subprocess.Popen, known: list[psutil.Process]) -> None:

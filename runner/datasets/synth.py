@@ -77,9 +77,7 @@ def camera_path(scene: Scene, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Camera-to-world rotations (n, 3, 3) and positions (n, 3): one smooth loop around the boxes."""
     phase = 2 * np.pi * np.arange(n) / max(n - 1, 1)
     a, b = scene.path_radii
-    pos = np.column_stack([
-        a * np.cos(phase), b * np.sin(phase), scene.cam_height + 0.1 * a / 2.3 * np.sin(3 * phase)
-    ])
+    pos = np.column_stack([a * np.cos(phase), b * np.sin(phase), scene.cam_height + 0.1 * a / 2.3 * np.sin(3 * phase)])
     target = scene.look_at + np.column_stack([0.3 * np.sin(2 * phase), 0.3 * np.cos(phase), 0.2 * np.sin(phase)])
     fwd = target - pos
     fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
@@ -189,8 +187,9 @@ def inverse_response() -> np.ndarray:
     return 255.0 * (np.arange(256) / 255.0) ** GAMMA
 
 
-def generate(out: str | Path, frames: int = 300, seed: int = 0, size: tuple[int, int] = (640, 480),
-             scene_kind: str = "indoor") -> Path:
+def generate(
+    out: str | Path, frames: int = 300, seed: int = 0, size: tuple[int, int] = (640, 480), scene_kind: str = "indoor"
+) -> Path:
     """Write a TUM-Mono sequence folder at `out` (written to a temporary folder, then renamed)."""
     out = Path(out)
     tmp = out.with_name(out.name + ".tmp-synth")

@@ -12,7 +12,7 @@ import numpy as np
 
 from runner.camera import CameraFile, read_camera_txt
 from runner.errors import DatasetError
-from runner.trajectory import Trajectory, read_tum
+from runner.trajectory import Trajectory
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
 REQUIRED = ("times.txt", "camera.txt")

@@ -19,7 +19,7 @@ import os
 import shutil
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 
 import cv2
@@ -33,12 +33,12 @@ from runner.trajectory import Trajectory
 VIEW_FORMAT_VERSION = 1
 
 
-class Direction(str, Enum):
+class Direction(StrEnum):
     forward = "forward"
     backward = "backward"
 
 
-class Profile(str, Enum):
+class Profile(StrEnum):
     native = "native"  # original frames + FOV camera.txt, pcalib, vignette (DSO family, LSD-SLAM, SVO)
     rectified = "rectified"  # pinhole frames by the camera.txt output rule, zero distortion
 
@@ -120,8 +120,9 @@ def view_key(seq: Sequence, direction: Direction, profile: Profile) -> str:
     return f"{seq.name}-{direction.value}-{profile.value}-{h.hexdigest()[:12]}"
 
 
-def prepare(sequence_dir: Path | str, direction: Direction, profile: Profile, cache_dir: Path | str,
-            workers: int = 2) -> PreparedView:
+def prepare(
+    sequence_dir: Path | str, direction: Direction, profile: Profile, cache_dir: Path | str, workers: int = 2
+) -> PreparedView:
     """The prepared view, built now if the cache lacks it (safe across threads and processes)."""
     seq = open_sequence(sequence_dir)
     cache_dir = Path(cache_dir)
@@ -189,9 +190,21 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
             list(pool.map(work, frames))
         (out / PreparedView.camera).write_text(dst.camera_txt())
         width, height, pinhole = dst.width, dst.height, (dst.fx, dst.fy, dst.cx, dst.cy)
-        (out / "camera_pinhole.json").write_text(json.dumps(
-            {"width": dst.width, "height": dst.height, "fx": dst.fx, "fy": dst.fy, "cx": dst.cx, "cy": dst.cy,
-             "K": dst.K().tolist(), "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]}, indent=1))
+        (out / "camera_pinhole.json").write_text(
+            json.dumps(
+                {
+                    "width": dst.width,
+                    "height": dst.height,
+                    "fx": dst.fx,
+                    "fy": dst.fy,
+                    "cx": dst.cx,
+                    "cy": dst.cy,
+                    "K": dst.K().tolist(),
+                    "distortion": [0.0, 0.0, 0.0, 0.0, 0.0],
+                },
+                indent=1,
+            )
+        )
 
     with open(out / PreparedView.times, "w") as f:
         for i in range(n):
@@ -199,15 +212,24 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
     with open(out / PreparedView.times_single, "w") as f:
         f.writelines(f"{t_view[i]:.6f}\n" for i in range(n))
     with open(out / PreparedView.rgb, "w") as f:
-        f.write(f"# prepared view of {seq.name} ({direction.value})\n# frames in presentation order\n"
-                "# timestamp filename\n")
+        f.write(
+            f"# prepared view of {seq.name} ({direction.value})\n# frames in presentation order\n# timestamp filename\n"
+        )
         f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
     with open(out / PreparedView.images_list, "w") as f:
         f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
     meta = {
-        "sequence": seq.name, "source": str(seq.root), "direction": direction.value, "profile": profile.value,
-        "n_frames": n, "t_first": t_first, "t_last": t_last, "width": width, "height": height,
-        "pinhole": list(pinhole) if pinhole else None, "format_version": VIEW_FORMAT_VERSION,
+        "sequence": seq.name,
+        "source": str(seq.root),
+        "direction": direction.value,
+        "profile": profile.value,
+        "n_frames": n,
+        "t_first": t_first,
+        "t_last": t_last,
+        "width": width,
+        "height": height,
+        "pinhole": list(pinhole) if pinhole else None,
+        "format_version": VIEW_FORMAT_VERSION,
     }
     (out / "view.json").write_text(json.dumps(meta, indent=1))
 

@@ -1,0 +1,298 @@
+"""The engine end to end with real processes: results, failures as data, timeouts, lock, signals, resume."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pandas as pd
+import psutil
+import pytest
+
+from runner.backends.local import LocalBackend
+from runner.campaign import run_campaign
+from runner.errors import InfraError
+from runner.ledger import ResultsLock
+from runner.spec import load_spec
+from tests.conftest import fake_method, write_spec
+
+REQUIRED_COLUMNS = (
+    "method, sequence, direction, trial, status, failure, e_t, e_r, e_s, e_align, e_start, e_end, "
+    "e_rmse, n_poses, wall_s, fps, cpu_mean_pct, cpu_peak_pct, ram_peak_mb, gpu_mem_peak_mb"
+).split(", ")
+
+
+def campaign(spec_path: Path, **kw):
+    return run_campaign(load_spec(spec_path), log=lambda *a: None, **kw)
+
+
+def ledger_rows(results: Path) -> list[dict]:
+    if not (results / "ledger.sqlite").exists():
+        return []
+    db = sqlite3.connect(f"file:{results / 'ledger.sqlite'}?mode=ro", uri=True, timeout=10)
+    db.row_factory = sqlite3.Row
+    try:
+        return [dict(r) for r in db.execute("SELECT * FROM runs")]
+    except sqlite3.OperationalError:  # not created yet
+        return []
+    finally:
+        db.close()
+
+
+def slamrun(*args: str) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "runner.cli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+
+
+def test_results_layout_and_evaluation(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], trials=2)
+    res = campaign(spec)
+    assert res.counts["done"] == 8 and res.infra_failures == 0
+    df = pd.read_csv(res.results_csv)
+    assert set(REQUIRED_COLUMNS) <= set(df.columns)
+    assert pd.read_parquet(res.results / "results.parquet").shape == df.shape
+    # The fake method writes the ground truth (scaled and shifted): every error ~0, backward included.
+    assert (df.eval_status == "ok").all()
+    assert df.e_align.max() < 1e-6 and df.e_rmse.max() < 1e-6 and (df.e_s - 1).abs().max() < 1e-6
+    assert set(df.direction) == {"forward", "backward"}
+    assert df.gpu_mem_peak_mb.isna().all()  # no GPU: empty, never zero
+    run_dir = Path(df.run_dir[0])
+    assert {"trajectory.txt", "log.txt", "resources.csv", "run.json", "raw"} <= {p.name for p in run_dir.iterdir()}
+    assert run_dir.relative_to(res.results).parts[0] == "runs"
+    # trajectory.txt carries the ORIGINAL timestamps, increasing, also for backward runs
+    back = df[df.direction == "backward"].iloc[0]
+    traj = pd.read_csv(Path(back.run_dir) / "trajectory.txt", sep=" ", comment="#", header=None)
+    times = pd.read_csv(tiny_dataset / back.sequence / "times.txt", sep=" ", header=None)[1]
+    assert traj[0].is_monotonic_increasing and abs(traj[0].iloc[0] - times.iloc[0]) < 1e-6
+    # A second start finds nothing to do and touches nothing.
+    mtime = (run_dir / "run.json").stat().st_mtime_ns
+    res2 = campaign(spec)
+    assert res2.added == 0 and res2.counts["done"] == 8
+    assert (run_dir / "run.json").stat().st_mtime_ns == mtime
+
+
+def test_method_failures_are_data(tmp_path, tiny_dataset):
+    methods = [
+        fake_method("crash", label="crash"),
+        fake_method("garbage", label="garbage"),
+        fake_method("nothing", label="nothing"),
+        fake_method("empty", label="empty", not_initialized_pattern=r"^NOT INITIALIZED"),
+        fake_method("lost", label="lost", lost_pattern=r"^LOST"),
+    ]
+    spec = write_spec(tmp_path, tiny_dataset, methods, directions=["forward"])
+    res = campaign(spec)
+    df = pd.read_csv(res.results_csv).set_index("method")
+    assert res.infra_failures == 0
+    assert (df.status == "failed").all()
+    assert set(df.loc["crash", "failure"]) == {"crashed"}
+    assert (df.loc["crash", "exit_code"] == 139).all()
+    assert df.loc["crash", "message"].str.contains("Segmentation fault").all()  # the log tail
+    assert set(df.loc["garbage", "failure"]) == {"no_output"}
+    assert set(df.loc["nothing", "failure"]) == {"no_output"}
+    assert set(df.loc["empty", "failure"]) == {"not_initialized"}
+    assert set(df.loc["lost", "failure"]) == {"lost"}
+    assert (df.loc["lost", "n_poses"] > 0).all()  # what it tracked before it got lost is kept
+    # attempts: method failures are never retried
+    assert (df.attempts == 1).all()
+
+
+def test_timeout_kills_the_whole_tree(tmp_path, tiny_dataset):
+    marker = tmp_path / "pids.txt"
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method("child-hang", extra=["--marker", str(marker)])],
+        timeout_s=1.5,
+        directions=["forward"],
+    )
+    t0 = time.monotonic()
+    res = campaign(spec)
+    assert time.monotonic() - t0 < 30
+    df = pd.read_csv(res.results_csv)
+    assert (df.failure == "timeout").all() and (df.wall_s < 10).all()
+    pids = [int(line.split()[-1]) for line in marker.read_text().split("\n") if line]
+    assert len(pids) == 4  # two runs: the method and its child each
+    for pid in pids:
+        assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+
+
+def test_log_flood_is_capped_and_run_recorded(tmp_path, tiny_dataset):
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method("flood")],
+        log_cap_mb=1,
+        directions=["forward"],
+        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+    )
+    res = campaign(spec)
+    df = pd.read_csv(res.results_csv)
+    assert df.status.tolist() == ["done"]
+    log = Path(df.run_dir[0]) / "log.txt"
+    assert log.stat().st_size < 1.1 * 2**20
+    text = log.read_text()
+    assert "log capped" in text and text.rstrip().endswith("done")  # head, marker, and the tail kept
+    assert json.loads((Path(df.run_dir[0]) / "run.json").read_text())["log_truncated"] is True
+
+
+def test_resources_sampled(tmp_path, tiny_dataset):
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method("burn", sleep=2.0)],
+        directions=["forward"],
+        lanes=1,
+        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+    )
+    res = campaign(spec)
+    row = pd.read_csv(res.results_csv).iloc[0]
+    series = pd.read_csv(Path(row.run_dir) / "resources.csv")
+    assert len(series) >= 4  # >= 2 Hz over ~2 s
+    assert row.cpu_peak_pct > 50 and row.ram_peak_mb > 5 and row.wall_s >= 2.0
+    assert row.fps == pytest.approx(40 / row.wall_s)
+
+
+def test_second_runner_is_refused(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()])
+    with ResultsLock(tmp_path / "results"):
+        proc = slamrun("campaign", str(spec))
+        out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    assert f"PID {os.getpid()}" in err and "another slamrun" in err
+
+
+class FlakyBackend(LocalBackend):
+    """Raises an infrastructure error for the first `fail` calls, then runs for real."""
+
+    def __init__(self, fail: int):
+        super().__init__()
+        self.fail = fail
+        self.calls = 0
+        self.lock = threading.Lock()
+
+    def execute(self, req, cancel, on_start=None):
+        with self.lock:
+            self.calls += 1
+            if self.calls <= self.fail:
+                raise InfraError("docker daemon gone (simulated)")
+        return super().execute(req, cancel, on_start)
+
+
+def test_infra_failures_are_retried(tmp_path, tiny_dataset):
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method()],
+        directions=["forward"],
+        lanes=1,
+        retries=2,
+        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+    )
+    backend = FlakyBackend(fail=2)
+    res = campaign(spec, backend=backend)
+    df = pd.read_csv(res.results_csv)
+    assert df.status.tolist() == ["done"] and df.attempts.tolist() == [3] and backend.calls == 3
+
+
+def test_infra_give_up_then_retry_next_start(tmp_path, tiny_dataset):
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method()],
+        directions=["forward"],
+        lanes=1,
+        retries=1,
+        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+    )
+    res = campaign(spec, backend=FlakyBackend(fail=100))
+    df = pd.read_csv(res.results_csv)
+    assert df.failure.tolist() == ["infra"] and "daemon gone" in df.message[0] and res.infra_failures == 1
+    res2 = campaign(spec, backend=FlakyBackend(fail=0))
+    assert res2.recovered["infra_reset"] == 1 and res2.counts["done"] == 1 and res2.infra_failures == 0
+
+
+def _wait_for(cond, timeout=60.0):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _snapshot(run_dir: Path) -> dict:
+    return {p.relative_to(run_dir): (p.stat().st_mtime_ns, p.read_bytes()) for p in run_dir.rglob("*") if p.is_file()}
+
+
+def test_kill_9_then_resume(tmp_path, tiny_dataset):
+    marker = tmp_path / "starts.txt"
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=0.8, extra=["--marker", str(marker)])], trials=3)
+    results = tmp_path / "results"
+    proc = slamrun("campaign", str(spec))
+
+    def mid_way():
+        rows = ledger_rows(results)
+        return sum(r["state"] == "done" for r in rows) >= 3 and any(r["state"] == "running" for r in rows)
+
+    assert _wait_for(mid_way), proc.communicate(timeout=5)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    rows = ledger_rows(results)
+    finished = {r["key"]: Path(r["run_dir"]) for r in rows if r["state"] == "done"}
+    in_flight = [r for r in rows if r["state"] == "running"]
+    assert finished and in_flight
+    before = {k: _snapshot(d) for k, d in finished.items()}
+
+    proc2 = slamrun("campaign", str(spec))
+    out, err = proc2.communicate(timeout=120)
+    assert proc2.returncode == 0, err
+    rows = ledger_rows(results)
+    assert len(rows) == 12 and all(r["state"] == "done" for r in rows)
+    for key, run_dir in finished.items():  # finished runs untouched, never executed again
+        assert _snapshot(run_dir) == before[key]
+        assert json.loads((run_dir / "run.json").read_text())["attempt"] == 1
+    for r in in_flight:  # interrupted runs were redone
+        assert json.loads((Path(r["run_dir"]) / "run.json").read_text())["attempt"] == 2
+    assert sorted(p.name for p in (results / "runs").rglob("run.json")).count("run.json") == 12
+    assert not list((results / "runs").rglob(".*.tmp-*"))
+    # each run that finished before the kill started exactly once
+    assert len(marker.read_text().split()) == 12 + len(in_flight)
+
+
+def test_sigint_stops_cleanly_and_resumes(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=1.5)], trials=2, stop_grace_s=0.5)
+    results = tmp_path / "results"
+    proc = slamrun("campaign", str(spec))
+    assert _wait_for(lambda: any(r["state"] == "running" for r in ledger_rows(results)))
+    t0 = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert time.monotonic() - t0 < 15
+    assert proc.returncode == 130, err
+    assert "resume" in out
+    rows = ledger_rows(results)
+    assert not any(r["state"] == "running" for r in rows)
+    assert any(r["state"] == "pending" for r in rows)
+    for r in rows:
+        if r["state"] == "done":
+            assert (Path(r["run_dir"]) / "trajectory.txt").exists()
+    proc2 = slamrun("campaign", str(spec))
+    proc2.communicate(timeout=120)
+    assert all(r["state"] == "done" for r in ledger_rows(results))
+
+
+def test_status_cli(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(), fake_method("crash", label="crashy")])
+    campaign(spec)
+    proc = slamrun("status", str(tmp_path / "results"))
+    out, _ = proc.communicate(timeout=60)
+    assert proc.returncode == 0
+    assert "crashy: success 0 %" in out and "external: success 100 %" in out
