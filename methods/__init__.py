@@ -6,9 +6,11 @@ The spec validator, the CLI's method list, the image build targets and the tests
 from __future__ import annotations
 
 from methods.base import Method
+from methods.colmap import Colmap
 from methods.external import External
+from methods.reference_vo import ReferenceVO
 
-REGISTRY: dict[str, type[Method]] = {cls.name: cls for cls in (External,)}
+REGISTRY: dict[str, type[Method]] = {cls.name: cls for cls in (Colmap, External, ReferenceVO)}
 
 
 def get(name: str) -> type[Method]:

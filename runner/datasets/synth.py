@@ -120,6 +120,7 @@ class Renderer:
             face = np.zeros(len(cx), np.int32)
             for k in range(3):
                 tk = np.where(w[k] > 0, (hi[k] - o[k]) * inv[k], (lo[k] - o[k]) * inv[k])
+                tk = np.where(tk > 0, tk, np.inf)  # a ray parallel to a wall never meets it
                 closer = tk < t
                 t = np.where(closer, tk, t)
                 face = np.where(closer, np.where(w[k] > 0, 2 * k + 1, 2 * k), face)
