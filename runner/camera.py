@@ -67,11 +67,16 @@ class FovCamera:
         return xy * factor[:, None]
 
     def undistort(self, xy: np.ndarray) -> np.ndarray:
-        """Distorted normalised points → undistorted normalised points (valid for r_d * omega < pi/2)."""
+        """Distorted normalised points → undistorted normalised points.
+
+        Points with r_d * omega >= pi/2 lie at or beyond 90 degrees off-axis and have no pinhole image: NaN.
+        """
         if self.omega == 0:
             return xy
         r_d = np.linalg.norm(xy, axis=1)
-        r_u = np.tan(r_d * self.omega) / (2.0 * math.tan(self.omega / 2.0))
+        with np.errstate(invalid="ignore"):
+            r_u = np.where(r_d * self.omega < math.pi / 2, np.tan(r_d * self.omega), np.nan) / (
+                2.0 * math.tan(self.omega / 2.0))
         factor = np.where(r_d > 1e-12, r_u / np.maximum(r_d, 1e-12), self.omega / (2.0 * math.tan(self.omega / 2.0)))
         return xy * factor[:, None]
 
@@ -205,6 +210,7 @@ def rectified_pinhole(cam: FovCamera, mode: str, out_width: int, out_height: int
             ]
         )
         und = cam.unproject(border)
+        und = und[np.isfinite(und).all(axis=1)]  # border points beyond 90 degrees cannot be kept
         (xmin, ymin), (xmax, ymax) = und.min(axis=0), und.max(axis=0)
         fx = (out_width - 1) / (xmax - xmin)
         fy = (out_height - 1) / (ymax - ymin)

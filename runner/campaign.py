@@ -65,7 +65,7 @@ def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], lo
     for r in runs:
         k = (str(r.sequence_dir), r.key.direction, r.profile)
         if r.key.id in keys and k not in views:
-            views[k] = prepare(r.sequence_dir, r.key.direction, r.profile, spec.cache)
+            views[k] = prepare(r.sequence_dir, r.key.direction, r.profile, spec.cache, frame_format=spec.frame_format)
     return views
 
 

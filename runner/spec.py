@@ -83,6 +83,9 @@ class CampaignSpec(Strict):
     stop_grace_s: float = Field(30.0, ge=0, description="On SIGINT/SIGTERM, time in-flight runs get to finish.")
     log_cap_mb: float = Field(20.0, gt=0, description="Size cap of one run's log.txt.")
     report: bool = Field(True, description="Write the report when the campaign ends.")
+    frame_format: Literal["png", "pgm"] = Field(
+        "png", description="Rectified frames on disk: png (compact) or pgm (fastest, ~4x the disk)."
+    )
 
     @field_validator("directions")
     @classmethod

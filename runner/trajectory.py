@@ -49,7 +49,8 @@ class Trajectory:
 
     def with_timestamps(self, timestamps: np.ndarray) -> Trajectory:
         """The same poses at other times (re-sorted), e.g. mapping mirror time back to original time."""
-        return from_arrays(np.asarray(timestamps, float), self.positions, self.quaternions)
+        moved = from_arrays(np.asarray(timestamps, float), self.positions, self.quaternions)
+        return Trajectory(moved.timestamps, moved.positions, moved.quaternions, report=self.report)
 
 
 def from_arrays(timestamps: np.ndarray, positions: np.ndarray, quaternions: np.ndarray) -> Trajectory:
@@ -203,6 +204,9 @@ def _read_text(path: str | Path) -> str:
 def _read_table(path: str | Path, ncols: int, text: str | None = None) -> np.ndarray:
     """Parse rows of `ncols` numbers separated by spaces or commas; errors name the file and line."""
     text = _read_text(path) if text is None else text
+    data = _fast_table(text, ncols)
+    if data is not None:
+        return data
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
@@ -223,6 +227,22 @@ def _read_table(path: str | Path, ncols: int, text: str | None = None) -> np.nda
         except ValueError:
             raise TrajectoryFormatError(f"{path}:{lineno}: not a number in {line.strip()[:80]!r}") from None
     raise TrajectoryFormatError(f"{path}: cannot parse as rows of {ncols} numbers")
+
+
+def _fast_table(text: str, ncols: int) -> np.ndarray | None:
+    """The common case (plain numbers, no comments or commas) parsed in one C call; None otherwise."""
+    if "#" in text or "," in text or not text.strip():
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            flat = np.fromstring(text, sep=" ")
+    except (ValueError, DeprecationWarning):
+        return None
+    n_lines = sum(1 for line in text.splitlines() if line.strip()) if "\n\n" in text else len(text.splitlines())
+    if flat.size != n_lines * ncols:
+        return None
+    return flat.reshape(-1, ncols)
 
 
 def _normalise(data: np.ndarray, source: str) -> Trajectory:

@@ -45,7 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, ValueError, IndexError) as exc:
         print(f"reference_vo: bad input: {exc}", file=sys.stderr)
         return 1
-    frames = sorted(f for f in a.images.iterdir() if f.suffix.lower() in (".png", ".jpg", ".jpeg", ".pgm"))
+    frames = sorted(f for f in a.images.iterdir() if f.suffix.lower() in (".png", ".jpg", ".jpeg", ".pgm", ".ppm"))
     if len(frames) != len(times):
         print(f"reference_vo: {len(frames)} images but {len(times)} timestamps in {a.times}", file=sys.stderr)
         return 1

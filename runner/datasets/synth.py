@@ -216,7 +216,8 @@ def generate(
     with open(tmp / "times.txt", "w") as f:
         for i in range(frames):
             f.write(f"{i:05d} {t[i]:.6f} {exposure[i]:.6f}\n")
-    write_camera_txt(tmp / "camera.txt", cam, "crop", size)
+    out_size = (640, 480) if size[0] >= 640 and size[1] >= 480 else size  # TUM-Mono's output size
+    write_camera_txt(tmp / "camera.txt", cam, "crop", out_size)
     (tmp / "pcalib.txt").write_text(" ".join(f"{v:.9g}" for v in inverse_response()) + "\n")
     cv2.imwrite(str(tmp / "vignette.png"), np.rint(vignette / vignette.max() * 65535).astype(np.uint16))
     quats = Rotation.from_matrix(rots).as_quat()

@@ -15,7 +15,7 @@ from runner.errors import DatasetError
 from runner.trajectory import Trajectory
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
-REQUIRED = ("times.txt", "camera.txt")
+REQUIRED = ("times.txt", "camera.txt", "pcalib.txt", "vignette.png")
 
 
 @dataclass(frozen=True, eq=False)

@@ -30,7 +30,7 @@ from runner.datasets.tum_mono import Sequence, open_sequence
 from runner.errors import DatasetError
 from runner.trajectory import Trajectory
 
-VIEW_FORMAT_VERSION = 1
+VIEW_FORMAT_VERSION = 2
 
 
 class Direction(StrEnum):
@@ -79,10 +79,23 @@ class PreparedView:
         return original if self.direction is Direction.forward else self.t_first + self.t_last - original
 
     def to_original(self, traj: Trajectory) -> Trajectory:
-        """A trajectory in view time → the same poses at their original frame timestamps."""
-        if self.direction is Direction.forward:
-            return traj
-        return traj.with_timestamps(self.t_first + self.t_last - traj.timestamps)
+        """A trajectory in view time → the same poses at their original frame timestamps.
+
+        Times within 0.1 ms of a frame snap to that frame's original timestamp exactly (files carry
+        rounded decimals); other times are mapped arithmetically.
+        """
+        t = traj.timestamps if self.direction is Direction.forward else self.t_first + self.t_last - traj.timestamps
+        originals = self.original_timestamps()
+        if len(originals) and len(t):
+            idx = np.clip(np.searchsorted(originals, t), 1, len(originals) - 1)
+            nearest = np.where(np.abs(originals[idx - 1] - t) <= np.abs(originals[idx] - t), idx - 1, idx)
+            close = np.abs(originals[nearest] - t) < 1e-4
+            t = np.where(close, originals[nearest], t)
+        return traj.with_timestamps(t)
+
+    def original_timestamps(self) -> np.ndarray:
+        """The sequence's original frame timestamps, increasing (full precision)."""
+        return np.loadtxt(self.root / "original_times.txt", ndmin=1)
 
     def view_timestamps(self) -> np.ndarray:
         data = np.loadtxt(self.root / self.times, ndmin=2)
@@ -105,10 +118,14 @@ class PreparedView:
         )
 
 
-def view_key(seq: Sequence, direction: Direction, profile: Profile) -> str:
+FRAME_FORMATS = ("png", "pgm")  # rectified frames: png is compact, pgm is fastest to write and read
+
+
+def view_key(seq: Sequence, direction: Direction, profile: Profile, frame_format: str = "png") -> str:
     """Content-addressed key: the small files in full, the images by name, size and modification time."""
     h = hashlib.sha256()
-    h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}".encode())
+    fmt = frame_format if profile is Profile.rectified else "-"
+    h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}|{fmt}".encode())
     for name in ("times.txt", "camera.txt", "pcalib.txt"):
         p = seq.root / name
         h.update(p.read_bytes() if p.exists() else b"-")
@@ -121,13 +138,20 @@ def view_key(seq: Sequence, direction: Direction, profile: Profile) -> str:
 
 
 def prepare(
-    sequence_dir: Path | str, direction: Direction, profile: Profile, cache_dir: Path | str, workers: int = 2
+    sequence_dir: Path | str,
+    direction: Direction,
+    profile: Profile,
+    cache_dir: Path | str,
+    workers: int = 2,
+    frame_format: str = "png",
 ) -> PreparedView:
     """The prepared view, built now if the cache lacks it (safe across threads and processes)."""
     seq = open_sequence(sequence_dir)
     cache_dir = Path(cache_dir)
     cache_dir.mkdir(parents=True, exist_ok=True)
-    key = view_key(seq, direction, profile)
+    if frame_format not in FRAME_FORMATS:
+        raise ValueError(f"frame format {frame_format!r}; expected one of {FRAME_FORMATS}")
+    key = view_key(seq, direction, profile, frame_format)
     final = cache_dir / key
     if (final / "view.json").exists():
         return PreparedView.load(final)
@@ -140,7 +164,7 @@ def prepare(
             shutil.rmtree(tmp)
         tmp.mkdir()
         try:
-            _build(seq, direction, profile, tmp, workers)
+            _build(seq, direction, profile, tmp, workers, frame_format)
             os.rename(tmp, final)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -148,7 +172,7 @@ def prepare(
     return PreparedView.load(final)
 
 
-def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, workers: int) -> None:
+def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, workers: int, frame_format: str) -> None:
     n = seq.n_frames
     order = np.arange(n) if direction is Direction.forward else np.arange(n)[::-1]
     t_orig = seq.timestamps
@@ -174,7 +198,7 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
         mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
         dst = rectified_pinhole(cam.camera, mode, cam.out_width, cam.out_height)
         map_x, map_y = rectification_maps(cam.camera, dst)
-        names = [f"{i:06d}.png" for i in range(n)]
+        names = [f"{i:06d}.{frame_format}" for i in range(n)]
         frames = list(enumerate(seq.read_bytes()))
         inverse = {orig: i for i, orig in enumerate(order)}
 
@@ -184,7 +208,8 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
             if img is None:
                 raise DatasetError(f"{seq.root}: frame {name} cannot be decoded")
             rect = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            cv2.imwrite(str(images / names[inverse[j]]), rect, [cv2.IMWRITE_PNG_COMPRESSION, 1])
+            params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if frame_format == "png" else []
+            cv2.imwrite(str(images / names[inverse[j]]), rect, params)
 
         with ThreadPoolExecutor(max(1, workers)) as pool:
             list(pool.map(work, frames))
@@ -209,6 +234,8 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
     with open(out / PreparedView.times, "w") as f:
         for i in range(n):
             f.write(f"{i:06d} {t_view[i]:.6f} {exposure[i]:.6f}\n")
+    with open(out / "original_times.txt", "w") as f:
+        f.writelines(f"{v!r}\n" for v in t_orig.tolist())
     with open(out / PreparedView.times_single, "w") as f:
         f.writelines(f"{t_view[i]:.6f}\n" for i in range(n))
     with open(out / PreparedView.rgb, "w") as f:

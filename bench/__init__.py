@@ -1,0 +1,1 @@
+"""Benchmarks: `make bench` (python -m bench [--only NAME ...] [--skip NAME ...])."""

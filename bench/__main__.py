@@ -1,0 +1,249 @@
+"""make bench: every figure is measured side by side with its baseline in the same run, then printed with
+its target. Speed targets live here, never in the unit tests (machines are noisy)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS: list[tuple[str, str, str]] = []
+
+
+def report(name: str, value: str, target: str) -> None:
+    RESULTS.append((name, value, target))
+    print(f"  {name:<58} {value:>22}   target: {target}", flush=True)
+
+
+def one_core() -> None:
+    os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
+
+
+# ---------------------------------------------------------------- evaluator
+
+
+def bench_evaluator(tmp: Path) -> None:
+    from scipy.spatial.transform import Rotation
+
+    from runner.evaluation import tum_mono
+    from runner.trajectory import Trajectory, read_tum
+
+    print("evaluator: 1,000 trajectories of 1,500 poses against one ground truth (one core)")
+    n = 1500
+    t = 100.0 + np.arange(n) / 30.0
+    phase = np.linspace(0, 2 * np.pi, n)
+    pos = np.column_stack([np.cos(phase), np.sin(phase), 0.1 * phase])
+    quat = Rotation.from_euler("z", phase[:, None]).as_quat()
+    gt_pos = pos.copy()
+    gt_pos[int(0.2 * n) : int(0.8 * n)] = np.nan
+    gt_lines = np.column_stack([t, gt_pos, quat])
+    np.savetxt(tmp / "gt.txt", gt_lines, fmt="%.9f")
+    rng = np.random.default_rng(0)
+    files = []
+    for i in range(1000):
+        est = 0.5 * pos + rng.normal(scale=0.01, size=pos.shape) + i * 0.001
+        path = tmp / f"est_{i}.txt"
+        np.savetxt(path, np.column_stack([t, est, quat]), fmt="%.9f")
+        files.append(path)
+    data = np.loadtxt(tmp / "gt.txt")
+    gt = Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
+    t0 = time.perf_counter()
+    for f in files:
+        res = tum_mono(gt, read_tum(f))
+        assert res.status.value == "ok"
+    ours = len(files) / (time.perf_counter() - t0)
+    report("TUM-Mono evaluation (read + all metrics)", f"{ours:.0f} files/s", ">= 500 files/s")
+    try:
+        from evo.core import metrics, sync
+        from evo.tools import file_interface
+    except ImportError:
+        report("evo Sim(3) APE on the same files", "evo not installed", "-")
+        return
+    subset = files[:100]
+    t0 = time.perf_counter()
+    for f in subset:
+        ref = file_interface.read_tum_trajectory_file(str(tmp / "gt.txt"))
+        est = file_interface.read_tum_trajectory_file(str(f))
+        ref, est = sync.associate_trajectories(ref, est, max_diff=0.001)
+        valid = np.isfinite(ref.positions_xyz).all(axis=1)
+        ref.reduce_to_ids(np.flatnonzero(valid))
+        est.reduce_to_ids(np.flatnonzero(valid))
+        est.align(ref, correct_scale=True)
+        ape = metrics.APE(metrics.PoseRelation.translation_part)
+        ape.process_data((ref, est))
+        ape.get_statistic(metrics.StatisticsType.rmse)
+    evo_rate = len(subset) / (time.perf_counter() - t0)
+    report("evo Sim(3) APE, same files (100 of them)", f"{evo_rate:.0f} files/s", "-")
+    report("ratio ours / evo", f"{ours / evo_rate:.1f}x", ">= 10x")
+
+
+# ---------------------------------------------------------------- scheduler
+
+
+def bench_scheduler(tmp: Path) -> None:
+    import yaml
+
+    from runner.campaign import run_campaign
+    from runner.datasets.synth import generate
+    from runner.spec import load_spec
+
+    print("scheduler: per-run overhead with a no-op method, against a bare spawn of the same command")
+    generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
+    n = 60
+    spec = {"name": "b", "results": str(tmp / "res"), "cache": str(tmp / "cache"),
+            "datasets": [{"name": "d", "path": str(tmp / "data"), "sequences": ["s"]}],
+            "methods": [{"name": "external", "params": {"argv": ["/bin/true"]}}], "directions": ["forward"],
+            "trials": n, "lanes": 1, "report": False, "evaluate": False}
+    (tmp / "b.yaml").write_text(yaml.safe_dump(spec))
+    loaded = load_spec(tmp / "b.yaml")
+    run_campaign(loaded.model_copy(update={"trials": 1}), log=lambda *a: None)  # warm: cache, imports
+    t0 = time.perf_counter()
+    run_campaign(loaded, log=lambda *a: None)
+    campaign_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    for _ in range(n):
+        subprocess.run(["/bin/true"], check=False)
+    bare_s = time.perf_counter() - t0
+    overhead_ms = (campaign_s - bare_s) / n * 1000
+    report("campaign, per run (no-op method)", f"{campaign_s / n * 1000:.1f} ms", "-")
+    report("bare subprocess.run, per run", f"{bare_s / n * 1000:.1f} ms", "-")
+    report("scheduler overhead per run", f"{overhead_ms:.1f} ms", "< 50 ms")
+
+
+def bench_plan_status(tmp: Path) -> None:
+    from runner.ledger import Ledger
+    from runner.plan import plan
+    from runner.results import method_summary, results_frame
+    from runner.spec import validate_spec
+
+    print("plan and status of a 10,000-run campaign")
+    raw = {"name": "big", "results": str(tmp / "big"), "trials": 10,
+           "datasets": [{"name": "tum", "path": str(tmp / "nowhere"), "sequences": [f"sequence_{i:02d}"
+                                                                                    for i in range(1, 51)]}],
+           "methods": [{"name": "external", "label": f"m{i}", "params": {"argv": ["x", str(i)]}} for i in range(10)]}
+    t0 = time.perf_counter()
+    spec = validate_spec(raw, base_dir=tmp, check_files=False)
+    runs = plan(spec)
+    ledger = Ledger(tmp / "big" / "ledger.sqlite")
+    ledger.sync_plan(runs)
+    plan_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    df = results_frame(ledger)
+    method_summary(df)
+    ledger.counts()
+    status_s = time.perf_counter() - t0
+    assert len(runs) == 10_000 and len(df) == 10_000
+    report("plan 10,000 runs and write them to the ledger", f"{plan_s:.2f} s", "< 2 s")
+    report("load the status of 10,000 runs", f"{status_s:.2f} s", "< 2 s")
+
+
+# ---------------------------------------------------------------- datasets
+
+
+def bench_datasets(tmp: Path) -> None:
+    import cv2
+
+    from runner.camera import rectification_maps, rectified_pinhole
+    from runner.datasets.synth import Renderer, camera_path, default_camera, fov_rays, make_scene, make_texture
+    from runner.datasets.synth import generate
+    from runner.datasets.tum_mono import open_sequence
+    from runner.datasets.views import Direction, Profile, prepare
+
+    print("datasets: synthetic rendering (one core) and rectified preparation 1280x1024 -> 640x480")
+    rng = np.random.default_rng(0)
+    scene = make_scene("indoor", rng)
+    cam = default_camera(640, 480)
+    renderer = Renderer(scene, make_texture(rng), fov_rays(cam), (480, 640))
+    rots, pos = camera_path(scene, 60)
+    t0 = time.perf_counter()
+    for i in range(60):
+        renderer.render(rots[i], pos[i])
+    report("synthetic rendering 640x480", f"{60 / (time.perf_counter() - t0):.1f} frames/s", ">= 30 frames/s")
+
+    seq_dir = generate(tmp / "big" / "s", frames=60, seed=1, size=(1280, 1024))
+    seq = open_sequence(seq_dir)
+    rates = {}
+    for fmt in ("pgm", "png"):
+        t0 = time.perf_counter()
+        prepare(seq_dir, Direction.forward, Profile.rectified, tmp / f"cache-{fmt}", workers=1, frame_format=fmt)
+        rates[fmt] = seq.n_frames / (time.perf_counter() - t0)
+    dst = rectified_pinhole(seq.camera.camera, "crop", 640, 480)
+    t0 = time.perf_counter()
+    mx, my = rectification_maps(seq.camera.camera, dst)
+    for _, data in seq.read_bytes():
+        img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
+        cv2.remap(img, mx, my, cv2.INTER_LINEAR)
+    bare = seq.n_frames / (time.perf_counter() - t0)
+    report("bare decode + remap loop", f"{bare:.1f} frames/s", "-")
+    report("prepare rectified view, pgm frames (spec frame_format: pgm)", f"{rates['pgm']:.1f} frames/s", "-")
+    report("  ratio prepare(pgm) / bare", f"{rates['pgm'] / bare:.2f}", ">= 0.8")
+    report("prepare rectified view, png frames (default, ~4x smaller)", f"{rates['png']:.1f} frames/s", "-")
+    report("  ratio prepare(png) / bare", f"{rates['png'] / bare:.2f}", "- (compression costs CPU)")
+
+
+# ---------------------------------------------------------------- methods
+
+
+def bench_reference_vo(tmp: Path) -> None:
+    from runner.datasets.synth import generate
+    from runner.datasets.views import Direction, Profile, prepare
+
+    print("reference VO at 640x480 (one core)")
+    seq = generate(tmp / "vo" / "s", frames=300, seed=0)
+    view = prepare(seq, Direction.forward, Profile.rectified, tmp / "cache")
+    out = subprocess.run(
+        ["taskset", "-c", str(sorted(os.sched_getaffinity(0))[0]), sys.executable, "-m", "methods.reference_vo",
+         "--images", str(view.path(view.images_dir)), "--times", str(view.path(view.times)),
+         "--camera", str(view.path(view.camera)), "--out", str(tmp / "vo.txt")],
+        capture_output=True, text=True, check=True).stdout
+    fps = float(out.strip().splitlines()[-1].split(",")[-1].split()[0])
+    report("reference VO (image decode included)", f"{fps:.1f} fps", ">= 30 fps")
+
+
+def bench_demo(tmp: Path) -> None:
+    print("the demo campaign (configs/demo.yaml), from generated data to summary, in a scratch folder")
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-m", "runner.cli", "campaign", str(ROOT / "configs" / "demo.yaml"),
+                    "--results", str(tmp / "demo")], check=True, capture_output=True)
+    report("demo campaign wall time (data cached after the first run)", f"{time.perf_counter() - t0:.0f} s",
+           "< 600 s")
+
+
+BENCHES: dict[str, Callable[[Path], None]] = {
+    "evaluator": bench_evaluator, "scheduler": bench_scheduler, "plan": bench_plan_status,
+    "datasets": bench_datasets, "reference_vo": bench_reference_vo, "demo": bench_demo,
+}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(prog="bench")
+    ap.add_argument("--only", nargs="*", choices=list(BENCHES), default=None)
+    ap.add_argument("--skip", nargs="*", choices=list(BENCHES), default=[])
+    a = ap.parse_args()
+    names = [n for n in (a.only or BENCHES) if n not in a.skip]
+    for name in names:
+        with tempfile.TemporaryDirectory(prefix=f"bench-{name}-") as d:
+            pid = os.fork()  # each benchmark in its own process, so CPU pinning does not leak
+            if pid == 0:
+                if name in ("evaluator", "datasets"):
+                    one_core()
+                try:
+                    BENCHES[name](Path(d))
+                    os._exit(0)
+                except Exception as exc:  # noqa: BLE001
+                    print(f"  {name} failed: {exc!r}", flush=True)
+                    os._exit(1)
+            os.waitpid(pid, 0)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
