@@ -28,5 +28,8 @@ lint: install
 	$(BIN)/ruff check runner methods tests bench
 	$(BIN)/ruff format --check runner methods tests bench
 
+images: install
+	$(BIN)/slamrun images $(if $(METHOD),--method $(METHOD))
+
 clean:
 	rm -rf $(VENV) results .cache

@@ -98,10 +98,18 @@ def bench_scheduler(tmp: Path) -> None:
     print("scheduler: per-run overhead with a no-op method, against a bare spawn of the same command")
     generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
     n = 60
-    spec = {"name": "b", "results": str(tmp / "res"), "cache": str(tmp / "cache"),
-            "datasets": [{"name": "d", "path": str(tmp / "data"), "sequences": ["s"]}],
-            "methods": [{"name": "external", "params": {"argv": ["/bin/true"]}}], "directions": ["forward"],
-            "trials": n, "lanes": 1, "report": False, "evaluate": False}
+    spec = {
+        "name": "b",
+        "results": str(tmp / "res"),
+        "cache": str(tmp / "cache"),
+        "datasets": [{"name": "d", "path": str(tmp / "data"), "sequences": ["s"]}],
+        "methods": [{"name": "external", "params": {"argv": ["/bin/true"]}}],
+        "directions": ["forward"],
+        "trials": n,
+        "lanes": 1,
+        "report": False,
+        "evaluate": False,
+    }
     (tmp / "b.yaml").write_text(yaml.safe_dump(spec))
     loaded = load_spec(tmp / "b.yaml")
     run_campaign(loaded.model_copy(update={"trials": 1}), log=lambda *a: None)  # warm: cache, imports
@@ -125,10 +133,15 @@ def bench_plan_status(tmp: Path) -> None:
     from runner.spec import validate_spec
 
     print("plan and status of a 10,000-run campaign")
-    raw = {"name": "big", "results": str(tmp / "big"), "trials": 10,
-           "datasets": [{"name": "tum", "path": str(tmp / "nowhere"), "sequences": [f"sequence_{i:02d}"
-                                                                                    for i in range(1, 51)]}],
-           "methods": [{"name": "external", "label": f"m{i}", "params": {"argv": ["x", str(i)]}} for i in range(10)]}
+    raw = {
+        "name": "big",
+        "results": str(tmp / "big"),
+        "trials": 10,
+        "datasets": [
+            {"name": "tum", "path": str(tmp / "nowhere"), "sequences": [f"sequence_{i:02d}" for i in range(1, 51)]}
+        ],
+        "methods": [{"name": "external", "label": f"m{i}", "params": {"argv": ["x", str(i)]}} for i in range(10)],
+    }
     t0 = time.perf_counter()
     spec = validate_spec(raw, base_dir=tmp, check_files=False)
     runs = plan(spec)
@@ -152,8 +165,15 @@ def bench_datasets(tmp: Path) -> None:
     import cv2
 
     from runner.camera import rectification_maps, rectified_pinhole
-    from runner.datasets.synth import Renderer, camera_path, default_camera, fov_rays, make_scene, make_texture
-    from runner.datasets.synth import generate
+    from runner.datasets.synth import (
+        Renderer,
+        camera_path,
+        default_camera,
+        fov_rays,
+        generate,
+        make_scene,
+        make_texture,
+    )
     from runner.datasets.tum_mono import open_sequence
     from runner.datasets.views import Direction, Profile, prepare
 
@@ -200,10 +220,26 @@ def bench_reference_vo(tmp: Path) -> None:
     seq = generate(tmp / "vo" / "s", frames=300, seed=0)
     view = prepare(seq, Direction.forward, Profile.rectified, tmp / "cache")
     out = subprocess.run(
-        ["taskset", "-c", str(sorted(os.sched_getaffinity(0))[0]), sys.executable, "-m", "methods.reference_vo",
-         "--images", str(view.path(view.images_dir)), "--times", str(view.path(view.times)),
-         "--camera", str(view.path(view.camera)), "--out", str(tmp / "vo.txt")],
-        capture_output=True, text=True, check=True).stdout
+        [
+            "taskset",
+            "-c",
+            str(sorted(os.sched_getaffinity(0))[0]),
+            sys.executable,
+            "-m",
+            "methods.reference_vo",
+            "--images",
+            str(view.path(view.images_dir)),
+            "--times",
+            str(view.path(view.times)),
+            "--camera",
+            str(view.path(view.camera)),
+            "--out",
+            str(tmp / "vo.txt"),
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     fps = float(out.strip().splitlines()[-1].split(",")[-1].split()[0])
     report("reference VO (image decode included)", f"{fps:.1f} fps", ">= 30 fps")
 
@@ -211,15 +247,29 @@ def bench_reference_vo(tmp: Path) -> None:
 def bench_demo(tmp: Path) -> None:
     print("the demo campaign (configs/demo.yaml), from generated data to summary, in a scratch folder")
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-m", "runner.cli", "campaign", str(ROOT / "configs" / "demo.yaml"),
-                    "--results", str(tmp / "demo")], check=True, capture_output=True)
-    report("demo campaign wall time (data cached after the first run)", f"{time.perf_counter() - t0:.0f} s",
-           "< 600 s")
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "runner.cli",
+            "campaign",
+            str(ROOT / "configs" / "demo.yaml"),
+            "--results",
+            str(tmp / "demo"),
+        ],
+        check=True,
+        capture_output=True,
+    )
+    report("demo campaign wall time (data cached after the first run)", f"{time.perf_counter() - t0:.0f} s", "< 600 s")
 
 
 BENCHES: dict[str, Callable[[Path], None]] = {
-    "evaluator": bench_evaluator, "scheduler": bench_scheduler, "plan": bench_plan_status,
-    "datasets": bench_datasets, "reference_vo": bench_reference_vo, "demo": bench_demo,
+    "evaluator": bench_evaluator,
+    "scheduler": bench_scheduler,
+    "plan": bench_plan_status,
+    "datasets": bench_datasets,
+    "reference_vo": bench_reference_vo,
+    "demo": bench_demo,
 }
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 from methods.base import Method
 from methods.colmap import Colmap
 from methods.external import External
-from methods.reference_vo import ReferenceVO
+from methods.reference_vo.adapter import ReferenceVO
 
 REGISTRY: dict[str, type[Method]] = {cls.name: cls for cls in (Colmap, External, ReferenceVO)}
 

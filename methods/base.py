@@ -21,8 +21,9 @@ class NoParams(BaseModel):
 class Method(ABC):
     """One SLAM/VO method. Subclasses set the class attributes and implement `command`.
 
-    Paths given to `configure`, `command` and `read_trajectory` are as the method's process sees
-    them: on the host for the local backend, /data and /work inside a container.
+    `configure` and `command` get paths as the method's process sees them (on the host for the local
+    backend, /data and /work inside a container); `read_trajectory` gets host paths, since the runner
+    reads the outputs.
     """
 
     name: ClassVar[str]
@@ -40,9 +41,16 @@ class Method(ABC):
     def __init__(self, params: BaseModel | dict | None = None):
         self.params = params if isinstance(params, BaseModel) else self.Params.model_validate(params or {})
 
-    def configure(self, view: PreparedView, workdir: Path) -> None:
-        """Write the method's own config files into workdir (nothing by default)."""
-        return None
+    def configure(self, view: PreparedView, workdir: Path) -> dict[str, str]:
+        """The method's own config files: {path relative to the work directory: content}.
+
+        Pure: the runner writes them, so the same call serves a local process and a container.
+        """
+        return {}
+
+    def for_backend(self, backend: str) -> Method:
+        """This method as run by a backend (`local` or `docker`); the interpreter may differ."""
+        return self
 
     @abstractmethod
     def command(self, view: PreparedView, workdir: Path) -> list[str]:

@@ -35,7 +35,12 @@ class Colmap(Method):
     native = True
     Params = ColmapParams
     not_initialized_pattern = r"^NOT INITIALIZED"
-    python = sys.executable
+    python = sys.executable  # the interpreter of a local run
+
+    def for_backend(self, backend: str) -> Method:
+        method = type(self)(self.params)
+        method.python = sys.executable if backend == "local" else "python3"
+        return method
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params

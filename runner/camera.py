@@ -76,7 +76,8 @@ class FovCamera:
         r_d = np.linalg.norm(xy, axis=1)
         with np.errstate(invalid="ignore"):
             r_u = np.where(r_d * self.omega < math.pi / 2, np.tan(r_d * self.omega), np.nan) / (
-                2.0 * math.tan(self.omega / 2.0))
+                2.0 * math.tan(self.omega / 2.0)
+            )
         factor = np.where(r_d > 1e-12, r_u / np.maximum(r_d, 1e-12), self.omega / (2.0 * math.tan(self.omega / 2.0)))
         return xy * factor[:, None]
 

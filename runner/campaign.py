@@ -8,6 +8,7 @@ from pathlib import Path
 
 import yaml
 
+import methods
 from runner.backends.base import Backend
 from runner.datasets import synth
 from runner.datasets.tum_mono import open_sequence
@@ -98,7 +99,9 @@ def run_campaign(
         runs = plan(spec)
         added = ledger.sync_plan(runs)
         backend = backend or make_backend(spec)
-        backend.check()
+        if hasattr(backend, "remove_leftovers"):
+            backend.remove_leftovers(spec.name)
+        backend.check({m.name: methods.get(m.name).image for m in spec.methods})
         pending = set(ledger.pending_keys())
         views = prepare_views(spec, runs, pending, log)
         gts = load_groundtruths(runs) if spec.evaluate else {}

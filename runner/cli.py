@@ -68,6 +68,11 @@ def _parser() -> argparse.ArgumentParser:
     pr.add_argument("spec", type=Path)
     pr.set_defaults(func=cmd_prepare)
 
+    im = sub.add_parser("images", help="build the methods' Docker images")
+    im.add_argument("--method", action="append", help="only this method (repeatable)")
+    im.add_argument("--list", action="store_true", help="list the buildable images and exit")
+    im.set_defaults(func=cmd_images)
+
     sy = sub.add_parser("synth", help="write a synthetic sequence in the TUM-Mono layout")
     sy.add_argument("out", type=Path)
     sy.add_argument("--frames", type=int, default=300)
@@ -356,6 +361,20 @@ def cmd_prepare(args) -> int:
         total += size
         console.print(f"{v.root} ({v.n_frames} frames, {size / 2**20:.1f} MiB)")
     console.print(f"{len(views)} views, {total / 2**20:.1f} MiB in {spec.cache}")
+    return 0
+
+
+def cmd_images(args) -> int:
+    import methods
+    from runner.images import build, buildable
+
+    if args.list:
+        for name, (tag, dockerfile) in buildable().items():
+            gpu = " (GPU optional)" if methods.REGISTRY[name].needs_gpu else ""
+            console.print(f"{name}: {tag} <- {dockerfile.parent.name}/Dockerfile{gpu}")
+        return 0
+    tags = build(args.method, log=lambda m: print(m, flush=True))
+    console.print(f"built {len(tags)} image(s): {', '.join(tags)}")
     return 0
 
 

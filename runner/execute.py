@@ -53,9 +53,16 @@ def execute_run(
     raw = RunPaths.raw(stage)
     raw.mkdir(parents=True)
     started = time.time()
+    pview, pwork = backend.process_paths(view, raw)  # as the method's process sees them
     try:
-        method.configure(view, raw)
-        argv = method.command(view, raw)
+        for rel, content in method.configure(pview, pwork).items():
+            target = raw / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            if isinstance(content, bytes):
+                target.write_bytes(content)
+            else:
+                target.write_text(content)
+        argv = method.command(pview, pwork)
     except MethodFailure as exc:
         shutil.rmtree(stage, ignore_errors=True)
         raise InfraError(f"{run.key.id}: cannot configure {run.method}: {exc}") from None

@@ -65,7 +65,7 @@ class Scheduler:
         self.cancel = threading.Event()  # stop runs in flight
         self._queue: list[PlannedRun] = []
         self._qlock = threading.Lock()
-        self._methods = {i: get_method(m.name)(m.params) for i, m in enumerate(spec.methods)}
+        self._methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
 
     def run(self, runs: list[PlannedRun]) -> None:
         pending = set(self.ledger.pending_keys())

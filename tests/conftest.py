@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -11,7 +12,16 @@ import yaml
 from runner.datasets.synth import generate
 
 FAKE = Path(__file__).parent / "fixtures" / "fake_method.py"
-SHARED = Path(__file__).resolve().parents[2] / "shared"
+# shared/ lies beside the repository (CI clones main next to it); SLAMRUN_SHARED points elsewhere.
+SHARED = Path(os.environ.get("SLAMRUN_SHARED", Path(__file__).resolve().parents[2] / "shared"))
+SHARED_DATA = SHARED / "data"
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    if not SHARED_DATA.is_dir():
+        pytest.skip(f"{SHARED_DATA} not found: the real trajectory files live in shared/data beside the repository")
+    return SHARED_DATA
 
 
 @pytest.fixture(scope="session")

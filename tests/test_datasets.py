@@ -41,19 +41,36 @@ def test_unpacked_images_folder_is_accepted(seq):
     [
         (lambda s: (s / "images.zip").write_bytes((s / "images.zip").read_bytes()[:5000]), "not a readable zip"),
         (lambda s: (s / "pcalib.txt").unlink(), "pcalib.txt: missing"),
-        (lambda s: (s / "times.txt").write_text("\n".join((s / "times.txt").read_text().splitlines()[:-1])),
-         "39 lines but 40 images"),
-        (lambda s: (s / "times.txt").write_text((s / "times.txt").read_text().replace("1.033333", "0.5")),
-         "timestamps not strictly increasing"),
-        (lambda s: (s / "camera.txt").write_text(
-            (s / "camera.txt").read_text().replace("160 120\ncrop", "320 240\ncrop")), "input size 320x240"),
+        (
+            lambda s: (s / "times.txt").write_text("\n".join((s / "times.txt").read_text().splitlines()[:-1])),
+            "39 lines but 40 images",
+        ),
+        (
+            lambda s: (s / "times.txt").write_text((s / "times.txt").read_text().replace("1.033333", "0.5")),
+            "timestamps not strictly increasing",
+        ),
+        (
+            lambda s: (s / "camera.txt").write_text(
+                (s / "camera.txt").read_text().replace("160 120\ncrop", "320 240\ncrop")
+            ),
+            "input size 320x240",
+        ),
         (lambda s: cv2.imwrite(str(s / "vignette.png"), np.ones((10, 10), np.uint16)), "vignette.png: 10x10"),
         (lambda s: (s / "pcalib.txt").write_text(" ".join(["1"] * 256)), "not strictly increasing"),
         (lambda s: (s / "pcalib.txt").write_text(" ".join(str(i) for i in range(255))), "255 values, expected 256"),
         (lambda s: (s / "times.txt").write_text("a b c\n"), "times.txt:1: not a number"),
     ],
-    ids=["truncated-zip", "missing-pcalib", "count-mismatch", "non-increasing", "camera-size", "vignette-size",
-         "pcalib-flat", "pcalib-short", "times-garbage"],
+    ids=[
+        "truncated-zip",
+        "missing-pcalib",
+        "count-mismatch",
+        "non-increasing",
+        "camera-size",
+        "vignette-size",
+        "pcalib-flat",
+        "pcalib-short",
+        "times-garbage",
+    ],
 )
 def test_bad_inputs_are_named(seq, damage, expected):
     damage(seq)

@@ -1,6 +1,5 @@
 """TUM-Mono metrics against values built independently (known Sim(3) transforms), ATE against evo."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,8 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from runner.evaluation import EvalStatus, ate, rpe, tum_mono
 from runner.trajectory import Trajectory, from_arrays, read_tum
-
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+from tests.conftest import SHARED_DATA as DATA
 
 
 def ground_truth(n: int = 400, seed: int = 0, nan_middle: bool = True) -> Trajectory:
@@ -140,7 +138,7 @@ def test_rpe_zero_for_similar_and_positive_for_noise():
 
 
 @pytest.mark.parametrize("name", ["sequence_01.txt", "sequence_29.txt"])
-def test_ate_matches_evo_on_real_files(name):
+def test_ate_matches_evo_on_real_files(name, shared_data):
     """ATE (Sim(3)-aligned RMSE) against evo's APE, ground truth made from a perturbed real file."""
     evo_core = pytest.importorskip("evo.core")
     from evo.core import metrics, sync
@@ -163,7 +161,7 @@ def test_ate_matches_evo_on_real_files(name):
     assert ours.rmse == pytest.approx(ape.get_statistic(metrics.StatisticsType.rmse), rel=1e-9)
 
 
-def test_real_backward_file_evaluates_against_its_own_segments():
+def test_real_backward_file_evaluates_against_its_own_segments(shared_data):
     """A real DSO backward file: GT = its own poses with NaN in the middle gives zero segment errors."""
     est = read_tum(DATA / "study_trajectories" / "dso_bw__sequence_47_9.txt")
     n = len(est)

@@ -24,8 +24,14 @@ def vo_dataset(tmp_path_factory):
 
 
 def _run(tmp_path, dataset, methods, **kw):
-    spec = write_spec(tmp_path, dataset, methods, datasets=[{"name": "s", "path": str(dataset), "sequences": ["seq_a"]}],
-                      timeout_s=300, **kw)
+    spec = write_spec(
+        tmp_path,
+        dataset,
+        methods,
+        datasets=[{"name": "s", "path": str(dataset), "sequences": ["seq_a"]}],
+        timeout_s=300,
+        **kw,
+    )
     res = run_campaign(load_spec(spec), log=lambda *a: None)
     return pd.read_csv(res.results_csv)
 
@@ -53,9 +59,23 @@ def _vo(tmp_path, images: list[np.ndarray]) -> subprocess.CompletedProcess:
     (tmp_path / "times.txt").write_text("".join(f"{i} {i / 30:.6f} 1\n" for i in range(len(images))))
     (tmp_path / "camera.txt").write_text("0.5 0.6667 0.5 0.5 0\n640 480\nnone\n640 480\n")
     return subprocess.run(
-        [sys.executable, "-m", "methods.reference_vo", "--images", str(folder), "--times", str(tmp_path / "times.txt"),
-         "--camera", str(tmp_path / "camera.txt"), "--out", str(tmp_path / "out.txt")],
-        capture_output=True, text=True, timeout=120)
+        [
+            sys.executable,
+            "-m",
+            "methods.reference_vo",
+            "--images",
+            str(folder),
+            "--times",
+            str(tmp_path / "times.txt"),
+            "--camera",
+            str(tmp_path / "camera.txt"),
+            "--out",
+            str(tmp_path / "out.txt"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 def test_reference_vo_says_not_initialized(tmp_path):

@@ -1,6 +1,5 @@
 """Trajectory readers and writers, on synthetic values and on the real files in shared/data."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -16,8 +15,8 @@ from runner.trajectory import (
     rotmat_to_quat,
     write_tum,
 )
+from tests.conftest import SHARED_DATA as DATA
 
-DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 REAL_FILES = sorted(DATA.glob("*/*.txt"))
 
 
@@ -138,7 +137,12 @@ def test_every_real_file_parses(path):
     assert traj.report.n_quat_far_from_unit == np.count_nonzero(norm_err > 0.1)
 
 
-def test_real_file_facts():
+def test_real_files_are_there(shared_data):
+    """The parametrised test below runs once per file: make sure there are files to run it on."""
+    assert len(REAL_FILES) >= 15
+
+
+def test_real_file_facts(shared_data):
     """Facts stated in shared/data/README.md: backward runs decrease; some CNN-SVO norms are in the thousands."""
     assert read_tum(DATA / "study_trajectories/dso_bw__sequence_47_9.txt").report.was_unsorted
     assert read_tum(DATA / "study_trajectories/dsm_bw__sequence_47_6.txt").report.was_unsorted

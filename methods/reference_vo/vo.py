@@ -219,32 +219,52 @@ class VisualOdometry:
         return sum(1 for i in self.tid.tolist() if i in self.points)
 
     def _pnp(self, tids, pts, R_guess, t_guess):
+        """Pose of a frame from its tracked map points: RANSAC, then least squares on the inliers.
+
+        Candidates (guess-seeded RANSAC, guess-free EPnP RANSAC, each refined or not) are judged by our
+        own reprojection test, so no solver's corner case can slip a wrong pose through.
+        """
         has = np.array([i in self.points for i in tids.tolist()], bool)
         if has.sum() < self.s.min_tracked_points:
             return None
         X = np.array([self.points[i] for i in tids[has].tolist()])
         uv = pts[has].astype(np.float64)
-        rvec, _ = cv2.Rodrigues(R_guess)
-        ok, rvec, tvec, inliers = cv2.solvePnPRansac(
-            X,
-            uv,
-            self.K,
-            None,
-            rvec.copy(),
-            t_guess.reshape(3, 1).copy(),
-            useExtrinsicGuess=True,
-            iterationsCount=100,
-            reprojectionError=self.s.pnp_reprojection_px,
-            confidence=0.999,
-            flags=cv2.SOLVEPNP_ITERATIVE,
-        )
-        if not ok or inliers is None or len(inliers) < self.s.min_tracked_points:
+        thr = self.s.pnp_reprojection_px
+        rvec0, _ = cv2.Rodrigues(R_guess)
+        candidates = []
+        for guess, flags in ((True, cv2.SOLVEPNP_ITERATIVE), (False, cv2.SOLVEPNP_EPNP)):
+            ok, rvec, tvec, inliers = cv2.solvePnPRansac(
+                X, uv, self.K, None, rvec0.copy(), t_guess.reshape(3, 1).copy(), useExtrinsicGuess=guess,
+                iterationsCount=100, reprojectionError=thr, confidence=0.999, flags=flags,
+            )  # fmt: skip
+            if not ok or inliers is None or len(inliers) < self.s.min_tracked_points:
+                continue
+            candidates.append((rvec, tvec))
+            inl = inliers.ravel()
+            refined = cv2.solvePnPRefineLM(X[inl], uv[inl], self.K, None, rvec.copy(), tvec.copy())
+            candidates.append(refined)
+            if len(candidates) >= 2 and self._count_inliers(X, uv, *refined, thr) >= 0.5 * len(X):
+                break  # a good pose from the guess: no need for the guess-free search
+        best, best_n = None, 0
+        for rvec, tvec in candidates:
+            n = self._count_inliers(X, uv, rvec, tvec, thr)
+            if n > best_n:
+                best, best_n = (rvec, tvec), n
+        if best is None or best_n < self.s.min_tracked_points:
             return None
-        inl = inliers.ravel()
-        rvec, tvec = cv2.solvePnPRefineLM(X[inl], uv[inl], self.K, None, rvec, tvec)
+        R, _ = cv2.Rodrigues(best[0])
+        t = best[1].ravel()
+        proj, z = project(self.K, R, t, X)
+        good = (np.linalg.norm(proj - uv, axis=1) < thr) & (z > 0)
+        outlier_ids = set(tids[has][~good].tolist())
+        return R, t, outlier_ids
+
+    def _count_inliers(self, X, uv, rvec, tvec, thr) -> int:
         R, _ = cv2.Rodrigues(rvec)
-        outlier_ids = set(tids[has].tolist()) - set(tids[has][inl].tolist())
-        return R, tvec.ravel(), outlier_ids
+        proj, z = project(self.K, R, np.asarray(tvec).ravel(), X)
+        if not np.isfinite(proj).all():
+            return 0
+        return int(np.count_nonzero((np.linalg.norm(proj - uv, axis=1) < thr) & (z > 0)))
 
     def _locate(self, frame: int, img: np.ndarray) -> None:
         R_prev, t_prev = self.poses[max(self.poses)]
@@ -402,6 +422,7 @@ class VisualOdometry:
             cols = np.concatenate([pc_cols, cc])
             return csr_matrix((data, (rows, cols)), shape=(2 * n_obs, len(x0)))
 
+        r0 = residuals(x0)
         sol = least_squares(
             residuals,
             x0,
@@ -412,15 +433,21 @@ class VisualOdometry:
             max_nfev=self.s.ba_max_evaluations,
             method="trf",
         )
+        before = np.abs(r0.reshape(2, -1)).max(axis=0)
+        after = np.abs(sol.fun.reshape(2, -1)).max(axis=0)
+        if not np.isfinite(sol.x).all() or np.median(after) > max(np.median(before), 0.5) * 1.5:
+            # The optimisation went astray: keep the map as it was, drop only what was bad before.
+            for p in set(np.array(pids)[pts_idx[before > 4.0]].tolist()):
+                self.points.pop(p, None)
+            return
         R, t, X = unpack(sol.x)
         for ci in range(n_fixed, len(window)):
             window[ci].R, window[ci].t = R[ci], t[ci]
             self.poses[window[ci].frame] = (R[ci], t[ci])
-        r = np.abs(sol.fun.reshape(2, -1)).max(axis=0)
         for j, p in enumerate(pids):
             self.points[p] = X[j]
         # Drop points with a large reprojection error in any window keyframe.
-        for p in set(np.array(pids)[pts_idx[r > 4.0]].tolist()):
+        for p in set(np.array(pids)[pts_idx[after > 4.0]].tolist()):
             self.points.pop(p, None)
 
     # ------------------------------------------------------------ results

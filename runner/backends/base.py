@@ -43,8 +43,12 @@ class ExecResult:
 class Backend(Protocol):
     name: str
 
-    def check(self) -> None:
-        """Raise InfraError before any run starts when the backend cannot work (daemon unreachable, ...)."""
+    def check(self, images: dict[str, str | None] | None = None) -> None:
+        """Raise InfraError before any run starts when the backend cannot work (daemon unreachable, images
+        missing: `images` maps method names to their image tags)."""
+
+    def process_paths(self, view: PreparedView, workdir: Path) -> tuple[PreparedView, Path]:
+        """The view and work directory as the method's process sees them."""
 
     def execute(self, req: ExecRequest, cancel: threading.Event, on_start: callable = None) -> ExecResult:  # type: ignore[valid-type]
         """Run to completion, timeout or cancel; always leaves no process behind."""

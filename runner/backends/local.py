@@ -25,8 +25,12 @@ class LocalBackend:
         self.sample_interval_s = sample_interval_s
         self.gpu = Gpu()
 
-    def check(self) -> None:
+    def check(self, images: dict[str, str | None] | None = None) -> None:
         """Nothing to reach: a local process always has a machine to run on."""
+
+    def process_paths(self, view, workdir):
+        """A local process sees the host paths."""
+        return view, workdir
 
     def execute(self, req: ExecRequest, cancel: threading.Event, on_start=None) -> ExecResult:
         cpus = req.cpus

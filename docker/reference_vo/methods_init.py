@@ -1,0 +1,1 @@
+"""Inside the reference VO image: only the VO itself, without the runner's method registry."""

@@ -1,0 +1,262 @@
+"""Docker backend: one container per run, with the container contract of the architecture.
+
+/data is the prepared view (read-only), /work the run's work directory (read-write), no network, a
+non-root user where the image has one, the lane's CPU set and memory limit, a GPU when the method needs
+one and the host has one. The wall-clock timeout is enforced from outside; the exit code, OOM kill and
+logs are read back; the container is always removed. Containers carry labels (campaign, run) so a
+runner that was killed leaves nothing behind once it starts again.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+
+from runner.backends.base import ExecRequest, ExecResult
+from runner.datasets.views import PreparedView
+from runner.errors import InfraError
+from runner.logcap import CappedLog
+from runner.monitor import Gpu, ResourceSeries, Sample
+
+DATA = Path("/data")
+WORK = Path("/work")
+CONTAINER_UID = 1000  # the non-root user our images create; a root host hands /work to it
+LABEL_CAMPAIGN = "slamrun.campaign"
+LABEL_RUN = "slamrun.run"
+
+
+def _docker():
+    try:
+        import docker
+    except ImportError:
+        raise InfraError("the docker Python package is missing; `pip install docker` (make install does it)") from None
+    return docker
+
+
+class DockerBackend:
+    name = "docker"
+
+    def __init__(self, sample_interval_s: float = 0.5, client=None):
+        self.sample_interval_s = sample_interval_s
+        self._client = client
+        self.gpu = Gpu()
+
+    @property
+    def client(self):
+        if self._client is None:
+            docker = _docker()
+            try:
+                self._client = docker.from_env(timeout=120)
+                self._client.ping()
+            except Exception as exc:  # noqa: BLE001 - any failure here means: no daemon to talk to
+                self._client = None
+                raise InfraError(
+                    f"cannot reach the Docker daemon ({exc}); start it (scripts/start-dockerd.sh) or use backend: local"
+                ) from None
+        return self._client
+
+    # ------------------------------------------------------------ before the first run
+    def check(self, images: dict[str, str | None] | None = None) -> None:
+        """The daemon answers and every method's image exists; one error lists every missing image."""
+        client = self.client
+        docker = _docker()
+        problems = []
+        for method, tag in (images or {}).items():
+            if tag is None:
+                problems.append(f"method {method!r} has no Docker image; run it with backend: local")
+                continue
+            try:
+                client.images.get(tag)
+            except docker.errors.ImageNotFound:
+                problems.append(f"image {tag} for method {method!r} is missing; build it: make images METHOD={method}")
+        if problems:
+            raise InfraError("Docker images:\n  " + "\n  ".join(problems))
+
+    def remove_leftovers(self, campaign: str) -> int:
+        """Remove containers of this campaign that a killed runner left behind."""
+        found = self.client.containers.list(all=True, filters={"label": f"{LABEL_CAMPAIGN}={campaign}"})
+        for c in found:
+            c.remove(force=True)
+        return len(found)
+
+    def process_paths(self, view: PreparedView, workdir: Path) -> tuple[PreparedView, Path]:
+        return view.at(DATA), WORK
+
+    # ------------------------------------------------------------ one run
+    def execute(self, req: ExecRequest, cancel: threading.Event, on_start=None) -> ExecResult:
+        docker = _docker()
+        if req.image is None:
+            raise InfraError("this method has no Docker image; run it with backend: local")
+        user = None
+        if os.getuid() == 0:
+            os.chown(req.workdir, CONTAINER_UID, CONTAINER_UID)
+            user = f"{CONTAINER_UID}:{CONTAINER_UID}"
+        else:
+            user = f"{os.getuid()}:{os.getgid()}"
+        kwargs = dict(
+            image=req.image,
+            command=req.argv,
+            detach=True,
+            network_mode="none",
+            working_dir=str(WORK),
+            user=user,
+            labels={**req.labels},
+            environ=None,
+            volumes={
+                str(req.view.root): {"bind": str(DATA), "mode": "ro"},
+                str(req.workdir): {"bind": str(WORK), "mode": "rw"},
+            },
+            environment={"HOME": str(WORK), "MPLBACKEND": "Agg", **req.env},
+        )
+        kwargs.pop("environ")
+        if req.cpus:
+            kwargs["cpuset_cpus"] = ",".join(str(c) for c in req.cpus)
+        if req.memory_mb:
+            kwargs["mem_limit"] = f"{req.memory_mb}m"
+            kwargs["memswap_limit"] = f"{req.memory_mb}m"
+        if req.needs_gpu and self.gpu.available:
+            kwargs["device_requests"] = [docker.types.DeviceRequest(count=-1, capabilities=[["gpu"]])]
+        try:
+            container = self.client.containers.create(**kwargs)
+        except docker.errors.ImageNotFound:
+            raise InfraError(f"image {req.image} is missing; build it: make images") from None
+        except docker.errors.APIError as exc:
+            raise InfraError(f"docker could not create the container: {exc.explanation or exc}") from None
+        log = CappedLog(req.log_path, req.log_cap_bytes)
+        try:
+            return self._run(container, req, cancel, log, on_start)
+        finally:
+            try:
+                container.remove(force=True)
+            except docker.errors.NotFound:
+                pass
+            except docker.errors.APIError as exc:  # the daemon went away: the next start removes it by label
+                raise InfraError(f"could not remove container {container.short_id}: {exc}") from None
+
+    def _run(self, container, req: ExecRequest, cancel: threading.Event, log: CappedLog, on_start) -> ExecResult:
+        docker = _docker()
+        t0 = time.monotonic()
+        try:
+            container.start()
+        except docker.errors.APIError as exc:
+            log.close()
+            raise InfraError(f"docker could not start the container: {exc.explanation or exc}") from None
+        if on_start:
+            on_start(0, 0.0)
+        pump = threading.Thread(target=self._pump_logs, args=(container, log), daemon=True)
+        pump.start()
+        monitor = ContainerMonitor(container, self.sample_interval_s, t0, self.gpu if req.needs_gpu else None)
+        monitor.start()
+        timed_out = cancelled = False
+        exit_code = None
+        while True:
+            remaining = t0 + req.timeout_s - time.monotonic()
+            if remaining <= 0:
+                timed_out = True
+                break
+            if cancel.is_set():
+                cancelled = True
+                break
+            try:
+                status = container.wait(timeout=min(0.2, max(remaining, 0.01)))
+                exit_code = status.get("StatusCode")
+                break
+            except Exception:  # noqa: BLE001 - the wait timed out (requests' ReadTimeout / ConnectionError)
+                continue
+        if exit_code is None:
+            try:
+                container.kill()
+            except docker.errors.APIError:
+                pass
+            try:
+                exit_code = container.wait(timeout=30).get("StatusCode")
+            except Exception:  # noqa: BLE001
+                exit_code = None
+        wall_s = time.monotonic() - t0
+        series = monitor.stop()
+        pump.join(timeout=10)
+        log.close()
+        try:
+            container.reload()
+            oom = bool(container.attrs["State"].get("OOMKilled"))
+        except docker.errors.APIError:
+            oom = False
+        series.write_csv(req.resources_path)
+        return ExecResult(
+            exit_code=exit_code,
+            wall_s=wall_s,
+            timed_out=timed_out,
+            cancelled=cancelled,
+            oom=oom and not timed_out and not cancelled,
+            log_truncated=log.truncated,
+            resources=series.summary(wall_s, req.view.n_frames),
+        )
+
+    @staticmethod
+    def _pump_logs(container, log: CappedLog) -> None:
+        try:
+            for chunk in container.logs(stream=True, follow=True, stdout=True, stderr=True):
+                log.write(chunk)
+        except Exception:  # noqa: BLE001 - the container is gone: the log ends here
+            pass
+
+
+class ContainerMonitor:
+    """Samples a container's cgroup figures (CPU time, memory) from the Docker stats API at a fixed rate."""
+
+    def __init__(self, container, interval_s: float, t0: float, gpu: Gpu | None = None):
+        self.container = container
+        self.gpu = gpu if gpu is not None and gpu.available else None
+        self.interval_s = interval_s
+        self.t0 = t0
+        self.series = ResourceSeries()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, daemon=True, name="container-monitor")
+        self._last: tuple[float, int] | None = None
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self) -> ResourceSeries:
+        self._stop.set()
+        self._thread.join(timeout=10)
+        return self.series
+
+    def _loop(self) -> None:
+        while not self._stop.is_set():
+            self.sample()
+            self._stop.wait(self.interval_s)
+
+    def sample(self) -> None:
+        try:
+            s = self.container.stats(stream=False, one_shot=True)
+        except Exception:  # noqa: BLE001 - the container ended between two samples
+            return
+        now = time.monotonic()
+        cpu_ns = (s.get("cpu_stats") or {}).get("cpu_usage", {}).get("total_usage")
+        mem = s.get("memory_stats") or {}
+        if cpu_ns is None or "usage" not in mem:
+            return  # not running (yet, or any more)
+        stats = mem.get("stats") or {}
+        # cgroup v1 counts page cache in usage; v2 names it inactive_file
+        cache = stats.get("total_inactive_file", stats.get("inactive_file", stats.get("cache", 0)))
+        ram_mb = max(mem["usage"] - cache, 0) / 2**20
+        if self._last is None:
+            cpu_pct = 0.0
+        else:
+            dt = now - self._last[0]
+            cpu_pct = max(0.0, (cpu_ns - self._last[1]) / 1e9 / max(dt, 1e-6) * 100.0)
+        self._last = (now, cpu_ns)
+        n_procs = (s.get("pids_stats") or {}).get("current") or 0
+        gmem = gutil = None
+        if self.gpu is not None:
+            try:
+                top = self.container.top()
+                col = top["Titles"].index("PID")
+                pids = {int(p[col]) for p in top["Processes"]}
+                gmem, gutil = self.gpu.sample(pids)
+            except Exception:  # noqa: BLE001 - the container ended
+                pass
+        self.series.samples.append(Sample(now - self.t0, cpu_pct, ram_mb, n_procs, gmem, gutil))

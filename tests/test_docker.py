@@ -1,0 +1,209 @@
+"""The Docker backend against a real Docker engine and real containers (no mocks).
+
+Skipped, with the reason shown, only where no engine can be reached; under CI (CI=true) a missing engine
+or base image is a failure, since .ci/run starts both.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from runner.backends.base import ExecRequest
+from runner.campaign import run_campaign
+from runner.datasets.views import Direction, Profile, prepare
+from runner.errors import InfraError
+from runner.spec import load_spec
+from tests.conftest import write_spec
+
+IMAGE = "slamrun/reference_vo:latest"
+IN_CI = os.environ.get("CI") == "true"
+
+
+def _unavailable(reason: str):
+    if IN_CI:
+        pytest.fail(f"CI must run the Docker tests: {reason}")
+    pytest.skip(reason)
+
+
+@pytest.fixture(scope="module")
+def backend():
+    from runner.backends.docker import DockerBackend
+
+    b = DockerBackend()
+    try:
+        b.check()
+    except InfraError as exc:
+        _unavailable(f"no Docker engine: {exc} (scripts/start-dockerd.sh starts one)")
+    return b
+
+
+@pytest.fixture(scope="module")
+def image(backend):
+    """The reference VO image, built from docker/reference_vo/Dockerfile (Docker's layer cache makes reruns fast)."""
+    import docker
+
+    try:
+        backend.client.images.get("debian:bookworm-slim")
+    except docker.errors.ImageNotFound:
+        _unavailable("no debian:bookworm-slim base image (scripts/make-offline-base.sh builds it offline)")
+    from runner.images import build
+
+    build(["reference_vo"], log=lambda *a: None)
+    return IMAGE
+
+
+def _request(tmp_path, view, argv, **kw) -> ExecRequest:
+    work = tmp_path / "work"
+    work.mkdir()
+    return ExecRequest(
+        argv=argv,
+        workdir=work,
+        view=view,
+        log_path=tmp_path / "log.txt",
+        resources_path=tmp_path / "resources.csv",
+        image=kw.pop("image", IMAGE),
+        timeout_s=kw.pop("timeout_s", 60),
+        labels={"slamrun.campaign": "pytest-docker"},
+        **kw,
+    )
+
+
+@pytest.fixture
+def view(tmp_path, tiny_dataset):
+    return prepare(tiny_dataset / "seq_a", Direction.forward, Profile.native, tmp_path / "cache")
+
+
+def _no_containers(backend, campaign: str) -> bool:
+    return not backend.client.containers.list(all=True, filters={"label": f"slamrun.campaign={campaign}"})
+
+
+def test_hang_is_killed_at_timeout(backend, image, tmp_path, view):
+    req = _request(
+        tmp_path, view, ["python3", "-c", "import time; print('start', flush=True); time.sleep(600)"], timeout_s=3
+    )
+    t0 = time.monotonic()
+    res = backend.execute(req, threading.Event())
+    assert res.timed_out and time.monotonic() - t0 < 30
+    assert "start" in req.log_path.read_text()
+    assert _no_containers(backend, "pytest-docker")
+
+
+def test_nonzero_exit_and_contract(backend, image, tmp_path, view):
+    script = (
+        "import os, socket, sys\n"
+        "print('uid', os.getuid(), 'data', sorted(os.listdir('/data'))[:3], flush=True)\n"
+        "open('/work/out.txt', 'w').write('ok')\n"
+        "try:\n    open('/data/x', 'w')\nexcept OSError:\n    print('data is read-only')\n"
+        "try:\n    socket.create_connection(('127.0.0.1', 9), timeout=1)\nexcept OSError as e:\n    print('net', e)\n"
+        "print('nproc', len(os.sched_getaffinity(0)))\n"
+        "sys.exit(3)\n"
+    )
+    req = _request(tmp_path, view, ["python3", "-c", script], cpus=(0,))
+    res = backend.execute(req, threading.Event())
+    log = req.log_path.read_text()
+    assert res.exit_code == 3 and not res.timed_out and not res.oom
+    assert "uid 1000" in log or f"uid {os.getuid()}" in log  # a non-root user
+    assert "data is read-only" in log and "camera.txt" in log and "nproc 1" in log
+    assert (req.workdir / "out.txt").read_text() == "ok"
+
+
+def test_memory_limit_is_oom(backend, image, tmp_path, view):
+    req = _request(tmp_path, view, ["python3", "-c", "x = bytearray(600 * 2**20); print(len(x))"], memory_mb=100)
+    res = backend.execute(req, threading.Event())
+    assert res.oom and res.exit_code != 0
+
+
+def test_log_flood_is_capped(backend, image, tmp_path, view):
+    flood = "import sys\nfor i in range(200000): sys.stdout.write('%08d' % i + 'x' * 92 + '\\n')\nprint('END')"
+    req = _request(tmp_path, view, ["python3", "-c", flood], log_cap_bytes=2**20)
+    res = backend.execute(req, threading.Event())
+    text = req.log_path.read_text()
+    assert res.exit_code == 0 and res.log_truncated
+    assert req.log_path.stat().st_size < 1.1 * 2**20 and text.rstrip().endswith("END") and "log capped" in text
+
+
+def test_missing_image_is_infra(backend, tmp_path, view):
+    with pytest.raises(InfraError, match="make images"):
+        backend.check({"nonexistent": "slamrun/does-not-exist:latest"})
+    req = _request(tmp_path, view, ["true"], image="slamrun/does-not-exist:latest")
+    with pytest.raises(InfraError, match="missing"):
+        backend.execute(req, threading.Event())
+
+
+def test_unreachable_daemon_is_reported_before_runs(tmp_path, monkeypatch):
+    from runner.backends.docker import DockerBackend
+
+    monkeypatch.setenv("DOCKER_HOST", f"unix://{tmp_path}/no-daemon.sock")
+    with pytest.raises(InfraError, match="cannot reach the Docker daemon"):
+        DockerBackend().check()
+
+
+@pytest.fixture(scope="module")
+def vo_dataset(tmp_path_factory):
+    from runner.datasets.synth import generate
+
+    root = tmp_path_factory.mktemp("docker_data")
+    generate(root / "seq_a", frames=200, seed=3, size=(640, 480))
+    return root
+
+
+def test_campaign_with_reference_vo_image(backend, image, tmp_path, vo_dataset):
+    spec = write_spec(
+        tmp_path,
+        vo_dataset,
+        [{"name": "reference_vo"}],
+        backend="docker",
+        memory_limit_mb=1500,
+        timeout_s=300,
+        datasets=[{"name": "s", "path": str(vo_dataset), "sequences": ["seq_a"]}],
+    )
+    res = run_campaign(load_spec(spec), log=lambda *a: None)
+    df = pd.read_csv(res.results_csv)
+    assert len(df) == 2 and set(df.direction) == {"forward", "backward"}
+    assert (df.status == "done").all() and (df.eval_status == "ok").all(), df.message.tolist()
+    assert (df.cpu_mean_pct > 10).all() and (df.ram_peak_mb > 20).all() and (df.fps > 0).all()
+    assert df.gpu_mem_peak_mb.isna().all()
+    series = pd.read_csv(Path(df.run_dir[0]) / "resources.csv")
+    assert len(series) >= 2 * 0.5 * df.wall_s[0] * 0.8  # about 2 Hz
+    assert _no_containers(backend, "t")
+
+
+def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo_dataset):
+    spec = write_spec(
+        tmp_path,
+        vo_dataset,
+        [{"name": "reference_vo"}],
+        backend="docker",
+        timeout_s=300,
+        trials=2,
+        datasets=[{"name": "s", "path": str(vo_dataset), "sequences": ["seq_a"]}],
+        name="killtest",
+    )
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "runner.cli", "campaign", str(spec)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    labels = {"label": "slamrun.campaign=killtest"}
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and not backend.client.containers.list(filters=labels):
+        time.sleep(0.2)
+    assert backend.client.containers.list(filters=labels), "no container started"
+    time.sleep(1.0)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert backend.client.containers.list(all=True, filters=labels)  # the orphan is still there
+    res = run_campaign(load_spec(spec), log=lambda *a: None)
+    assert res.counts["done"] == 4 and res.recovered["requeued"] >= 1
+    assert _no_containers(backend, "killtest")
+    df = pd.read_csv(res.results_csv)
+    assert (df.attempts >= 1).all() and (df.attempts == 2).any()  # the interrupted runs were redone
