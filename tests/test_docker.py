@@ -42,7 +42,7 @@ def backend():
     try:
         b.check()
     except InfraError as exc:
-        _unavailable(f"no Docker engine: {exc} (scripts/start-dockerd.sh starts one)")
+        _unavailable(f"no Docker engine: {exc}")
     return b
 
 

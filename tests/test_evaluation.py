@@ -1,6 +1,5 @@
 """TUM-Mono metrics against values built independently (known Sim(3) transforms), ATE against evo."""
 
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation

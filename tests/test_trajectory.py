@@ -1,6 +1,5 @@
 """Trajectory readers and writers, on synthetic values and on the real files in shared/data."""
 
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation

@@ -1,0 +1,136 @@
+"""The report of a campaign: statistics, tables (CSV, Markdown, LaTeX) and figures (PNG, SVG), gathered in a
+self-contained report/index.html."""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from runner.analysis import figures, tables
+from runner.analysis.load import LABELS, evaluated, failure_table, load_results, metrics_for
+from runner.analysis.stats import study_statistics
+
+
+def write_report(
+    results: Path, level: float = 0.999, adjust: str = "holm", alpha: float = 0.05, trajectory_sequences: int = 2
+) -> Path:
+    results = Path(results)
+    df = load_results(results)
+    out = results / "report"
+    fig_dir, tab_dir = out / "figures", out / "tables"
+    metrics = metrics_for(df)
+    ok = evaluated(df, metrics)
+    sections: list[tuple[str, str]] = []
+
+    fails = failure_table(df)
+    tables.write_all(fails, tab_dir, "failures", "Runs and failures per method")
+    sections.append(("Runs and failures per method", tables.to_html(fails)))
+
+    st = None
+    if ok.method.nunique() >= 2 and len(ok) > len(metrics) + 1:
+        st = study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha)
+        (out / "statistics.json").parent.mkdir(parents=True, exist_ok=True)
+        (out / "statistics.json").write_text(json.dumps(st.to_json(), indent=1))
+        acc = [m for m in ("e_t", "e_r", "e_s_sym", "e_s") if m in metrics][:3]
+        seg = [m for m in ("e_start", "e_end", "e_rmse") if m in metrics]
+        t3 = tables.medians_with_letters(st, acc)
+        t4 = tables.medians_with_letters(st, seg)
+        tables.write_all(t3, tab_dir, "table3_drift", "Medians of the drift metrics, with letter groups")
+        tables.write_all(t4, tab_dir, "table4_segments", "Medians of the segment alignment errors, with letter groups")
+        note = (
+            f"{len(ok)} evaluated runs, {st.n_outliers} multivariate outliers removed (squared Mahalanobis "
+            f"distance over {len(metrics)} metrics above {st.cutoff:.4f}, the chi-square {level} quantile); "
+            f"letters: pairwise Wilcoxon rank-sum tests, {adjust} adjustment, alpha {alpha}."
+        )
+        sections.append(("Drift (Table 3 layout)", f"<p>{html.escape(note)}</p>" + tables.to_html(t3)))
+        sections.append(("Segment errors (Table 4 layout)", tables.to_html(t4)))
+    else:
+        sections.append(("Statistics", "<p>Fewer than two methods with evaluated runs: no group comparison.</p>"))
+
+    res = tables.resources_table(df[df.status.isin(["done", "failed"])]) if "status" in df else pd.DataFrame()
+    if not res.empty:
+        tables.write_all(res, tab_dir, "table2_resources", "Mean resources per run")
+        sections.append(("Resources (Table 2 layout)", tables.to_html(res)))
+    if "e_align" in df.columns and "direction" in df.columns:
+        mb = tables.motion_bias_table(df)
+        tables.write_all(mb, tab_dir, "motion_bias", "Forward vs backward e_align")
+        sections.append(("Motion bias: forward vs backward", tables.to_html(mb)))
+        seq = tables.per_sequence_table(df)
+        if not seq.empty:
+            tables.write_all(seq, tab_dir, "e_align_per_sequence", "Median e_align per method and sequence")
+            sections.append(("Median e_align per sequence", tables.to_html(seq)))
+
+    figs: list[Path] = []
+    if not ok.empty:
+        for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end"):
+            if m in ok.columns:
+                figs.append(figures.cumulative(ok, m, fig_dir))
+        if "e_align" in ok.columns:
+            figs.append(figures.cumulative(ok, "e_align", fig_dir, "cumulative_e_align_motion_bias", bold_all=True))
+            figs.append(figures.heatmap(df, fig_dir))
+    if st is not None:
+        for m in metrics:
+            figs.append(figures.boxplot(st, m, fig_dir))
+    figs += _trajectory_figures(df, fig_dir, trajectory_sequences)
+
+    index = out / "index.html"
+    index.write_text(_html(results.name, sections, figs))
+    return index
+
+
+def _trajectory_figures(df: pd.DataFrame, folder: Path, n_sequences: int) -> list[Path]:
+    """Best evaluated forward run of each method for the first sequences, against the ground truth."""
+    from runner.datasets.tum_mono import open_sequence
+    from runner.errors import SlamRunError
+    from runner.trajectory import read_tum
+
+    out = []
+    if "run_dir" not in df.columns or "e_align" not in df.columns:
+        return out
+    ok = df.dropna(subset=["e_align"])
+    for sequence in sorted(ok.sequence.unique())[:n_sequences]:
+        runs, gt = [], None
+        for method, g in ok[ok.sequence == sequence].groupby("method"):
+            best = g.sort_values("e_align").iloc[0]
+            run_dir = Path(best.run_dir)
+            try:
+                info = json.loads((run_dir / "run.json").read_text())
+                gt = gt or open_sequence(info["sequence_dir"]).groundtruth()
+                runs.append((method, read_tum(run_dir / "trajectory.txt"), best))
+            except (OSError, KeyError, ValueError, SlamRunError):
+                continue
+        if runs and gt is not None:
+            out.append(figures.trajectories(runs, gt, folder, sequence))
+    return out
+
+
+def _html(title: str, sections: list[tuple[str, str]], figs: list[Path]) -> str:
+    parts = [f"<h2>{html.escape(h)}</h2>{body}" for h, body in sections]
+    for f in figs:
+        data = base64.b64encode(f.read_bytes()).decode()
+        caption = html.escape(f.stem.replace("_", " "))
+        label = LABELS.get(f.stem.split("_", 1)[-1], "")
+        parts.append(
+            f'<figure><img alt="{caption}" src="data:image/png;base64,{data}">'
+            f"<figcaption>{caption}{(' - ' + html.escape(label)) if label else ''}</figcaption></figure>"
+        )
+    check = (
+        "<script>window.addEventListener('load',()=>{const i=[...document.images];"
+        "document.body.dataset.imagesLoaded=i.filter(x=>x.complete&&x.naturalWidth>0).length+'/'+i.length;});"
+        "</script>"
+    )
+    style = (
+        "body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}table{border-collapse:collapse;"
+        "margin:1em 0;font-size:13px}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
+        "td:first-child,th:first-child{text-align:left}img{max-width:100%}figure{margin:1.5em 0}"
+    )
+    return (
+        f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)} report</title>"
+        f"<style>{style}</style>{check}</head><body><h1>Campaign {html.escape(title)}</h1>"
+        + "".join(parts)
+        + "</body></html>"
+    )
