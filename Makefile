@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 SPEC   ?= configs/demo.yaml
 ARGS   ?=
 
-.PHONY: install campaign test bench lint images clean
+.PHONY: install campaign test bench lint images paper clean
 
 install: $(VENV)/.installed
 
@@ -30,6 +30,10 @@ lint: install
 
 images: install
 	$(BIN)/slamrun images $(if $(METHOD),--method $(METHOD))
+
+paper: install
+	$(BIN)/slamrun campaign configs/paper.yaml
+	$(BIN)/slamrun campaign configs/paper-timing.yaml
 
 clean:
 	rm -rf $(VENV) results .cache

@@ -29,7 +29,8 @@ class Method(ABC):
     name: ClassVar[str]
     image: ClassVar[str | None] = None  # Docker tag; None for a method that only runs natively
     profile: ClassVar[Profile] = Profile.native  # which prepared view it consumes
-    needs_gpu: ClassVar[bool] = False
+    needs_gpu: ClassVar[bool] = False  # a GPU is requested for the run
+    gpu_capable: ClassVar[bool] = False  # can use a GPU when asked (params.gpu); runs on the CPU otherwise
     loop_closure_switch: ClassVar[str | None] = None  # how the image turns loop closure off, if it has one
     native: ClassVar[bool] = False  # runs as a local process without an image
     Params: ClassVar[type[BaseModel]] = NoParams
@@ -51,6 +52,18 @@ class Method(ABC):
     def for_backend(self, backend: str) -> Method:
         """This method as run by a backend (`local` or `docker`); the interpreter may differ."""
         return self
+
+    def environment(self) -> dict[str, str]:
+        """Environment variables of the method's process (e.g. a loop-closure switch)."""
+        return {}
+
+    def problems(self, backend: str) -> list[str]:
+        """Why this method cannot run on `backend` as configured ([] when it can); checked before any run."""
+        if backend == "local" and not self.native:
+            return [
+                f"{self.name} has no native build here: give params.executable (a local build) or use backend: docker"
+            ]
+        return []
 
     @abstractmethod
     def command(self, view: PreparedView, workdir: Path) -> list[str]:

@@ -86,6 +86,15 @@ def _parser() -> argparse.ArgumentParser:
     im.add_argument("--list", action="store_true", help="list the buildable images and exit")
     im.set_defaults(func=cmd_images)
 
+    ds = sub.add_parser("dataset", help="dataset tools")
+    dsub = ds.add_subparsers()
+    dl = dsub.add_parser("download", help="download TUM-Mono sequences (resumable)")
+    dl.add_argument("name", choices=["tum-mono"])
+    dl.add_argument("dest", type=Path)
+    dl.add_argument("--sequences", default="1-50", help="numbers and ranges, e.g. 1-5,7")
+    dl.add_argument("--url", help="base address of the sequence zips (default: the dataset's site)")
+    dl.set_defaults(func=cmd_download)
+
     sy = sub.add_parser("synth", help="write a synthetic sequence in the TUM-Mono layout")
     sy.add_argument("out", type=Path)
     sy.add_argument("--frames", type=int, default=300)
@@ -410,11 +419,35 @@ def cmd_images(args) -> int:
 
     if args.list:
         for name, (tag, dockerfile) in buildable().items():
-            gpu = " (GPU optional)" if methods.REGISTRY[name].needs_gpu else ""
+            gpu = " (GPU optional, CPU by default)" if methods.REGISTRY[name].gpu_capable else ""
             console.print(f"{name}: {tag} <- {dockerfile.parent.name}/Dockerfile{gpu}")
         return 0
     tags = build(args.method, log=lambda m: print(m, flush=True))
     console.print(f"built {len(tags)} image(s): {', '.join(tags)}")
+    return 0
+
+
+def cmd_download(args) -> int:
+    from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TransferSpeedColumn
+
+    from runner.datasets.download import TUM_MONO_URL, download_tum_mono, parse_sequences
+
+    numbers = parse_sequences(args.sequences)
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        DownloadColumn(),
+        TransferSpeedColumn(),
+        console=console,
+        disable=not sys.stdout.isatty(),
+    ) as progress:
+
+        def factory(name):
+            task = progress.add_task(name, total=None)
+            return lambda done, total: progress.update(task, completed=done, total=total or None)
+
+        folders = download_tum_mono(args.dest, numbers, args.url or TUM_MONO_URL, factory, log=progress.console.print)
+    console.print(f"{len(folders)} sequence(s) in {args.dest}")
     return 0
 
 

@@ -76,8 +76,8 @@ def execute_run(
         cpus=cpus,
         memory_mb=memory_mb,
         log_cap_bytes=log_cap_bytes,
-        image=type(method).image,
-        needs_gpu=type(method).needs_gpu,
+        image=method.image,
+        needs_gpu=method.needs_gpu,
         labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id},
     )
     try:

@@ -60,4 +60,4 @@ def build(
 
 
 def describe() -> str:
-    return json.dumps({n: {"tag": t, "gpu": methods.REGISTRY[n].needs_gpu} for n, (t, _) in buildable().items()})
+    return json.dumps({n: {"tag": t, "gpu": methods.REGISTRY[n].gpu_capable} for n, (t, _) in buildable().items()})

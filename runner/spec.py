@@ -141,11 +141,14 @@ def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files
             problems.append(f"methods[{i}].name: {exc.args[0]}")
             continue
         try:
-            cls.Params.model_validate(m.get("params") or {})
+            params = cls.Params.model_validate(m.get("params") or {})
         except ValidationError as exc:
             for err in exc.errors():
                 msg = "unknown parameter" if err["type"] == "extra_forbidden" else err["msg"]
                 problems.append(f"methods[{i}].params.{_loc(err['loc'])}: {msg}")
+        else:
+            backend = raw.get("backend", "local")
+            problems += [f"methods[{i}]: {p}" for p in cls(params).problems(backend)]
         label = m.get("label") or m["name"]
         if label in labels:
             problems.append(f"methods[{i}].label: {label!r} used by methods[{labels[label]}] too; give a label")

@@ -57,6 +57,7 @@ class PreparedView:
     width: int
     height: int
     pinhole: tuple[float, float, float, float] | None  # fx fy cx cy in pixels, for rectified views
+    frame_suffix: str = ".png"  # frames are images/<6-digit index><suffix>
 
     images_dir = "images"
     times = "times.txt"
@@ -115,6 +116,7 @@ class PreparedView:
             width=meta["width"],
             height=meta["height"],
             pinhole=tuple(meta["pinhole"]) if meta["pinhole"] else None,
+            frame_suffix=meta.get("frame_suffix", ".png"),
         )
 
 
@@ -257,6 +259,7 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
         "height": height,
         "pinhole": list(pinhole) if pinhole else None,
         "format_version": VIEW_FORMAT_VERSION,
+        "frame_suffix": Path(names[0]).suffix,
     }
     (out / "view.json").write_text(json.dumps(meta, indent=1))
 
