@@ -263,12 +263,99 @@ def bench_demo(tmp: Path) -> None:
     report("demo campaign wall time (data cached after the first run)", f"{time.perf_counter() - t0:.0f} s", "< 600 s")
 
 
+def bench_docker(tmp: Path) -> None:
+    import threading
+
+    import psutil
+
+    from runner.backends.base import ExecRequest
+    from runner.backends.docker import DockerBackend
+    from runner.datasets.synth import generate
+    from runner.datasets.views import Direction, Profile, prepare
+    from runner.errors import InfraError
+    from runner.monitor import ProcessTreeMonitor
+
+    print("docker backend: per-run overhead against `docker run --rm` of the same no-op image; monitor cost")
+    backend = DockerBackend()
+    try:
+        backend.check({"reference_vo": "slamrun/reference_vo:latest"})
+    except InfraError as exc:
+        report("docker backend", "skipped", str(exc)[:60])
+        return
+    seq = generate(tmp / "d" / "s", frames=30, seed=0, size=(64, 48))
+    view = prepare(seq, Direction.forward, Profile.native, tmp / "cache")
+    n = 10
+    t0 = time.perf_counter()
+    for i in range(n):
+        work = tmp / f"w{i}"
+        work.mkdir()
+        req = ExecRequest(argv=["true"], workdir=work, view=view, log_path=tmp / f"log{i}", image=
+                          "slamrun/reference_vo:latest", resources_path=tmp / f"res{i}.csv", timeout_s=60)
+        backend.execute(req, threading.Event())
+    ours = (time.perf_counter() - t0) / n
+    t0 = time.perf_counter()
+    for _ in range(n):
+        subprocess.run(["docker", "run", "--rm", "--network", "none", "-v", f"{view.root}:/data:ro",
+                        "slamrun/reference_vo:latest", "true"], check=True, capture_output=True)
+    bare = (time.perf_counter() - t0) / n
+    report("DockerBackend.execute, no-op container", f"{ours * 1000:.0f} ms", "-")
+    report("docker run --rm, same image and mount", f"{bare * 1000:.0f} ms", "-")
+    report("ratio backend / docker run", f"{ours / bare:.2f}", "<= 1.2")
+
+    # the monitor's own CPU at 2 Hz, sampling a busy process tree for 10 s
+    busy = subprocess.Popen([sys.executable, "-c", "import time\nend=time.time()+10\nwhile time.time()<end: pass"])
+    me = psutil.Process()
+    c0 = sum(me.cpu_times()[:2])
+    mon = ProcessTreeMonitor(busy.pid, 0.5).start()
+    busy.wait()
+    mon.stop()
+    cost = (sum(me.cpu_times()[:2]) - c0) / 10 * 100
+    report("process-tree monitor at 2 Hz, CPU of one core", f"{cost:.2f} %", "< 2 %")
+
+
+def bench_analysis(tmp: Path) -> None:
+    import pandas as pd
+
+    from runner.analysis.report import write_report
+
+    print("analysis: statistics, tables and all figures for a 10,000-run results table")
+    rng = np.random.default_rng(0)
+    n = 10_000
+    methods = [f"method_{i}" for i in range(10)]
+    df = pd.DataFrame({
+        "method": np.repeat(methods, n // 10),
+        "sequence": np.tile(np.repeat([f"sequence_{i:02d}" for i in range(1, 51)], 20), 10),
+        "direction": np.tile(np.repeat(["forward", "backward"], 10), 500),
+        "trial": np.tile(np.arange(10), 1000),
+    })
+    scale = np.repeat(np.linspace(0.5, 3, 10), n // 10)
+    for m in ("e_t", "e_r", "e_start", "e_end", "e_rmse", "e_align"):
+        df[m] = rng.lognormal(np.log(scale), 0.6)
+    df["e_s"] = rng.lognormal(0, 0.05 * scale)
+    df["e_s_sym"] = np.maximum(df.e_s, 1 / df.e_s)
+    failed = rng.random(n) < 0.1
+    df.loc[failed, ["e_t", "e_r", "e_s", "e_s_sym", "e_start", "e_end", "e_rmse", "e_align"]] = np.nan
+    df["status"] = np.where(failed, "failed", "done")
+    df["failure"] = np.where(failed, "lost", None)
+    df["eval_status"] = np.where(failed, None, "ok")
+    for c, v in (("wall_s", 100), ("fps", 30), ("cpu_mean_pct", 90), ("cpu_peak_pct", 150), ("ram_peak_mb", 400)):
+        df[c] = rng.normal(v, v / 10, n)
+    df["gpu_mem_peak_mb"] = np.nan
+    df["run_dir"] = ""
+    df.to_parquet(tmp / "results.parquet")
+    t0 = time.perf_counter()
+    write_report(tmp)
+    report("report: statistics + tables + figures, 10,000 runs", f"{time.perf_counter() - t0:.1f} s", "< 30 s")
+
+
 BENCHES: dict[str, Callable[[Path], None]] = {
     "evaluator": bench_evaluator,
     "scheduler": bench_scheduler,
     "plan": bench_plan_status,
     "datasets": bench_datasets,
     "reference_vo": bench_reference_vo,
+    "docker": bench_docker,
+    "analysis": bench_analysis,
     "demo": bench_demo,
 }
 
