@@ -96,6 +96,8 @@ class Renderer:
         self.scene = scene
         self.texture = texture
         self.rays = rays_cam.astype(np.float32)
+        self.ray_x, self.ray_y, self.ray_z = (np.ascontiguousarray(self.rays[:, k]) for k in range(3))
+        self.ray_norm = np.linalg.norm(self.rays, axis=1).astype(np.float32)
         self.shape = shape
         rng = np.random.default_rng(99)
         n_faces = 6 * (1 + len(scene.boxes))
@@ -105,11 +107,11 @@ class Renderer:
     def render(self, rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
         """Irradiance-like image in 0..255 (float32) seen from camera-to-world (rot, pos).
 
-        Structure-of-arrays ray casting: one float32 array per coordinate keeps every step a fast
-        element-wise operation.
+        Structure-of-arrays ray casting (one contiguous float32 array per coordinate); each box is only
+        tested on the rays inside its bounding cone.
         """
         rot = rot.astype(np.float32)
-        cx, cy, cz = self.rays[:, 0], self.rays[:, 1], self.rays[:, 2]
+        cx, cy, cz = self.ray_x, self.ray_y, self.ray_z
         w = [rot[k, 0] * cx + rot[k, 1] * cy + rot[k, 2] * cz for k in range(3)]  # world ray components
         o = pos.astype(np.float32)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
@@ -119,30 +121,45 @@ class Renderer:
             t = np.full(len(cx), np.inf, np.float32)
             face = np.zeros(len(cx), np.int32)
             for k in range(3):
-                tk = np.where(w[k] > 0, (hi[k] - o[k]) * inv[k], (lo[k] - o[k]) * inv[k])
-                tk = np.where(tk > 0, tk, np.inf)  # a ray parallel to a wall never meets it
+                pos_dir = w[k] > 0
+                tk = np.where(pos_dir, (hi[k] - o[k]) * inv[k], (lo[k] - o[k]) * inv[k])
+                tk[~(tk > 0)] = np.inf  # a ray parallel to a wall never meets it
                 closer = tk < t
-                t = np.where(closer, tk, t)
-                face = np.where(closer, np.where(w[k] > 0, 2 * k + 1, 2 * k), face)
-            # Boxes, seen from outside (slab test).
+                t[closer] = tk[closer]
+                face[closer] = 2 * k + pos_dir[closer]
+            # Boxes, seen from outside: slab test on the rays of the box's bounding cone.
             for i, (blo, bhi) in enumerate(self.scene.boxes):
+                centre = ((blo + bhi) / 2).astype(np.float32)
+                radius = float(np.linalg.norm(bhi - blo) / 2)
+                v = centre - o
+                dist = float(np.linalg.norm(v))
+                if dist > radius:
+                    cos_max = np.sqrt(1.0 - (radius / dist) ** 2)
+                    dot = w[0] * v[0] + w[1] * v[1] + w[2] * v[2]
+                    idx = np.flatnonzero(dot > np.float32(cos_max * dist) * self.ray_norm)
+                else:
+                    idx = np.arange(len(cx))
+                if len(idx) == 0:
+                    continue
+                wi = [wk[idx] for wk in w]
+                ii = [ik[idx] for ik in inv]
                 near, far = [], []
                 for k in range(3):
-                    a = (np.float32(blo[k]) - o[k]) * inv[k]
-                    b = (np.float32(bhi[k]) - o[k]) * inv[k]
+                    a = (np.float32(blo[k]) - o[k]) * ii[k]
+                    b = (np.float32(bhi[k]) - o[k]) * ii[k]
                     near.append(np.minimum(a, b))
                     far.append(np.maximum(a, b))
                 tmin = np.maximum(np.maximum(near[0], near[1]), near[2])
                 tfar = np.minimum(np.minimum(far[0], far[1]), far[2])
-                hit = (tmin > 0) & (tmin <= tfar) & (tmin < t)
+                hit = (tmin > 0) & (tmin <= tfar) & (tmin < t[idx])
                 if not hit.any():
                     continue
-                idx = np.flatnonzero(hit)
-                tm = tmin[idx]
-                axis = np.where(near[0][idx] == tm, 0, np.where(near[1][idx] == tm, 1, 2))
-                sign = np.where(np.choose(axis, [w[0][idx], w[1][idx], w[2][idx]]) < 0, 1, 0)
-                t[idx] = tm
-                face[idx] = 6 * (i + 1) + axis * 2 + sign
+                tm = tmin[hit]
+                axis = np.where(near[0][hit] == tm, 0, np.where(near[1][hit] == tm, 1, 2))
+                sign = np.where(np.choose(axis, [wi[0][hit], wi[1][hit], wi[2][hit]]) < 0, 1, 0)
+                sel = idx[hit]
+                t[sel] = tm
+                face[sel] = 6 * (i + 1) + axis * 2 + sign
         axis = (face % 6) // 2
         px, py, pz = (o[k] + w[k] * t for k in range(3))
         u = np.where(axis == 0, py, px)
