@@ -289,14 +289,34 @@ def bench_docker(tmp: Path) -> None:
     for i in range(n):
         work = tmp / f"w{i}"
         work.mkdir()
-        req = ExecRequest(argv=["true"], workdir=work, view=view, log_path=tmp / f"log{i}", image=
-                          "slamrun/reference_vo:latest", resources_path=tmp / f"res{i}.csv", timeout_s=60)
+        req = ExecRequest(
+            argv=["true"],
+            workdir=work,
+            view=view,
+            log_path=tmp / f"log{i}",
+            image="slamrun/reference_vo:latest",
+            resources_path=tmp / f"res{i}.csv",
+            timeout_s=60,
+        )
         backend.execute(req, threading.Event())
     ours = (time.perf_counter() - t0) / n
     t0 = time.perf_counter()
     for _ in range(n):
-        subprocess.run(["docker", "run", "--rm", "--network", "none", "-v", f"{view.root}:/data:ro",
-                        "slamrun/reference_vo:latest", "true"], check=True, capture_output=True)
+        subprocess.run(
+            [
+                "docker",
+                "run",
+                "--rm",
+                "--network",
+                "none",
+                "-v",
+                f"{view.root}:/data:ro",
+                "slamrun/reference_vo:latest",
+                "true",
+            ],
+            check=True,
+            capture_output=True,
+        )
     bare = (time.perf_counter() - t0) / n
     report("DockerBackend.execute, no-op container", f"{ours * 1000:.0f} ms", "-")
     report("docker run --rm, same image and mount", f"{bare * 1000:.0f} ms", "-")
@@ -322,12 +342,14 @@ def bench_analysis(tmp: Path) -> None:
     rng = np.random.default_rng(0)
     n = 10_000
     methods = [f"method_{i}" for i in range(10)]
-    df = pd.DataFrame({
-        "method": np.repeat(methods, n // 10),
-        "sequence": np.tile(np.repeat([f"sequence_{i:02d}" for i in range(1, 51)], 20), 10),
-        "direction": np.tile(np.repeat(["forward", "backward"], 10), 500),
-        "trial": np.tile(np.arange(10), 1000),
-    })
+    df = pd.DataFrame(
+        {
+            "method": np.repeat(methods, n // 10),
+            "sequence": np.tile(np.repeat([f"sequence_{i:02d}" for i in range(1, 51)], 20), 10),
+            "direction": np.tile(np.repeat(["forward", "backward"], 10), 500),
+            "trial": np.tile(np.arange(10), 1000),
+        }
+    )
     scale = np.repeat(np.linspace(0.5, 3, 10), n // 10)
     for m in ("e_t", "e_r", "e_start", "e_end", "e_rmse", "e_align"):
         df[m] = rng.lognormal(np.log(scale), 0.6)

@@ -8,7 +8,7 @@ import re
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import include_once, patch  # noqa: E402
+from patchlib import orb_slam2_family  # noqa: E402
 
 root = sys.argv[1]
 tracking = os.path.join(root, "src", "Tracking.cc")
@@ -51,16 +51,4 @@ with open(tracking, "w") as f:
     f.write(src)
 print("patch: Tracking.cc monocular optical-flow images: %d statement(s) for %s" % (len(fills), sorted(flow_args)))
 
-patch(root, "src/LoopClosing.cc", "after", "bool LoopClosing::DetectLoop()\n{", """
-    if (getenv("ORB_SLAM2_NO_LOOP"))  // slamrun: loop closure switch
-    {
-        unique_lock<mutex> lock(mMutexLoopQueue);
-        mpCurrentKF = mlpLoopKeyFrameQueue.front();
-        mlpLoopKeyFrameQueue.pop_front();
-        mpKeyFrameDB->add(mpCurrentKF);
-        return false;
-    }
-""")
-for f in ("src/LoopClosing.cc", "src/System.cc", "src/Tracking.cc", "src/LocalMapping.cc"):
-    include_once(root, f, "unistd.h")
-include_once(root, "src/LoopClosing.cc", "cstdlib")
+orb_slam2_family(root, [])

@@ -5,7 +5,7 @@ import re
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import include_once, patch  # noqa: E402
+from patchlib import orb_slam2_family  # noqa: E402
 
 root = sys.argv[1]
 cmake = os.path.join(root, "CMakeLists.txt")
@@ -28,16 +28,4 @@ with open(os.path.join(root, mono), "w") as f:
     f.write(text)
 print("patch: %s: viewer off" % mono)
 
-patch(root, "src/LoopClosing.cc", "after", "bool LoopClosing::DetectLoop()\n{", """
-    if (getenv("ORB_SLAM2_NO_LOOP"))  // slamrun: loop closure switch
-    {
-        unique_lock<mutex> lock(mMutexLoopQueue);
-        mpCurrentKF = mlpLoopKeyFrameQueue.front();
-        mlpLoopKeyFrameQueue.pop_front();
-        mpKeyFrameDB->add(mpCurrentKF);
-        return false;
-    }
-""")
-include_once(root, "src/LoopClosing.cc", "cstdlib")
-for f in ("src/System.cc", "src/Tracking.cc", "src/LocalMapping.cc", "src/LoopClosing.cc", mono):
-    include_once(root, f, "unistd.h")
+orb_slam2_family(root, [mono])

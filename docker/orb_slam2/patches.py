@@ -3,7 +3,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import include_once, patch  # noqa: E402
+from patchlib import orb_slam2_family, patch  # noqa: E402
 
 root = sys.argv[1]
 
@@ -12,20 +12,5 @@ patch(root, "Examples/Monocular/mono_tum.cc", "replace",
       "ORB_SLAM2::System SLAM(argv[1],argv[2],ORB_SLAM2::System::MONOCULAR,true);",
       "ORB_SLAM2::System SLAM(argv[1],argv[2],ORB_SLAM2::System::MONOCULAR,false);")
 
-# Loop closure off when ORB_SLAM2_NO_LOOP is set: keyframes still enter the database, no loop is searched.
-patch(root, "src/LoopClosing.cc", "after", "bool LoopClosing::DetectLoop()\n{", """
-    if (getenv("ORB_SLAM2_NO_LOOP"))  // slamrun: loop closure switch
-    {
-        unique_lock<mutex> lock(mMutexLoopQueue);
-        mpCurrentKF = mlpLoopKeyFrameQueue.front();
-        mlpLoopKeyFrameQueue.pop_front();
-        mpKeyFrameDB->add(mpCurrentKF);
-        return false;
-    }
-""")
-include_once(root, "src/LoopClosing.cc", "cstdlib")
-
-# gcc >= 7 needs unistd.h for usleep.
-for f in ("src/System.cc", "src/Tracking.cc", "src/LocalMapping.cc", "src/LoopClosing.cc", "src/Viewer.cc",
-          "Examples/Monocular/mono_tum.cc"):
-    include_once(root, f, "unistd.h")
+# Loop-closure switch (ORB_SLAM2_NO_LOOP=1) and usleep's header.
+orb_slam2_family(root, ["src/Viewer.cc", "Examples/Monocular/mono_tum.cc"])

@@ -1,0 +1,241 @@
+"""What of the method images can be tested without GitHub: the patch scripts on source trees holding the
+upstream anchors, the build helpers, and the image dependency order."""
+
+from __future__ import annotations
+
+import hashlib
+import http.server
+import os
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCKER = ROOT / "docker"
+
+
+def tree(root: Path, files: dict[str, str]) -> Path:
+    for rel, text in files.items():
+        p = root / rel
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_text(text)
+    return root
+
+
+def run(script: Path, *args) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, str(script), *map(str, args)], capture_output=True, text=True)
+
+
+ORB_FILES = {
+    "Examples/Monocular/mono_tum.cc": "int main(){\n    ORB_SLAM2::System SLAM(argv[1],argv[2],ORB_SLAM2::System::MONOCULAR,true);\n}\n",
+    "src/LoopClosing.cc": "bool LoopClosing::DetectLoop()\n{\n    {\n        unique_lock<mutex> lock(mMutexLoopQueue);\n",
+    "src/System.cc": "",
+    "src/Tracking.cc": "",
+    "src/LocalMapping.cc": "",
+    "src/Viewer.cc": "",
+}
+
+
+def test_orb_slam2_patches(tmp_path):
+    root = tree(tmp_path / "orb", ORB_FILES)
+    res = run(DOCKER / "orb_slam2" / "patches.py", root)
+    assert res.returncode == 0, res.stderr
+    assert "MONOCULAR,false);" in (root / "Examples/Monocular/mono_tum.cc").read_text()
+    loop = (root / "src/LoopClosing.cc").read_text()
+    assert 'getenv("ORB_SLAM2_NO_LOOP")' in loop and loop.index("getenv") < loop.index(
+        "unique_lock<mutex> lock(mMutexLoopQueue);\n", loop.index("getenv") + 200
+    )
+    assert "#include <unistd.h>" in (root / "src/System.cc").read_text()
+    # an upstream change that moves an anchor fails the build, naming the file
+    broken = tree(tmp_path / "broken", {**ORB_FILES, "src/LoopClosing.cc": "bool LoopClosing::DetectLoop() {\n"})
+    res = run(DOCKER / "orb_slam2" / "patches.py", broken)
+    assert res.returncode != 0 and "src/LoopClosing.cc" in res.stderr and "found 0 times" in res.stderr
+
+
+def test_dynaslam_patches(tmp_path):
+    cmake = (
+        "add_executable(mono_tum Examples/Monocular/mono_tum.cc)\ntarget_link_libraries(mono_tum ${PROJECT_NAME})\n"
+        "add_executable(mono_carla\nExamples/Monocular/mono_carla.cc)\ntarget_link_libraries(mono_carla ${PROJECT_NAME})\n"
+    )
+    root = tree(
+        tmp_path / "dyna",
+        {
+            **ORB_FILES,
+            "CMakeLists.txt": cmake,
+            "Examples/Monocular/mono_tum.cc": "ORB_SLAM2::System SLAM(argv[1],argv[2],"
+            "ORB_SLAM2::System::MONOCULAR,true);\n",
+        },
+    )
+    res = run(DOCKER / "dynaslam" / "patches.py", root)
+    assert res.returncode == 0, res.stderr
+    text = (root / "CMakeLists.txt").read_text()
+    assert "mono_carla" not in text and "add_executable(mono_tum" in text
+
+
+def test_df_orb_slam_optical_flow_fix(tmp_path):
+    tracking = """
+cv::Mat Tracking::GrabImageRGBD(const cv::Mat &imRGB,const cv::Mat &imD, const double &timestamp)
+{
+    mImGray = imRGB;
+    mImGray.copyTo(mImGrayCurrent);
+    mCurrentFrame = Frame(mImGray,imDepth,timestamp,mpORBextractorLeft,mpORBVocabulary,mK,mDistCoef,mbf,mThDepth);
+    Track();
+    mImGrayCurrent.copyTo(mImGrayLast);
+    return mCurrentFrame.mTcw.clone();
+}
+
+cv::Mat Tracking::GrabImageMonocular(const cv::Mat &im, const double &timestamp)
+{
+    mImGray = im;
+    if(mState==NOT_INITIALIZED || mState==NO_IMAGES_YET)
+        mCurrentFrame = Frame(mImGray,timestamp,mpIniORBextractor,mpORBVocabulary,mK,mDistCoef,mbf,mThDepth);
+    else
+        mCurrentFrame = Frame(mImGray,timestamp,mpORBextractorLeft,mpORBVocabulary,mK,mDistCoef,mbf,mThDepth);
+    Track();
+    return mCurrentFrame.mTcw.clone();
+}
+
+void Tracking::TrackWithOpticalFlow()
+{
+    cv::calcOpticalFlowPyrLK(mImGrayLast, mImGrayCurrent, prev, next, status, err);
+}
+"""
+    root = tree(tmp_path / "df", {**ORB_FILES, "src/Tracking.cc": tracking})
+    res = run(DOCKER / "df_orb_slam" / "patches.py", root)
+    assert res.returncode == 0, res.stderr
+    text = (root / "src/Tracking.cc").read_text()
+    mono = text[text.index("GrabImageMonocular") : text.index("TrackWithOpticalFlow")]
+    assert "mImGray.copyTo(mImGrayCurrent);" in mono and "mImGrayCurrent.copyTo(mImGrayLast);" in mono
+    assert mono.index("copyTo") < mono.index("mCurrentFrame = Frame(")
+
+
+def test_lsd_slam_pose_dump_patch(tmp_path):
+    main = "int main(){\n\tsystem->finalize();\n\n\tdelete system;\n}\n"
+    settings = "bool displayDepthMap = true;\n"
+    root = tree(
+        tmp_path / "lsd",
+        {"lsd_slam_core/src/main_on_images.cpp": main, "lsd_slam_core/src/util/settings.cpp": settings},
+    )
+    res = run(DOCKER / "lsd_slam" / "patches.py", root)
+    assert res.returncode == 0, res.stderr
+    text = (root / "lsd_slam_core/src/main_on_images.cpp").read_text()
+    assert "SLAMRUN_POSES" in text and text.index("finalize") < text.index("getAllPoses") < text.index("delete system")
+    assert "displayDepthMap = false" in (root / "lsd_slam_core/src/util/settings.cpp").read_text()
+
+
+def test_svo_patches(tmp_path):
+    sophus = tree(
+        tmp_path / "sophus",
+        {"sophus/so2.cpp": "SO2::SO2() {\n  unit_complex_.real() = 1.;\n  unit_complex_.imag() = 0.;\n}\n"},
+    )
+    svo = tree(tmp_path / "svo", {"svo_ros/src/benchmark_node.cpp": "void run() {\n    vo_->addImage(img, t);\n}\n"})
+    res = run(DOCKER / "svo" / "patches.py", sophus, svo)
+    assert res.returncode == 0, res.stderr
+    assert "std::complex<double>(1, 0)" in (sophus / "sophus/so2.cpp").read_text()
+    bench = (svo / "svo_ros/src/benchmark_node.cpp").read_text()
+    assert "STAGE_PAUSED" in bench and "vo_->start();" in bench
+
+
+def test_dso_and_cnn_patches(tmp_path):
+    dso = {
+        "src/util/IndexThreadReduce.h": "#include <boost/bind.hpp>\n",
+        "src/util/Undistort.cpp": "cv::imread(f, CV_LOAD_IMAGE_GRAYSCALE);\n",
+    }
+    root = tree(tmp_path / "dso", dso)
+    assert run(DOCKER / "dso" / "patches.py", root).returncode == 0
+    assert "boost::placeholders" in (root / "src/util/IndexThreadReduce.h").read_text()
+    assert "cv::IMREAD_GRAYSCALE" in (root / "src/util/Undistort.cpp").read_text()
+    cnn = tree(
+        tmp_path / "cnn",
+        {
+            **dso,
+            "CMakeLists.txt": "set(TF /home/someone/tensorflow)\n"
+            "include_directories(/home/someone/monodepth-cpp/include)\n",
+        },
+    )
+    res = run(DOCKER / "cnn_dso" / "patches.py", cnn, "/opt/tf", "/opt/monodepth-cpp")
+    assert res.returncode == 0, res.stderr
+    text = (cnn / "CMakeLists.txt").read_text()
+    assert "/home/" not in text and "/opt/tf" in text and "/opt/monodepth-cpp/include" in text
+    svo = tree(tmp_path / "cnnsvo", {"svo_ros/CMakeLists.txt": "set(X /home/a/tensorflow)\nset(Y /home/a/other)\n"})
+    res = run(DOCKER / "cnn_svo" / "patches.py", svo, "/opt/tf", "/opt/md")
+    assert res.returncode != 0 and "personal paths" in res.stderr
+
+
+def test_portable_march(tmp_path):
+    root = tree(
+        tmp_path / "src",
+        {
+            "CMakeLists.txt": 'set(CMAKE_CXX_FLAGS "-O3 -march=native")\n',
+            "sub/CMakeLists.txt": "add_compile_options(-march=native -mtune=native)\n",
+        },
+    )
+    res = subprocess.run([str(DOCKER / "common" / "portable-march.sh"), str(root)], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert "-march=x86-64-v2" in (root / "CMakeLists.txt").read_text()
+    assert "native" not in (root / "sub/CMakeLists.txt").read_text()
+
+
+@pytest.fixture
+def weights_server(tmp_path):
+    data = b"fake weights " * 1000
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802
+            self.send_response(200)
+            self.send_header("Content-Length", str(len(data)))
+            self.end_headers()
+            self.wfile.write(data)
+
+        def log_message(self, *a):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    yield f"http://127.0.0.1:{httpd.server_address[1]}/w.h5", hashlib.sha256(data).hexdigest()
+    httpd.shutdown()
+    httpd.server_close()
+
+
+def test_fetch_checks_the_checksum(tmp_path, weights_server):
+    url, sha = weights_server
+    fetch = str(DOCKER / "common" / "fetch.sh")
+    env = {**os.environ, "ALLOW_UNVERIFIED": "0"}
+    ok = subprocess.run([fetch, url, sha, str(tmp_path / "a.h5")], capture_output=True, text=True, env=env)
+    assert ok.returncode == 0, ok.stderr
+    bad = subprocess.run([fetch, url, "0" * 64, str(tmp_path / "b.h5")], capture_output=True, text=True, env=env)
+    assert bad.returncode != 0 and "refusing" in bad.stderr
+    unpinned = subprocess.run([fetch, url, "", str(tmp_path / "c.h5")], capture_output=True, text=True, env=env)
+    assert unpinned.returncode != 0 and sha in unpinned.stderr  # says which hash to pin
+    env["ALLOW_UNVERIFIED"] = "1"
+    allowed = subprocess.run([fetch, url, "", str(tmp_path / "d.h5")], capture_output=True, text=True, env=env)
+    assert allowed.returncode == 0 and "unverified" in allowed.stdout
+    missing = subprocess.run(
+        [fetch, url.replace("/w.h5", ":1/none"), sha, str(tmp_path / "e")], capture_output=True, text=True, env=env
+    )
+    assert missing.returncode != 0 and "cannot download" in missing.stderr
+
+
+def test_image_bases_are_built_first():
+    from runner.images import BASES, bases_of, buildable
+
+    assert bases_of(DOCKER / "cnn_dso" / "Dockerfile") == ["slamrun/tensorflow-cc:1.6"]
+    assert bases_of(DOCKER / "cnn_svo" / "Dockerfile") == ["slamrun/tensorflow-cc:1.6"]
+    assert bases_of(DOCKER / "dso" / "Dockerfile") == []
+    assert all(p.exists() for p in BASES.values())
+    assert set(buildable()) == {
+        "orb_slam2",
+        "df_orb_slam",
+        "lsd_slam",
+        "dso",
+        "svo",
+        "ldso",
+        "dsm",
+        "dynaslam",
+        "cnn_dso",
+        "cnn_svo",
+        "reference_vo",
+    }
