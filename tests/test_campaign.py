@@ -118,7 +118,8 @@ def test_timeout_kills_the_whole_tree(tmp_path, tiny_dataset):
     assert time.monotonic() - t0 < 30
     df = pd.read_csv(res.results_csv)
     assert (df.failure == "timeout").all() and (df.wall_s < 10).all()
-    pids = [int(line.split()[-1]) for line in marker.read_text().split("\n") if line]
+    lines = [line.split() for line in marker.read_text().splitlines() if line]
+    pids = [int(w[1]) if w[0] == "child" else int(w[0]) for w in lines]
     assert len(pids) == 4  # two runs: the method and its child each
     for pid in pids:
         assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
@@ -263,8 +264,19 @@ def test_kill_9_then_resume(tmp_path, tiny_dataset):
         assert json.loads((Path(r["run_dir"]) / "run.json").read_text())["attempt"] == 2
     assert sorted(p.name for p in (results / "runs").rglob("run.json")).count("run.json") == 12
     assert not list((results / "runs").rglob(".*.tmp-*"))
-    # each run that finished before the kill started exactly once
-    assert len(marker.read_text().split()) == 12 + len(in_flight)
+    # each run that finished before the kill was started exactly once; every run at least once
+    starts = [line.split()[1] for line in marker.read_text().splitlines() if line]
+
+    def run_of(out: str) -> str:  # .../<sequence>/<direction>/.<trial>.tmp-<attempt>/raw/trajectory.txt
+        parts = Path(out).parts
+        return "/".join((parts[-5], parts[-4], parts[-3].split(".")[1]))
+
+    counts = {}
+    for out in starts:
+        counts[run_of(out)] = counts.get(run_of(out), 0) + 1
+    assert len(counts) == 12
+    for key in finished:
+        assert counts["/".join(key.split("/")[1:])] == 1, key
 
 
 def test_sigint_stops_cleanly_and_resumes(tmp_path, tiny_dataset):
