@@ -48,6 +48,16 @@ def write_report(
         )
         sections.append(("Drift (Table 3 layout)", f"<p>{html.escape(note)}</p>" + tables.to_html(t3)))
         sections.append(("Segment errors (Table 4 layout)", tables.to_html(t4)))
+        # the same procedure per direction: motion bias can change the ranking
+        for direction in ("forward", "backward"):
+            part = ok[ok.direction == direction] if "direction" in ok.columns else ok.iloc[0:0]
+            if part.method.nunique() < 2 or len(part) <= len(metrics) + 1:
+                continue
+            sd = study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha)
+            (out / f"statistics_{direction}.json").write_text(json.dumps(sd.to_json(), indent=1))
+            td = tables.medians_with_letters(sd, acc)
+            tables.write_all(td, tab_dir, f"table3_drift_{direction}", f"Drift medians, {direction} runs only")
+            sections.append((f"Drift, {direction} runs only", tables.to_html(td)))
     else:
         sections.append(("Statistics", "<p>Fewer than two methods with evaluated runs: no group comparison.</p>"))
 
