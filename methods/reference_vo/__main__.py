@@ -53,8 +53,11 @@ def main(argv: list[str] | None = None) -> int:
     cv2.setNumThreads(1)
     vo = VisualOdometry(K, Settings(max_corners=a.max_corners))
     t0 = time.perf_counter()
+    decode_s = 0.0
     for i, f in enumerate(frames):
+        td = time.perf_counter()
         img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        decode_s += time.perf_counter() - td
         if img is None or img.shape != (h, w):
             print(f"reference_vo: {f} unreadable or not {w}x{h}", file=sys.stderr)
             return 1
