@@ -52,8 +52,16 @@ def test_report_files(tmp_path):
     fake_results(tmp_path).to_csv(tmp_path / "results.csv", index=False)
     index = write_report(tmp_path)
     tables = {p.name for p in (tmp_path / "report" / "tables").iterdir()}
-    for name in ("table3_drift", "table4_segments", "table2_resources", "failures", "motion_bias",
-                 "table3_drift_forward", "table3_drift_backward", "e_align_per_sequence"):
+    for name in (
+        "table3_drift",
+        "table4_segments",
+        "table2_resources",
+        "failures",
+        "motion_bias",
+        "table3_drift_forward",
+        "table3_drift_backward",
+        "e_align_per_sequence",
+    ):
         assert {f"{name}.csv", f"{name}.md", f"{name}.tex"} <= tables
     figs = {p.name for p in (tmp_path / "report" / "figures").iterdir()}
     for name in (
