@@ -62,8 +62,12 @@ def lilliefors_p(x: np.ndarray) -> float:
 
 
 def levene(groups: list[np.ndarray]) -> tuple[float, float]:
-    """Levene's test centred on the median (car::leveneTest's default, i.e. Brown-Forsythe): F and p."""
-    res = stats.levene(*groups, center="median")
+    """Levene's test centred on the median (car::leveneTest's default, i.e. Brown-Forsythe): F and p.
+
+    Groups without spread (a deterministic method's identical trials) give NaN, as in R, without a warning.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        res = stats.levene(*groups, center="median")
     return float(res.statistic), float(res.pvalue)
 
 
