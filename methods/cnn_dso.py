@@ -11,27 +11,22 @@ from pathlib import Path
 from pydantic import Field
 
 from methods.dso import Dso, DsoParams
+from methods.upstream import GpuOptional, GpuOptionalParams
 from runner.datasets.views import PreparedView
 
 
-class CnnDsoParams(DsoParams):
+class CnnDsoParams(DsoParams, GpuOptionalParams):
     model: str = Field("/opt/CNN-DSO/model/model_city2kitti.pb", description="Frozen MonoDepth graph.")
-    gpu: bool = Field(False, description="Run MonoDepth on a GPU (TensorFlow 1.6: CUDA 9 GPUs only).")
 
 
-class CnnDso(Dso):
+class CnnDso(GpuOptional, Dso):
     name = "cnn_dso"
     image = "slamrun/cnn_dso:latest"
     binary = "/opt/CNN-DSO/build/bin/dso_dataset"
     Params = CnnDsoParams
-    gpu_capable = True
-
-    @property
-    def needs_gpu(self) -> bool:  # type: ignore[override]
-        return self.params.gpu
 
     def extra_args(self, view: PreparedView, workdir: Path) -> list[str]:
         return [f"cnn={self.params.model}"]
 
     def environment(self) -> dict[str, str]:
-        return {} if self.params.gpu else {"CUDA_VISIBLE_DEVICES": ""}
+        return self.cpu_environment()

@@ -16,28 +16,23 @@ from pydantic import Field
 
 from methods.base import read_tum_output
 from methods.svo import Svo, SvoParams, ros_params_yaml
+from methods.upstream import GpuOptional, GpuOptionalParams
 from runner.datasets.views import PreparedView
 from runner.errors import MethodFailure, TrajectoryFormatError
 from runner.trajectory import Trajectory, read_timestamped_3x4
 
 
-class CnnSvoParams(SvoParams):
+class CnnSvoParams(SvoParams, GpuOptionalParams):
     model: str = Field("/opt/CNN-SVO/model/model_city2kitti.pb", description="Frozen MonoDepth graph.")
-    gpu: bool = Field(False, description="Run MonoDepth on a GPU (TensorFlow 1.6: CUDA 9 GPUs only).")
 
 
-class CnnSvo(Svo):
+class CnnSvo(GpuOptional, Svo):
     name = "cnn_svo"
     image = "slamrun/cnn_svo:latest"
     binary = "/opt/CNN-SVO/cnn-svo-run"
     Params = CnnSvoParams
-    gpu_capable = True
     output_file = "results/CNN_VO/traj_estimate_ATE.txt"
     matrix_file = "results/CNN_VO/traj_estimate.txt"
-
-    @property
-    def needs_gpu(self) -> bool:  # type: ignore[override]
-        return self.params.gpu
 
     def parameters(self, view: PreparedView, workdir: Path) -> dict:
         values = super().parameters(view, workdir)
@@ -60,10 +55,7 @@ class CnnSvo(Svo):
         }
 
     def environment(self) -> dict[str, str]:
-        env = {"HOME": "/work"} if self.backend == "docker" else {}
-        if not self.params.gpu:
-            env["CUDA_VISIBLE_DEVICES"] = ""
-        return env
+        return {**({"HOME": "/work"} if self.backend == "docker" else {}), **self.cpu_environment()}
 
     def read_trajectory(self, workdir: Path, view: PreparedView) -> Trajectory:
         try:

@@ -33,21 +33,22 @@ class Dso(UpstreamMethod):
     not_initialized_pattern = r"INITIALIZATION FAILED|no images loaded|could not load"
     lost_pattern = r"^LOST"
 
-    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+    def dataset_args(self, view: PreparedView) -> list[str]:
+        """The sequence and calibration arguments DSO's family share: files, calib, preset, photometric files."""
         p = self.params
         argv = [
-            self.exe(),
             f"files={view.path(view.images_dir)}",
             f"calib={view.path(view.camera)}",
             f"preset={p.preset}",
             "nogui=1",
-            "nolog=1",
-            "quiet=1",
         ]
         if p.photometric:
-            argv += [f"gamma={view.path(view.pcalib)}", f"vignette={view.path(view.vignette)}", "mode=0"]
-        else:
-            argv.append("mode=1")
+            argv += [f"gamma={view.path(view.pcalib)}", f"vignette={view.path(view.vignette)}"]
+        return argv
+
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        p = self.params
+        argv = [self.exe(), *self.dataset_args(view), "nolog=1", "quiet=1", "mode=0" if p.photometric else "mode=1"]
         if p.single_thread:
             argv.append("nomt=1")
         return argv + self.extra_args(view, workdir)

@@ -12,27 +12,22 @@ from pathlib import Path
 from pydantic import Field
 
 from methods.orb_slam2 import OrbSlam2, OrbSlam2Params
+from methods.upstream import GpuOptional, GpuOptionalParams
 from runner.datasets.views import PreparedView
 from runner.errors import MethodFailure
 
 
-class DynaSlamParams(OrbSlam2Params):
+class DynaSlamParams(OrbSlam2Params, GpuOptionalParams):
     vocabulary: str = Field("/opt/DynaSLAM/Vocabulary/ORBvoc.txt", description="ORB vocabulary (ORBvoc.txt).")
     masks: bool = Field(True, description="Segment every frame with Mask R-CNN (off: plain ORB-SLAM2).")
-    gpu: bool = Field(False, description="Run Mask R-CNN on a GPU (TensorFlow 1.x: CUDA 9/10 GPUs only).")
 
 
-class DynaSlam(OrbSlam2):
+class DynaSlam(GpuOptional, OrbSlam2):
     name = "dynaslam"
     image = "slamrun/dynaslam:latest"
     binary = "/opt/DynaSLAM/dynaslam-run"
     Params = DynaSlamParams
-    gpu_capable = True
     loop_closure_switch = "env ORB_SLAM2_NO_LOOP=1 (patch in docker/dynaslam)"
-
-    @property
-    def needs_gpu(self) -> bool:  # type: ignore[override]
-        return self.params.gpu
 
     def configure(self, view: PreparedView, workdir: Path) -> dict[str, str]:
         if (view.width, view.height) != (640, 480):
@@ -48,7 +43,4 @@ class DynaSlam(OrbSlam2):
         return argv
 
     def environment(self) -> dict[str, str]:
-        env = {**super().environment(), "MPLBACKEND": "Agg", "SLAMRUN_WORKDIR": "/work"}
-        if not self.params.gpu:
-            env["CUDA_VISIBLE_DEVICES"] = ""
-        return env
+        return {**super().environment(), "MPLBACKEND": "Agg", "SLAMRUN_WORKDIR": "/work", **self.cpu_environment()}

@@ -29,19 +29,13 @@ class Ldso(Dso):
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params
-        argv = [
+        return [
             self.exe(),
-            f"files={view.path(view.images_dir)}",
-            f"calib={view.path(view.camera)}",
-            f"preset={p.preset}",
-            "nogui=1",
+            *self.dataset_args(view),
             f"loopclosing={int(p.loop_closure)}",
             f"output={workdir / self.output_file}",
             f"vocab={p.vocabulary}",
         ]
-        if p.photometric:
-            argv += [f"gamma={view.path(view.pcalib)}", f"vignette={view.path(view.vignette)}"]
-        return argv
 
     def accepts_exit(self, exit_code: int, workdir: Path) -> bool:
         if exit_code == 0:

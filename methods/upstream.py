@@ -44,6 +44,26 @@ class UpstreamMethod(Method):
         return self.params.executable or self.binary
 
 
+class GpuOptionalParams(BaseModel):
+    """Parameters of the learning-based methods: a network file, and the GPU as an option."""
+
+    model_config = ConfigDict(extra="forbid")
+    gpu: bool = Field(False, description="Run the network on a GPU (TensorFlow 1.x: CUDA 9/10 GPUs only).")
+
+
+class GpuOptional:
+    """Mixin: CPU inference by default, a GPU requested only when params.gpu is set."""
+
+    gpu_capable = True
+
+    @property
+    def needs_gpu(self) -> bool:
+        return self.params.gpu
+
+    def cpu_environment(self) -> dict[str, str]:
+        return {} if self.params.gpu else {"CUDA_VISIBLE_DEVICES": ""}
+
+
 def fps_of(view: PreparedView) -> float:
     """Mean frame rate of a view (from its first and last timestamps; reads no file)."""
     span = view.t_last - view.t_first

@@ -329,7 +329,7 @@ def cmd_list_methods(args) -> int:
             name,
             str(prof),
             cls.image or "-",
-            "yes" if cls.needs_gpu else "no",
+            "optional" if cls.gpu_capable else "no",
             "yes" if cls.native else "no",
             cls.loop_closure_switch or "-",
         )

@@ -356,7 +356,7 @@ def test_dockerfile_pins_commit_and_portable_flags(name):
 def test_commits_match_methods_md():
     doc = ROOT.parent / "shared" / "docs" / "methods.md"
     if not doc.exists():
-        pytest.skip("shared/docs/methods.md not beside the repository")
+        pytest.skip(reason="shared/docs/methods.md not beside the repository")
     text = doc.read_text()
     for name, commit in COMMITS.items():
         assert f"@ {commit}" in text, name

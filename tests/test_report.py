@@ -96,7 +96,7 @@ def test_stats_cli_json(tmp_path, shared_data, capsys):
 def test_report_renders_in_chromium(tmp_path):
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
-        pytest.skip("Chromium not installed (apt-get install chromium); .ci/run installs it")
+        pytest.skip(reason="Chromium not installed (apt-get install chromium); .ci/run installs it")
     fake_results(tmp_path).to_csv(tmp_path / "results.csv", index=False)
     index = write_report(tmp_path)
     flags = [

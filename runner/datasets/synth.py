@@ -229,7 +229,8 @@ def generate(
         for i in range(frames):
             irr = renderer.render(rots[i], positions[i]) * vignette * np.float32(exposure[i] / 8.0)
             ok, jpg = cv2.imencode(".jpg", response(irr), [cv2.IMWRITE_JPEG_QUALITY, 95])
-            zf.writestr(f"{i:05d}.jpg", jpg.tobytes())
+            entry = zipfile.ZipInfo(f"{i:05d}.jpg", date_time=(1980, 1, 1, 0, 0, 0))  # deterministic bytes
+            zf.writestr(entry, jpg.tobytes())
     with open(tmp / "times.txt", "w") as f:
         for i in range(frames):
             f.write(f"{i:05d} {t[i]:.6f} {exposure[i]:.6f}\n")
