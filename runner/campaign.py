@@ -13,7 +13,6 @@ from runner.backends.base import Backend
 from runner.datasets import synth
 from runner.datasets.tum_mono import open_sequence
 from runner.datasets.views import prepare
-from runner.errors import DatasetError
 from runner.ledger import Ledger, ResultsLock
 from runner.plan import PlannedRun, plan
 from runner.results import export
@@ -71,14 +70,11 @@ def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], lo
 
 
 def load_groundtruths(runs: list[PlannedRun]) -> dict:
+    """groundtruthSync.txt of every sequence in the plan (None where a sequence has none)."""
     gts = {}
     for r in runs:
-        k = str(r.sequence_dir)
-        if k not in gts:
-            try:
-                gts[k] = open_sequence(r.sequence_dir).groundtruth()
-            except DatasetError:
-                raise
+        if str(r.sequence_dir) not in gts:
+            gts[str(r.sequence_dir)] = open_sequence(r.sequence_dir).groundtruth()
     return gts
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
@@ -50,5 +51,7 @@ class Backend(Protocol):
     def process_paths(self, view: PreparedView, workdir: Path) -> tuple[PreparedView, Path]:
         """The view and work directory as the method's process sees them."""
 
-    def execute(self, req: ExecRequest, cancel: threading.Event, on_start: callable = None) -> ExecResult:  # type: ignore[valid-type]
+    def execute(
+        self, req: ExecRequest, cancel: threading.Event, on_start: Callable[[int, float], None] | None = None
+    ) -> ExecResult:
         """Run to completion, timeout or cancel; always leaves no process behind."""
