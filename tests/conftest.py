@@ -20,7 +20,7 @@ SHARED_DATA = SHARED / "data"
 @pytest.fixture(scope="session")
 def shared_data() -> Path:
     if not SHARED_DATA.is_dir():
-        pytest.skip(reason=f"{SHARED_DATA} not found: the real trajectory files live in shared/data beside the repository")
+        pytest.skip(reason=f"{SHARED_DATA} not found: the real trajectory files live in shared/data beside the repo")
     return SHARED_DATA
 
 
