@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 
@@ -125,4 +126,5 @@ def test_report_renders_in_chromium(tmp_path):
         timeout=120,
     )
     assert shot.exists() and shot.stat().st_size > 10_000
-    shutil.copy(shot, "/tmp/slamrun-report-screenshot.png") if shutil.os.environ.get("SLAMRUN_KEEP_SHOT") else None
+    if os.environ.get("SLAMRUN_KEEP_SHOT"):  # to look at the rendered report yourself
+        shutil.copy(shot, os.environ["SLAMRUN_KEEP_SHOT"])
