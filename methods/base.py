@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import sys
 from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import ClassVar
@@ -94,3 +95,14 @@ def read_tum_output(path: Path) -> Trajectory:
     if len(traj) == 0:
         raise MethodFailure("not_initialized", f"{path.name} holds no pose")
     return traj
+
+
+class PythonProcess:
+    """Mixin for methods run as `python -m ...`: this interpreter locally, the image's python3 in a container."""
+
+    python: str = sys.executable
+
+    def for_backend(self, backend: str) -> Method:
+        method = type(self)(self.params)
+        method.python = sys.executable if backend == "local" else "python3"
+        return method

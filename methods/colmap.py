@@ -8,12 +8,11 @@ measure it and stop it like any other method; its thread count follows the CPUs 
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from methods.base import Method
+from methods.base import Method, PythonProcess
 from runner.datasets.views import PreparedView, Profile
 
 
@@ -28,19 +27,13 @@ class ColmapParams(BaseModel):
     first_octave: int = Field(0, ge=-1, le=2, description="SIFT first octave (-1 doubles the image: slower).")
 
 
-class Colmap(Method):
+class Colmap(PythonProcess, Method):
     name = "colmap"
     image = None
     profile = Profile.rectified
     native = True
     Params = ColmapParams
     not_initialized_pattern = r"^NOT INITIALIZED"
-    python = sys.executable  # the interpreter of a local run
-
-    def for_backend(self, backend: str) -> Method:
-        method = type(self)(self.params)
-        method.python = sys.executable if backend == "local" else "python3"
-        return method
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params

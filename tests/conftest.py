@@ -57,6 +57,11 @@ def fake_method(
     return m
 
 
+def one_sequence(dataset: Path, sequence: str = "seq_a") -> list[dict]:
+    """The `datasets` entry of a spec that runs a single sequence."""
+    return [{"name": "s", "path": str(dataset), "sequences": [sequence]}]
+
+
 def write_spec(tmp_path: Path, dataset: Path, methods: list[dict], **kw) -> Path:
     spec = {
         "name": "t",

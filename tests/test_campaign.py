@@ -21,7 +21,7 @@ from runner.campaign import run_campaign
 from runner.errors import InfraError
 from runner.ledger import ResultsLock
 from runner.spec import load_spec
-from tests.conftest import fake_method, write_spec
+from tests.conftest import fake_method, one_sequence, write_spec
 
 REQUIRED_COLUMNS = (
     "method, sequence, direction, trial, status, failure, e_t, e_r, e_s, e_align, e_start, e_end, "
@@ -132,7 +132,7 @@ def test_log_flood_is_capped_and_run_recorded(tmp_path, tiny_dataset):
         [fake_method("flood")],
         log_cap_mb=1,
         directions=["forward"],
-        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+        datasets=one_sequence(tiny_dataset),
     )
     res = campaign(spec)
     df = pd.read_csv(res.results_csv)
@@ -151,7 +151,7 @@ def test_resources_sampled(tmp_path, tiny_dataset):
         [fake_method("burn", sleep=2.0)],
         directions=["forward"],
         lanes=1,
-        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+        datasets=one_sequence(tiny_dataset),
     )
     res = campaign(spec)
     row = pd.read_csv(res.results_csv).iloc[0]
@@ -195,7 +195,7 @@ def test_infra_failures_are_retried(tmp_path, tiny_dataset):
         directions=["forward"],
         lanes=1,
         retries=2,
-        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+        datasets=one_sequence(tiny_dataset),
     )
     backend = FlakyBackend(fail=2)
     res = campaign(spec, backend=backend)
@@ -211,7 +211,7 @@ def test_infra_give_up_then_retry_next_start(tmp_path, tiny_dataset):
         directions=["forward"],
         lanes=1,
         retries=1,
-        datasets=[{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
+        datasets=one_sequence(tiny_dataset),
     )
     res = campaign(spec, backend=FlakyBackend(fail=100))
     df = pd.read_csv(res.results_csv)

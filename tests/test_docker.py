@@ -22,7 +22,7 @@ from runner.campaign import run_campaign
 from runner.datasets.views import Direction, Profile, prepare
 from runner.errors import InfraError
 from runner.spec import load_spec
-from tests.conftest import write_spec
+from tests.conftest import one_sequence, write_spec
 
 IMAGE = "slamrun/reference_vo:latest"
 IN_CI = os.environ.get("CI") == "true"
@@ -164,7 +164,7 @@ def test_campaign_with_reference_vo_image(backend, image, tmp_path, vo_dataset):
         backend="docker",
         memory_limit_mb=1500,
         timeout_s=300,
-        datasets=[{"name": "s", "path": str(vo_dataset), "sequences": ["seq_a"]}],
+        datasets=one_sequence(vo_dataset),
     )
     res = run_campaign(load_spec(spec), log=lambda *a: None)
     df = pd.read_csv(res.results_csv)
@@ -185,7 +185,7 @@ def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo
         backend="docker",
         timeout_s=300,
         trials=2,
-        datasets=[{"name": "s", "path": str(vo_dataset), "sequences": ["seq_a"]}],
+        datasets=one_sequence(vo_dataset),
         name="killtest",
     )
     proc = subprocess.Popen(

@@ -13,7 +13,7 @@ import pytest
 from runner.campaign import run_campaign
 from runner.datasets.synth import generate
 from runner.spec import load_spec
-from tests.conftest import write_spec
+from tests.conftest import one_sequence, write_spec
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +28,7 @@ def _run(tmp_path, dataset, methods, **kw):
         tmp_path,
         dataset,
         methods,
-        datasets=[{"name": "s", "path": str(dataset), "sequences": ["seq_a"]}],
+        datasets=one_sequence(dataset),
         timeout_s=300,
         **kw,
     )

@@ -5,12 +5,11 @@ Runs as its own process: `python -m methods.reference_vo --images ... --times ..
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from methods.base import Method
+from methods.base import Method, PythonProcess
 from runner.datasets.views import PreparedView, Profile
 
 
@@ -20,7 +19,7 @@ class ReferenceVOParams(BaseModel):
     seed: int = Field(0, description="Seed of OpenCV's RANSAC (the method is otherwise deterministic).")
 
 
-class ReferenceVO(Method):
+class ReferenceVO(PythonProcess, Method):
     name = "reference_vo"
     image = "slamrun/reference_vo:latest"
     profile = Profile.rectified
@@ -28,12 +27,6 @@ class ReferenceVO(Method):
     Params = ReferenceVOParams
     not_initialized_pattern = r"^NOT INITIALIZED"
     lost_pattern = r"^LOST"
-    python = sys.executable  # the interpreter of a local run
-
-    def for_backend(self, backend: str) -> Method:
-        method = type(self)(self.params)
-        method.python = sys.executable if backend == "local" else "python3"
-        return method
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         return [

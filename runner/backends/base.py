@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,3 +56,21 @@ class Backend(Protocol):
         self, req: ExecRequest, cancel: threading.Event, on_start: Callable[[int, float], None] | None = None
     ) -> ExecResult:
         """Run to completion, timeout or cancel; always leaves no process behind."""
+
+
+def supervise(
+    wait_step: Callable[[float], bool], t0: float, timeout_s: float, cancel: threading.Event
+) -> tuple[bool, bool]:
+    """Wait for a run until it ends, its wall-clock timeout passes or `cancel` is set.
+
+    `wait_step(remaining_s)` waits a short while and returns True once the process has ended.
+    Returns (timed_out, cancelled).
+    """
+    while True:
+        remaining = t0 + timeout_s - time.monotonic()
+        if remaining <= 0:
+            return True, False
+        if cancel.is_set():
+            return False, True
+        if wait_step(remaining):
+            return False, False

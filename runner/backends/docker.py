@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from runner.backends.base import ExecRequest, ExecResult
+from runner.backends.base import ExecRequest, ExecResult, supervise
 from runner.datasets.views import PreparedView
 from runner.errors import InfraError
 from runner.logcap import CappedLog
@@ -103,14 +103,12 @@ class DockerBackend:
             working_dir=str(WORK),
             user=user,
             labels={**req.labels},
-            environ=None,
             volumes={
                 str(req.view.root): {"bind": str(DATA), "mode": "ro"},
                 str(req.workdir): {"bind": str(WORK), "mode": "rw"},
             },
             environment={"HOME": str(WORK), "MPLBACKEND": "Agg", **req.env},
         )
-        kwargs.pop("environ")
         if req.cpus:
             kwargs["cpuset_cpus"] = ",".join(str(c) for c in req.cpus)
         if req.memory_mb:
@@ -149,22 +147,17 @@ class DockerBackend:
         pump.start()
         monitor = ContainerMonitor(container, self.sample_interval_s, t0, self.gpu if req.needs_gpu else None)
         monitor.start()
-        timed_out = cancelled = False
         exit_code = None
-        while True:
-            remaining = t0 + req.timeout_s - time.monotonic()
-            if remaining <= 0:
-                timed_out = True
-                break
-            if cancel.is_set():
-                cancelled = True
-                break
+
+        def step(remaining: float) -> bool:
+            nonlocal exit_code
             try:
-                status = container.wait(timeout=min(0.2, max(remaining, 0.01)))
-                exit_code = status.get("StatusCode")
-                break
+                exit_code = container.wait(timeout=min(0.2, max(remaining, 0.01))).get("StatusCode")
+                return True
             except Exception:  # noqa: BLE001 - the wait timed out (requests' ReadTimeout / ConnectionError)
-                continue
+                return False
+
+        timed_out, cancelled = supervise(step, t0, req.timeout_s, cancel)
         if exit_code is None:
             try:
                 container.kill()

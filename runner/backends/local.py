@@ -10,7 +10,7 @@ import time
 
 import psutil
 
-from runner.backends.base import ExecRequest, ExecResult
+from runner.backends.base import ExecRequest, ExecResult, supervise
 from runner.errors import InfraError
 from runner.logcap import CappedLog
 from runner.monitor import Gpu, ProcessTreeMonitor
@@ -60,19 +60,15 @@ class LocalBackend:
         monitor = ProcessTreeMonitor(proc.pid, self.sample_interval_s, self.gpu).start()
         if on_start:
             on_start(proc.pid, psutil.Process(proc.pid).create_time())
-        timed_out = cancelled = False
-        deadline = t0 + req.timeout_s
-        while proc.poll() is None:
-            if time.monotonic() >= deadline:
-                timed_out = True
-                break
-            if cancel.is_set():
-                cancelled = True
-                break
+
+        def step(remaining: float) -> bool:
             try:
-                proc.wait(timeout=0.05)
+                proc.wait(timeout=min(0.05, remaining))
+                return True
             except subprocess.TimeoutExpired:
-                pass
+                return False
+
+        timed_out, cancelled = supervise(step, t0, req.timeout_s, cancel)
         if timed_out or cancelled:
             kill_tree(proc, monitor.descendants())
         exit_code = proc.wait()
