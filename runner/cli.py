@@ -353,17 +353,19 @@ def cmd_evaluate(args) -> int:
             d = tum_mono(gt, read_tum(f)).to_dict()
         except TrajectoryFormatError as exc:
             d = {"status": "unreadable", "detail": str(exc)}
+        detail = d.get("detail") if d["status"] != "ok" else None
         d = {
             "file": str(f),
             **{
                 k: d.get(k) for k in ("status", "e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse", "n_poses")
             },
+            **({"detail": detail} if detail else {}),
         }
         if args.json:
             print(json.dumps(d))
         else:
             vals = " ".join(f"{k}={v:.6g}" for k, v in d.items() if isinstance(v, float))
-            print(f"{f}: {d['status']} {vals}")
+            print(f"{f}: {d['status']} {vals}" + (f"({detail})" if detail else ""))
     return 0
 
 

@@ -170,3 +170,23 @@ def test_real_backward_file_evaluates_against_its_own_segments(shared_data):
     res = tum_mono(gt, est)
     assert res.status is EvalStatus.ok
     assert res.e_start == pytest.approx(0, abs=1e-9) and res.e_s == pytest.approx(1, abs=1e-9)
+
+
+def test_evaluate_cli_many_files_json(tmp_path, capsys):
+    import json
+
+    from runner.cli import main
+    from runner.trajectory import write_tum
+
+    gt = ground_truth()
+    np.savetxt(tmp_path / "gt.txt", np.column_stack([gt.timestamps, gt.positions, gt.quaternions]))
+    write_tum(tmp_path / "good.txt", estimate_from(gt, np.nan_to_num(gt.positions) * 2))
+    (tmp_path / "bad.txt").write_text("1 2 3\n")
+    write_tum(tmp_path / "empty.txt", estimate_from(gt, gt.positions, np.zeros(len(gt), bool)))
+    files = [str(tmp_path / n) for n in ("good.txt", "bad.txt", "empty.txt")]
+    assert main(["evaluate", "--gt", str(tmp_path / "gt.txt"), "--json", *files]) == 0
+    out = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [o["status"] for o in out] == ["ok", "unreadable", "empty"]
+    assert out[0]["e_s"] == pytest.approx(1.0) and out[0]["e_align"] == pytest.approx(0, abs=1e-9)
+    assert out[1]["e_t"] is None and "bad.txt:1" in out[1]["detail"]
+    assert {"file", "status", "e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse", "n_poses"} <= set(out[0])
