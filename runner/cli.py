@@ -153,13 +153,9 @@ def cmd_campaign(args) -> int:
         + f" ({time.monotonic() - t0:.0f} s)"
     )
     if spec.report and not result.interrupted:
-        try:
-            from runner.analysis.report import write_report
-        except ImportError:
-            write_report = None
-        if write_report:
-            index = write_report(result.results)
-            console.print(f"report: {index}")
+        from runner.analysis.report import write_report
+
+        console.print(f"report: {write_report(result.results)}")
     console.print(f"results: {result.results_csv}")
     if result.interrupted:
         console.print("stopped before the end: run the same command again to resume")
