@@ -338,17 +338,17 @@ def cmd_evaluate(args) -> int:
 
     from runner.errors import TrajectoryFormatError
     from runner.evaluation import tum_mono
-    from runner.trajectory import Trajectory, read_tum
+    from runner.trajectory import Trajectory, read_tum_many
 
     data = np.loadtxt(args.gt, comments="#", ndmin=2) if args.gt.exists() else None
     if data is None or data.shape[1] != 8:
         raise SlamRunError(f"{args.gt}: expected a groundtruthSync file of 'timestamp tx ty tz qx qy qz qw' rows")
     gt = Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
-    for f in args.traj:
-        try:
-            d = tum_mono(gt, read_tum(f)).to_dict()
-        except TrajectoryFormatError as exc:
-            d = {"status": "unreadable", "detail": str(exc)}
+    for f, traj in zip(args.traj, read_tum_many(args.traj), strict=True):
+        if isinstance(traj, TrajectoryFormatError):
+            d = {"status": "unreadable", "detail": str(traj)}
+        else:
+            d = tum_mono(gt, traj).to_dict()
         detail = d.get("detail") if d["status"] != "ok" else None
         d = {
             "file": str(f),

@@ -12,7 +12,7 @@ from enum import StrEnum
 
 import numpy as np
 
-from runner.alignment import align_sim3, rmse, rotation_angle_deg
+from runner.alignment import Sim3, align_sim3, rmse, rotation_angle_deg
 from runner.trajectory import Trajectory
 
 ASSOCIATION_TOLERANCE_S = 1e-3
@@ -69,59 +69,136 @@ def associate(gt_times: np.ndarray, est_times: np.ndarray, tol: float = ASSOCIAT
 
     `gt_times` must be sorted increasingly.
     """
+    nearest, distance = _nearest(gt_times, est_times)
+    return np.where(distance <= tol, nearest, -1)
+
+
+def _nearest(gt_times: np.ndarray, est_times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the nearest ground-truth time for each estimated time, and the distance to it."""
     idx = np.searchsorted(gt_times, est_times)
-    lo = np.clip(idx - 1, 0, len(gt_times) - 1)
-    hi = np.clip(idx, 0, len(gt_times) - 1)
-    nearest = np.where(np.abs(gt_times[lo] - est_times) <= np.abs(gt_times[hi] - est_times), lo, hi)
-    ok = np.abs(gt_times[nearest] - est_times) <= tol
-    return np.where(ok, nearest, -1)
+    hi = np.minimum(idx, len(gt_times) - 1)
+    if np.array_equal(gt_times[hi], est_times):  # the usual case: poses written at the frames' own times
+        return hi, np.zeros(len(est_times))
+    lo = np.maximum(idx - 1, 0)
+    d_hi = np.abs(gt_times[hi] - est_times)
+    d_lo = np.abs(gt_times[lo] - est_times)
+    take_lo = d_lo <= d_hi
+    return np.where(take_lo, lo, hi), np.where(take_lo, d_lo, d_hi)
 
 
 def tum_mono(gt: Trajectory, est: Trajectory) -> TumMonoResult:
-    """Evaluate one estimated trajectory against a TUM-Mono groundtruthSync (NaN rows allowed)."""
+    """Evaluate one estimated trajectory against a TUM-Mono groundtruthSync (NaN rows allowed).
+
+    The three Sim(3) alignments (start, end, both segments) are solved in one batched SVD; the sums
+    over the union are the sums over the two disjoint segments.
+    """
     n = len(est)
     if n == 0:
         return _failed(EvalStatus.empty, 0, "no pose in the estimate")
-    if not (np.isfinite(est.positions).all() and np.isfinite(est.quaternions).all()):
+    p = est.positions
+    if not (np.isfinite(p).all() and np.isfinite(est.quaternions).all()):
         return _failed(EvalStatus.nan, n, "the estimate holds NaN or infinite values")
     gt_t = gt.timestamps
-    match = associate(gt_t, est.timestamps)
-    if np.any(match < 0):
-        bad = est.timestamps[np.flatnonzero(match < 0)[0]]
+    t = est.timestamps
+    match, distance = _nearest(gt_t, t)
+    far = distance > ASSOCIATION_TOLERANCE_S
+    if far.any():
+        bad = t[np.flatnonzero(far)[0]]
         return _failed(
-            EvalStatus.unassociated, n, f"{np.count_nonzero(match < 0)} poses (first t={bad!r}) have no GT within 1 ms"
+            EvalStatus.unassociated, n, f"{np.count_nonzero(far)} poses (first t={bad!r}) have no GT within 1 ms"
         )
     n_gt = len(gt_t)
-    start_lo, start_hi = gt_t[0], gt_t[n_gt // 2 - 1]
-    end_lo, end_hi = gt_t[(n_gt + 1) // 2 - 1], gt_t[-1]
-    gt_pos = gt.positions[match]
-    valid = np.isfinite(gt_pos).all(axis=1)
-    t = est.timestamps
-    in_start = valid & (t >= start_lo) & (t <= start_hi)
-    in_end = valid & (t >= end_lo) & (t <= end_hi)
-    n_s, n_e = int(in_start.sum()), int(in_end.sum())
+    # Segments by ground-truth rows (1-based: 1..floor(n/2) and ceil(n/2)..n); est is sorted, so each
+    # segment's time range is one slice of it, of which the rows with a finite ground truth take part.
+    lo = np.searchsorted(t, (gt_t[0], gt_t[(n_gt + 1) // 2 - 1]), side="left")
+    hi = np.searchsorted(t, (gt_t[n_gt // 2 - 1], gt_t[-1]), side="right")
+    valid = gt.finite_rows
+    seg_est, seg_gt = [], []
+    for k in (0, 1):
+        m = match[lo[k] : hi[k]]
+        keep = valid[m]
+        if keep.all():
+            seg_est.append(p[lo[k] : hi[k]])
+            seg_gt.append(gt.positions[m])
+        else:
+            seg_est.append(p[lo[k] : hi[k]][keep])
+            seg_gt.append(gt.positions[m[keep]])
+    n_s, n_e = len(seg_est[0]), len(seg_est[1])
     if n_s < MIN_SEGMENT_POSES or n_e < MIN_SEGMENT_POSES:
         return _failed(EvalStatus.incomplete, n, f"segment poses: start {n_s}, end {n_e}; need >= {MIN_SEGMENT_POSES}")
 
-    p = est.positions
-    s_start = align_sim3(p[in_start], gt_pos[in_start])
-    s_end = align_sim3(p[in_end], gt_pos[in_end])
-    e_start = rmse(s_start.apply(p[in_start]), gt_pos[in_start])
-    e_end = rmse(s_end.apply(p[in_end]), gt_pos[in_end])
+    (s_start, s_end, _), (e_start, e_end, e_rmse) = _align_segments(seg_est, seg_gt)
+    if lo[1] < hi[0] and valid[match[lo[1] : hi[0]]].any():  # shared poses: a finite middle GT row, even count
+        union = slice(lo[0], hi[1])
+        in_union = valid[match[union]] & ((t[union] <= gt_t[n_gt // 2 - 1]) | (t[union] >= gt_t[(n_gt + 1) // 2 - 1]))
+        both_est, both_gt = p[union][in_union], gt.positions[match[union][in_union]]
+        e_rmse = rmse(align_sim3(both_est, both_gt).apply(both_est), both_gt)
 
-    drift = s_end.matrix() @ np.linalg.inv(s_start.matrix())
-    e_t = float(np.linalg.norm(drift[:3, 3]))
-    e_r = rotation_angle_deg(s_end.rotation @ s_start.rotation.T)
+    # e_align: RMSE between the trajectory aligned by the start and by the end segment, over all poses.
+    a_mat = s_end.scale * s_end.rotation - s_start.scale * s_start.rotation
+    diff = p @ a_mat.T + (s_end.translation - s_start.translation)
+    e_align = math.sqrt(float(np.einsum("ij,ij->", diff, diff)) / n)
+    # Drift S_end * S_start^-1: rotation R_e R_s^T, scale s_e / s_s, translation t_e - (s_e/s_s) R_e R_s^T t_s.
+    rel_rot = s_end.rotation @ s_start.rotation.T
     e_s = s_start.scale / s_end.scale
-    e_align = rmse(s_end.apply(p), s_start.apply(p))
-
-    both = in_start | in_end
-    s_both = align_sim3(p[both], gt_pos[both])
-    e_rmse = rmse(s_both.apply(p[both]), gt_pos[both])
+    drift_t = s_end.translation - (rel_rot @ s_start.translation) / e_s
+    e_t = math.sqrt(float(drift_t @ drift_t))
+    e_r = rotation_angle_deg(rel_rot)
     values = (e_t, e_r, e_s, e_align, e_start, e_end, e_rmse)
     if not all(math.isfinite(v) for v in values):
         return _failed(EvalStatus.nan, n, "degenerate alignment (all poses of a segment at one point)")
     return TumMonoResult(EvalStatus.ok, *values, n_poses=n)
+
+
+def _umeyama(cov: np.ndarray, var_source: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations and scales of stacked Sim(3) problems from their cross-covariances (k, 3, 3) =
+    sum of centred target x centred source^T, and the source's centred sums of squares (k,).
+
+    The same solution as `align_sim3`: R = U D V^T with the reflection fixed, s = trace(D S) / var.
+    """
+    u, sv, vt = np.linalg.svd(cov)
+    d = np.ones(sv.shape)
+    d[np.linalg.det(u) * np.linalg.det(vt) < 0, 2] = -1.0
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = (d * sv).sum(axis=1) / var_source
+    return (u * d[:, None, :]) @ vt, scale
+
+
+def _align_segments(est: list[np.ndarray], gt: list[np.ndarray]) -> tuple[list[Sim3], list[float]]:
+    """`align_sim3` and the RMSE after it for the start segment, the end segment and their union.
+
+    The union's centred sums follow from the segments' by the parallel-axis rule, so the three
+    alignments need one pass over the points and one batched SVD; the RMSEs a second pass.
+    """
+    counts = [len(e) for e in est]
+    n_u = counts[0] + counts[1]
+    mu_e = [e.sum(axis=0) / k for e, k in zip(est, counts, strict=True)]
+    mu_g = [g.sum(axis=0) / k for g, k in zip(gt, counts, strict=True)]
+    centred_e = [e - m for e, m in zip(est, mu_e, strict=True)]
+    centred_g = [g - m for g, m in zip(gt, mu_g, strict=True)]
+    mu_e.append((counts[0] * mu_e[0] + counts[1] * mu_e[1]) / n_u)
+    mu_g.append((counts[0] * mu_g[0] + counts[1] * mu_g[1]) / n_u)
+    shift_e = [mu_e[k] - mu_e[2] for k in (0, 1)]  # segment mean relative to the union's mean
+    shift_g = [mu_g[k] - mu_g[2] for k in (0, 1)]
+    cov = np.empty((3, 3, 3))
+    var = np.empty(3)
+    for k in (0, 1):
+        cov[k] = centred_g[k].T @ centred_e[k]
+        var[k] = np.einsum("ij,ij->", centred_e[k], centred_e[k])
+    cov[2] = (
+        cov[0] + cov[1] + counts[0] * np.outer(shift_g[0], shift_e[0]) + counts[1] * np.outer(shift_g[1], shift_e[1])
+    )
+    var[2] = var[0] + var[1] + counts[0] * (shift_e[0] @ shift_e[0]) + counts[1] * (shift_e[1] @ shift_e[1])
+    rots, scales = _umeyama(cov, var)
+    maps = scales[:, None, None] * rots
+    sims = [Sim3(rots[k], mu_g[k] - maps[k] @ mu_e[k], float(scales[k])) for k in range(3)]
+    sq = [0.0, 0.0, 0.0]
+    for k in (0, 1):
+        r = centred_e[k] @ maps[k].T - centred_g[k]
+        sq[k] = float(np.einsum("ij,ij->", r, r))
+        r = centred_e[k] @ maps[2].T - centred_g[k] + (maps[2] @ shift_e[k] - shift_g[k])
+        sq[2] += float(np.einsum("ij,ij->", r, r))
+    return sims, [math.sqrt(sq[0] / counts[0]), math.sqrt(sq[1] / counts[1]), math.sqrt(sq[2] / n_u)]
 
 
 @dataclass(frozen=True)

@@ -148,3 +148,58 @@ def test_real_file_facts(shared_data):
     cnn = read_tum(DATA / "study_trajectories/cnn-svo_fw__sequence_48_8.txt").report
     assert cnn.max_quat_norm_error > 1000 and cnn.n_quat_far_from_unit > 500
     assert not read_tum(DATA / "dso_tum_mono_examples/sequence_01.txt").report.was_unsorted
+
+
+def test_read_tum_many_matches_read_tum_file_by_file(tmp_path):
+    """Batched reading gives each file exactly what read_tum gives it, errors included, in order."""
+    from runner.errors import TrajectoryFormatError
+    from runner.trajectory import read_tum_many, write_tum
+
+    rng = np.random.default_rng(3)
+
+    def rows(n: int, t0: float) -> str:
+        data = np.column_stack([t0 + np.arange(n) / 30, rng.normal(size=(n, 3)), rng.normal(size=(n, 4))])
+        return "".join(" ".join(f"{v:.9f}" for v in row) + "\n" for row in data)
+
+    files = {
+        "plain_a.txt": rows(50, 1.0),
+        "plain_b.txt": rows(70, 5.0),
+        "header.txt": "# timestamp tx ty tz qx qy qz qw\n" + rows(20, 2.0),
+        "blank_line.txt": rows(5, 3.0) + "\n" + rows(5, 9.0),
+        "comment_mid.txt": rows(5, 3.0) + "# relocalised\n" + rows(5, 9.0),
+        "no_final_newline.txt": rows(6, 4.0).rstrip("\n"),
+        "crlf.txt": rows(8, 6.0).replace("\n", "\r\n"),
+        "seven_columns.txt": rows(4, 1.0) + "1 2 3 4 5 6 7\n",
+        "unsorted.txt": "".join(reversed(rows(9, 7.0).splitlines(keepends=True))),
+        "empty.txt": "",
+        "plain_c.txt": rows(30, 8.0),
+    }
+    paths = []
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+        paths.append(tmp_path / name)
+    write_tum(tmp_path / "written.txt", read_tum(paths[0]))
+    paths += [tmp_path / "written.txt", tmp_path / "missing.txt"]
+
+    def check(subset: list, batch_bytes: int) -> list:
+        got = list(read_tum_many(subset, batch_bytes=batch_bytes))
+        assert len(got) == len(subset)
+        for path, item in zip(subset, got, strict=True):
+            try:
+                want = read_tum(path)
+            except TrajectoryFormatError as exc:
+                assert isinstance(item, TrajectoryFormatError) and str(item) == str(exc), path.name
+                continue
+            assert not isinstance(item, TrajectoryFormatError), (path.name, item)
+            for a, b in ((item.timestamps, want.timestamps), (item.positions, want.positions)):
+                assert np.array_equal(a, b), path.name
+            assert np.array_equal(item.quaternions, want.quaternions), path.name
+            assert item.report == want.report, path.name
+        return got
+
+    got = check(paths, batch_bytes=2000)  # small batches: several flushes
+    assert isinstance(got[-1], TrajectoryFormatError) and "missing.txt" in str(got[-1])
+    assert isinstance(got[paths.index(tmp_path / "seven_columns.txt")], TrajectoryFormatError)
+    plain = [tmp_path / "plain_a.txt", tmp_path / "plain_b.txt", tmp_path / "plain_c.txt"]
+    for odd in paths:  # each odd file between plain ones, in one batch
+        check([plain[0], odd, plain[1], plain[2]], batch_bytes=1 << 22)
