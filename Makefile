@@ -25,7 +25,7 @@ bench: install
 	$(BIN)/python -m bench $(ARGS)
 
 lint: install
-	$(BIN)/ruff check runner methods tests bench
+	$(BIN)/ruff check runner methods tests bench docker
 	$(BIN)/ruff format --check runner methods tests bench
 
 images: install
