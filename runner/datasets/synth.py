@@ -90,85 +90,151 @@ def camera_path(scene: Scene, n: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 class Renderer:
-    """Ray-casts the scene for a fixed set of camera rays (one per pixel)."""
+    """Ray-casts the scene for a fixed set of camera rays (one per pixel).
+
+    The image is cut into blocks of BLOCK x BLOCK pixels, grouped into tiles of about 20,000 pixels (small
+    enough for a tile's arrays to stay in the CPU cache). Each block has the cone bounding its rays; a box
+    is ray-cast only on the rectangle of a tile covered by blocks whose cone meets the box's bounding
+    sphere, which is conservative (no pixel of the box is ever skipped).
+    """
+
+    BLOCK = 16
+    TILE_BLOCKS = 9
 
     def __init__(self, scene: Scene, texture: np.ndarray, rays_cam: np.ndarray, shape: tuple[int, int]):
         self.scene = scene
-        self.texture = texture
-        self.rays = rays_cam.astype(np.float32)
-        self.ray_x, self.ray_y, self.ray_z = (np.ascontiguousarray(self.rays[:, k]) for k in range(3))
-        self.ray_norm = np.linalg.norm(self.rays, axis=1).astype(np.float32)
+        self.texture = np.clip(np.rint(texture), 0, 255).astype(np.uint8)
         self.shape = shape
         rng = np.random.default_rng(99)
         n_faces = 6 * (1 + len(scene.boxes))
-        self.offsets = rng.uniform(0, texture.shape[0], size=(n_faces, 2)).astype(np.float32)
-        self.shade = rng.uniform(0.75, 1.0, size=n_faces).astype(np.float32)
+        if n_faces > 256:
+            raise ValueError(f"{len(scene.boxes)} boxes: at most 41 (face ids are 8-bit)")
+        offsets = rng.uniform(0, texture.shape[0], size=(n_faces, 2)).astype(np.float32)
+        shade = rng.uniform(0.75, 1.0, size=n_faces).astype(np.float32)
+
+        def lut(values: np.ndarray, dtype) -> np.ndarray:  # a 256-entry table for cv2.LUT
+            table = np.zeros(256, dtype)
+            table[: len(values)] = values
+            return table
+
+        self._face_offset_x, self._face_offset_y = lut(offsets[:, 0], np.float32), lut(offsets[:, 1], np.float32)
+        self._face_shade = lut(shade, np.float32)
+        self._face_axis = lut((np.arange(n_faces) % 6) // 2, np.uint8)
+        self.box_corners = np.array(
+            [[[(lo, hi)[(c >> k) & 1][k] for k in range(3)] for c in range(8)] for lo, hi in scene.boxes]
+        ).reshape(-1, 8, 3)
+        rays = rays_cam.reshape(*shape, 3).astype(np.float32)
+        self.rays = [np.ascontiguousarray(rays[..., k]) for k in range(3)]
+        self.block_bounds = _block_bounds(rays, self.BLOCK)
+        side = self.BLOCK * self.TILE_BLOCKS
+        self.tiles = [
+            (slice(r, min(r + side, shape[0])), slice(c, min(c + side, shape[1])))
+            for r in range(0, shape[0], side)
+            for c in range(0, shape[1], side)
+        ]
+        self._tile_rays = [
+            np.ascontiguousarray(np.stack([rk[rows, cols] for rk in self.rays])) for rows, cols in self.tiles
+        ]
+        self._room_lo = scene.room_lo.astype(np.float32).reshape(3, 1, 1)
+        self._room_hi = scene.room_hi.astype(np.float32).reshape(3, 1, 1)
+        self._box_lo = [lo.astype(np.float32).reshape(3, 1, 1) for lo, _ in scene.boxes]
+        self._box_hi = [hi.astype(np.float32).reshape(3, 1, 1) for _, hi in scene.boxes]
+        self._map_x = np.empty(shape, np.float32)
+        self._map_y = np.empty(shape, np.float32)
+        self._face = np.empty(shape, np.uint8)
 
     def render(self, rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
-        """Irradiance-like image in 0..255 (float32) seen from camera-to-world (rot, pos).
+        """Irradiance-like image in 0..255 (float32) seen from camera-to-world (rot, pos)."""
+        rot32, o = rot.astype(np.float32), pos.astype(np.float32).reshape(3, 1, 1)
+        visible = self._visible_blocks(rot, pos)
+        for (rows, cols), rays in zip(self.tiles, self._tile_rays, strict=True):
+            self._render_tile(rows, cols, rays, rot32, o, visible)
+        img = cv2.remap(self.texture, self._map_x, self._map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+        return cv2.multiply(img, cv2.LUT(self._face, self._face_shade), dtype=cv2.CV_32F)
 
-        Structure-of-arrays ray casting (one contiguous float32 array per coordinate); each box is only
-        tested on the rays inside its bounding cone.
+    def _visible_blocks(self, rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
+        """(block rows, block cols, boxes): whether any ray of a block can meet a box.
+
+        For a box wholly in front of the camera (z > 0 at its corners) its image in normalised pinhole
+        coordinates (x/z, y/z) is the convex hull of its corners' images, so the corners' bounding
+        rectangle bounds it exactly and is compared with each block's rectangle. A box reaching behind
+        the camera, or rays that are not all in front, fall back to every block.
         """
-        rot = rot.astype(np.float32)
-        cx, cy, cz = self.ray_x, self.ray_y, self.ray_z
-        w = [rot[k, 0] * cx + rot[k, 1] * cy + rot[k, 2] * cz for k in range(3)]  # world ray components
-        o = pos.astype(np.float32)
+        n_boxes = len(self.scene.boxes)
+        if self.block_bounds is None or not n_boxes:
+            grid = (-(-self.shape[0] // self.BLOCK), -(-self.shape[1] // self.BLOCK))
+            return np.ones((*grid, n_boxes), bool)
+        corners = (self.box_corners - pos) @ rot  # (boxes, 8, 3) camera frame
+        z = corners[..., 2]
+        in_front = (z > 1e-6).all(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x, y = corners[..., 0] / z, corners[..., 1] / z
+        lo_x, hi_x, lo_y, hi_y = x.min(axis=1), x.max(axis=1), y.min(axis=1), y.max(axis=1)
+        b = self.block_bounds  # (by, bx, 4): min x/z, max x/z, min y/z, max y/z of the block's rays
+        overlap = (b[..., 1:2] >= lo_x) & (b[..., 0:1] <= hi_x) & (b[..., 3:4] >= lo_y) & (b[..., 2:3] <= hi_y)
+        return overlap | ~in_front
+
+    def _render_tile(self, rows: slice, cols: slice, rays: np.ndarray, rot: np.ndarray, o: np.ndarray, visible) -> None:
+        """Fill the tile's texture maps and face ids. Arrays are (3, h, w): one plane per world axis."""
+        w = (rot @ rays.reshape(3, -1)).reshape(rays.shape)  # world ray directions
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            inv = [np.float32(1.0) / wk for wk in w]
-            lo, hi = self.scene.room_lo.astype(np.float32), self.scene.room_hi.astype(np.float32)
-            # Room, seen from inside: the nearest wall along each axis.
-            t = np.full(len(cx), np.inf, np.float32)
-            face = np.zeros(len(cx), np.int32)
-            for k in range(3):
-                pos_dir = w[k] > 0
-                tk = np.where(pos_dir, (hi[k] - o[k]) * inv[k], (lo[k] - o[k]) * inv[k])
-                tk[~(tk > 0)] = np.inf  # a ray parallel to a wall never meets it
-                closer = tk < t
-                t[closer] = tk[closer]
-                face[closer] = 2 * k + pos_dir[closer]
-            # Boxes, seen from outside: slab test on the rays of the box's bounding cone.
-            for i, (blo, bhi) in enumerate(self.scene.boxes):
-                centre = ((blo + bhi) / 2).astype(np.float32)
-                radius = float(np.linalg.norm(bhi - blo) / 2)
-                v = centre - o
-                dist = float(np.linalg.norm(v))
-                if dist > radius:
-                    cos_max = np.sqrt(1.0 - (radius / dist) ** 2)
-                    dot = w[0] * v[0] + w[1] * v[1] + w[2] * v[2]
-                    idx = np.flatnonzero(dot > np.float32(cos_max * dist) * self.ray_norm)
-                else:
-                    idx = np.arange(len(cx))
-                if len(idx) == 0:
-                    continue
-                wi = [wk[idx] for wk in w]
-                ii = [ik[idx] for ik in inv]
-                near, far = [], []
-                for k in range(3):
-                    a = (np.float32(blo[k]) - o[k]) * ii[k]
-                    b = (np.float32(bhi[k]) - o[k]) * ii[k]
-                    near.append(np.minimum(a, b))
-                    far.append(np.maximum(a, b))
-                tmin = np.maximum(np.maximum(near[0], near[1]), near[2])
-                tfar = np.minimum(np.minimum(far[0], far[1]), far[2])
-                hit = (tmin > 0) & (tmin <= tfar) & (tmin < t[idx])
-                if not hit.any():
-                    continue
-                tm = tmin[hit]
-                axis = np.where(near[0][hit] == tm, 0, np.where(near[1][hit] == tm, 1, 2))
-                sign = np.where(np.choose(axis, [wi[0][hit], wi[1][hit], wi[2][hit]]) < 0, 1, 0)
-                sel = idx[hit]
-                t[sel] = tm
-                face[sel] = 6 * (i + 1) + axis * 2 + sign
-        axis = (face % 6) // 2
-        px, py, pz = (o[k] + w[k] * t for k in range(3))
-        u = np.where(axis == 0, py, px)
-        v = np.where(axis == 2, py, pz)
+            inv = np.float32(1.0) / w
+            # Room, seen from inside: along each axis the ray leaves through the farther of its two walls
+            # (a ray parallel to a wall gets +inf there); the nearest of the three exits is the wall seen.
+            exits = np.maximum((self._room_lo - o) * inv, (self._room_hi - o) * inv)
+            t = np.minimum(np.minimum(exits[0], exits[1]), exits[2])
+            ahead = (w > 0).view(np.uint8)  # per axis: 1 when the ray runs towards the upper wall
+            face = np.where(exits[0] == t, ahead[0], np.where(exits[1] == t, 2 + ahead[1], 4 + ahead[2]))
+            b = self.BLOCK
+            tile_vis = visible[rows.start // b : -(-rows.stop // b), cols.start // b : -(-cols.stop // b)]
+            for i in np.flatnonzero(tile_vis.any(axis=(0, 1))):
+                # The tile's rectangle covered by blocks that may see box i.
+                by = np.flatnonzero(tile_vis[:, :, i].any(axis=1))
+                bx = np.flatnonzero(tile_vis[:, :, i].any(axis=0))
+                sub = (slice(by[0] * b, (by[-1] + 1) * b), slice(bx[0] * b, (bx[-1] + 1) * b))
+                self._cast_box(int(i), o, w[:, sub[0], sub[1]], inv[:, sub[0], sub[1]], t[sub], face[sub])
+        # Texture coordinates: the hit point's two coordinates in the face's plane, in texels, plus the
+        # face's offset into the texture. Faces are uint8 so that look-ups are cv2.LUT calls.
+        axis = cv2.LUT(face, self._face_axis)
+        u, y, v = o + w * t
+        np.copyto(u, y, where=axis == 0)  # x walls: (y, z); y walls: (x, z); z walls: (x, y)
+        np.copyto(v, y, where=axis == 2)
         tpm = np.float32(self.scene.texels_per_m)
-        map_x = (u * tpm + self.offsets[face, 0]).reshape(self.shape)
-        map_y = (v * tpm + self.offsets[face, 1]).reshape(self.shape)
-        img = cv2.remap(self.texture, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
-        return img * self.shade[face].reshape(self.shape)
+        self._map_x[rows, cols] = u * tpm + cv2.LUT(face, self._face_offset_x)
+        self._map_y[rows, cols] = v * tpm + cv2.LUT(face, self._face_offset_y)
+        self._face[rows, cols] = face
+
+    def _cast_box(self, i: int, o: np.ndarray, w: np.ndarray, inv: np.ndarray, t: np.ndarray, face: np.ndarray) -> None:
+        """Slab test of box i; where it is nearer, write its distance and face into `t` and `face` (views)."""
+        lo_side, hi_side = (self._box_lo[i] - o) * inv, (self._box_hi[i] - o) * inv
+        near = np.minimum(lo_side, hi_side)
+        far = np.maximum(lo_side, hi_side)
+        tmin = np.maximum(np.maximum(near[0], near[1]), near[2])
+        tfar = np.minimum(np.minimum(far[0], far[1]), far[2])
+        hit = (tmin > 0) & (tmin <= tfar) & (tmin < t)
+        if not hit.any():
+            return
+        # The face entered: the axis whose slab is entered last, on the side the ray comes from.
+        back = (w < 0).view(np.uint8)  # per axis: 1 when the ray enters through the upper side
+        entered = np.where(near[0] == tmin, back[0], np.where(near[1] == tmin, 2 + back[1], 4 + back[2]))
+        np.copyto(t, tmin, where=hit)
+        np.copyto(face, entered + 6 * (i + 1), where=hit)
+
+
+def _block_bounds(rays: np.ndarray, block: int) -> np.ndarray | None:
+    """For (h, w, 3) camera rays: each block's rectangle in normalised pinhole coordinates (x/z, y/z), as
+    (block rows, block cols, 4) = min x, max x, min y, max y; None when some ray does not point forward."""
+    if not (rays[..., 2] > 0).all():
+        return None
+    x, y = rays[..., 0] / rays[..., 2], rays[..., 1] / rays[..., 2]
+    h, w = rays.shape[:2]
+    by, bx = -(-h // block), -(-w // block)
+    bounds = np.zeros((by, bx, 4))
+    for r in range(by):
+        for c in range(bx):
+            sub = (slice(r * block, (r + 1) * block), slice(c * block, (c + 1) * block))
+            bounds[r, c] = x[sub].min(), x[sub].max(), y[sub].min(), y[sub].max()
+    return bounds
 
 
 def default_camera(width: int, height: int) -> FovCamera:
