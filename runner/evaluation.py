@@ -89,8 +89,8 @@ def _nearest(gt_times: np.ndarray, est_times: np.ndarray) -> tuple[np.ndarray, n
 def tum_mono(gt: Trajectory, est: Trajectory) -> TumMonoResult:
     """Evaluate one estimated trajectory against a TUM-Mono groundtruthSync (NaN rows allowed).
 
-    The three Sim(3) alignments (start, end, both segments) are solved in one batched SVD; the sums
-    over the union are the sums over the two disjoint segments.
+    The start, end and union alignments come from one pass over each segment and one batched SVD
+    (see `_align_segments`); docs/tum-mono.md has the definitions.
     """
     n = len(est)
     if n == 0:
@@ -134,16 +134,17 @@ def tum_mono(gt: Trajectory, est: Trajectory) -> TumMonoResult:
         both_est, both_gt = p[union][in_union], gt.positions[match[union][in_union]]
         e_rmse = rmse(align_sim3(both_est, both_gt).apply(both_est), both_gt)
 
-    # e_align: RMSE between the trajectory aligned by the start and by the end segment, over all poses.
-    a_mat = s_end.scale * s_end.rotation - s_start.scale * s_start.rotation
-    diff = p @ a_mat.T + (s_end.translation - s_start.translation)
-    e_align = math.sqrt(float(np.einsum("ij,ij->", diff, diff)) / n)
-    # Drift S_end * S_start^-1: rotation R_e R_s^T, scale s_e / s_s, translation t_e - (s_e/s_s) R_e R_s^T t_s.
-    rel_rot = s_end.rotation @ s_start.rotation.T
-    e_s = s_start.scale / s_end.scale
-    drift_t = s_end.translation - (rel_rot @ s_start.translation) / e_s
-    e_t = math.sqrt(float(drift_t @ drift_t))
-    e_r = rotation_angle_deg(rel_rot)
+    with np.errstate(all="ignore"):  # a degenerate segment (scale 0 or NaN) ends as status nan below
+        # e_align: RMSE between the trajectory aligned by the start and by the end segment, over all poses.
+        a_mat = s_end.scale * s_end.rotation - s_start.scale * s_start.rotation
+        diff = p @ a_mat.T + (s_end.translation - s_start.translation)
+        e_align = math.sqrt(float(np.einsum("ij,ij->", diff, diff)) / n)
+        # Drift S_end S_start^-1: rotation R_e R_s^T, scale s_e/s_s, translation t_e - (s_e/s_s) R_e R_s^T t_s.
+        rel_rot = s_end.rotation @ s_start.rotation.T
+        e_s = float(np.float64(s_start.scale) / s_end.scale)
+        drift_t = s_end.translation - (rel_rot @ s_start.translation) / e_s
+        e_t = math.sqrt(float(drift_t @ drift_t))
+        e_r = rotation_angle_deg(rel_rot)
     values = (e_t, e_r, e_s, e_align, e_start, e_end, e_rmse)
     if not all(math.isfinite(v) for v in values):
         return _failed(EvalStatus.nan, n, "degenerate alignment (all poses of a segment at one point)")

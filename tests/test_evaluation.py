@@ -238,3 +238,18 @@ def test_agrees_with_the_plain_definition(seed):
     assert res.status is EvalStatus.ok
     got = (res.e_t, res.e_r, res.e_s, res.e_align, res.e_start, res.e_end, res.e_rmse)
     np.testing.assert_allclose(got, reference_tum_mono(gt, est), rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("which", ["gt_start", "gt_end", "est_start", "est_end"])
+def test_a_segment_at_one_point_is_status_nan_without_warnings(which):
+    import warnings
+
+    gt = ground_truth(200)
+    est_pos = np.nan_to_num(gt.positions).copy()
+    gt_pos = gt.positions.copy()
+    seg = slice(0, 40) if which.endswith("start") else slice(160, 200)  # the whole GT segment
+    (gt_pos if which.startswith("gt") else est_pos)[seg] = [1.0, 2.0, 3.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = tum_mono(Trajectory(gt.timestamps, gt_pos, gt.quaternions), estimate_from(gt, est_pos))
+    assert res.status is EvalStatus.nan and np.isnan(res.e_t)
