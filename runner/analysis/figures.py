@@ -67,8 +67,7 @@ def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align") -> Path:
     )
     values = np.log10(grid.to_numpy(float))
     fig, ax = plt.subplots(figsize=(min(18, 3 + 0.05 * len(cols)), 1 + 0.45 * len(methods)))
-    cmap = plt.get_cmap("viridis").copy()
-    cmap.set_bad("0.85")
+    cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")  # grey where a run has no value
     im = ax.imshow(np.ma.masked_invalid(values), aspect="auto", cmap=cmap, interpolation="nearest")
     ax.set_yticks(range(len(methods)), methods)
     seqs = [c.split("/")[0] for c in cols]
