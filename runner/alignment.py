@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,6 +57,7 @@ def rmse(a: np.ndarray, b: np.ndarray) -> float:
 
 def rotation_angle_deg(rot: np.ndarray) -> float:
     """The angle of a rotation matrix, in degrees (robust near 0 and 180)."""
-    cos = (np.trace(rot) - 1.0) / 2.0
-    sin = np.linalg.norm([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]) / 2.0
-    return float(np.degrees(np.arctan2(sin, cos)))
+    (r11, r12, r13), (r21, r22, r23), (r31, r32, r33) = np.asarray(rot, float).tolist()
+    cos = (r11 + r22 + r33 - 1.0) / 2.0
+    sin = math.hypot(r32 - r23, r13 - r31, r21 - r12) / 2.0
+    return math.degrees(math.atan2(sin, cos))

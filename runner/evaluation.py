@@ -77,7 +77,7 @@ def _nearest(gt_times: np.ndarray, est_times: np.ndarray) -> tuple[np.ndarray, n
     """Index of the nearest ground-truth time for each estimated time, and the distance to it."""
     idx = np.searchsorted(gt_times, est_times)
     hi = np.minimum(idx, len(gt_times) - 1)
-    if np.array_equal(gt_times[hi], est_times):  # the usual case: poses written at the frames' own times
+    if (gt_times[hi] == est_times).all():  # the usual case: poses written at the frames' own times
         return hi, np.zeros(len(est_times))
     lo = np.maximum(idx - 1, 0)
     d_hi = np.abs(gt_times[hi] - est_times)
@@ -127,7 +127,7 @@ def tum_mono(gt: Trajectory, est: Trajectory) -> TumMonoResult:
     if n_s < MIN_SEGMENT_POSES or n_e < MIN_SEGMENT_POSES:
         return _failed(EvalStatus.incomplete, n, f"segment poses: start {n_s}, end {n_e}; need >= {MIN_SEGMENT_POSES}")
 
-    (s_start, s_end, _), (e_start, e_end, e_rmse) = _align_segments(seg_est, seg_gt)
+    (s_start, s_end), (e_start, e_end, e_rmse) = _align_segments(seg_est, seg_gt)
     if lo[1] < hi[0] and valid[match[lo[1] : hi[0]]].any():  # shared poses: a finite middle GT row, even count
         union = slice(lo[0], hi[1])
         in_union = valid[match[union]] & ((t[union] <= gt_t[n_gt // 2 - 1]) | (t[union] >= gt_t[(n_gt + 1) // 2 - 1]))
@@ -158,48 +158,37 @@ def _umeyama(cov: np.ndarray, var_source: np.ndarray) -> tuple[np.ndarray, np.nd
     The same solution as `align_sim3`: R = U D V^T with the reflection fixed, s = trace(D S) / var.
     """
     u, sv, vt = np.linalg.svd(cov)
-    d = np.ones(sv.shape)
-    d[np.linalg.det(u) * np.linalg.det(vt) < 0, 2] = -1.0
+    rots = u @ vt
+    flip = np.linalg.det(rots) < 0
+    if flip.any():  # D = diag(1, 1, -1) where U V^T is a reflection
+        d = np.ones(sv.shape)
+        d[flip, 2] = -1.0
+        rots = (u * d[:, None, :]) @ vt
+        sv = sv * d
     with np.errstate(invalid="ignore", divide="ignore"):
-        scale = (d * sv).sum(axis=1) / var_source
-    return (u * d[:, None, :]) @ vt, scale
+        return rots, sv.sum(axis=1) / var_source
 
 
 def _align_segments(est: list[np.ndarray], gt: list[np.ndarray]) -> tuple[list[Sim3], list[float]]:
-    """`align_sim3` and the RMSE after it for the start segment, the end segment and their union.
-
-    The union's centred sums follow from the segments' by the parallel-axis rule, so the three
-    alignments need one pass over the points and one batched SVD; the RMSEs a second pass.
-    """
-    counts = [len(e) for e in est]
-    n_u = counts[0] + counts[1]
-    mu_e = [e.sum(axis=0) / k for e, k in zip(est, counts, strict=True)]
-    mu_g = [g.sum(axis=0) / k for g, k in zip(gt, counts, strict=True)]
-    centred_e = [e - m for e, m in zip(est, mu_e, strict=True)]
-    centred_g = [g - m for g, m in zip(gt, mu_g, strict=True)]
-    mu_e.append((counts[0] * mu_e[0] + counts[1] * mu_e[1]) / n_u)
-    mu_g.append((counts[0] * mu_g[0] + counts[1] * mu_g[1]) / n_u)
-    shift_e = [mu_e[k] - mu_e[2] for k in (0, 1)]  # segment mean relative to the union's mean
-    shift_g = [mu_g[k] - mu_g[2] for k in (0, 1)]
-    cov = np.empty((3, 3, 3))
-    var = np.empty(3)
-    for k in (0, 1):
-        cov[k] = centred_g[k].T @ centred_e[k]
-        var[k] = np.einsum("ij,ij->", centred_e[k], centred_e[k])
-    cov[2] = (
-        cov[0] + cov[1] + counts[0] * np.outer(shift_g[0], shift_e[0]) + counts[1] * np.outer(shift_g[1], shift_e[1])
-    )
-    var[2] = var[0] + var[1] + counts[0] * (shift_e[0] @ shift_e[0]) + counts[1] * (shift_e[1] @ shift_e[1])
+    """Sim(3) alignments of the start and the end segment, and the RMSEs after alignment of the start
+    segment, the end segment and the two together (each as `align_sim3` would give), with one batched SVD."""
+    sets = [(est[0], gt[0]), (est[1], gt[1]), (np.concatenate(est), np.concatenate(gt))]
+    mu_e, mu_g, centred, cov, var = [], [], [], np.empty((3, 3, 3)), np.empty(3)
+    for k, (e, g) in enumerate(sets):
+        mu_e.append(e.sum(axis=0) / len(e))
+        mu_g.append(g.sum(axis=0) / len(g))
+        ec, gc = e - mu_e[k], g - mu_g[k]
+        centred.append((ec, gc))
+        cov[k] = gc.T @ ec
+        var[k] = np.einsum("ij,ij->", ec, ec)
     rots, scales = _umeyama(cov, var)
     maps = scales[:, None, None] * rots
-    sims = [Sim3(rots[k], mu_g[k] - maps[k] @ mu_e[k], float(scales[k])) for k in range(3)]
-    sq = [0.0, 0.0, 0.0]
-    for k in (0, 1):
-        r = centred_e[k] @ maps[k].T - centred_g[k]
-        sq[k] = float(np.einsum("ij,ij->", r, r))
-        r = centred_e[k] @ maps[2].T - centred_g[k] + (maps[2] @ shift_e[k] - shift_g[k])
-        sq[2] += float(np.einsum("ij,ij->", r, r))
-    return sims, [math.sqrt(sq[0] / counts[0]), math.sqrt(sq[1] / counts[1]), math.sqrt(sq[2] / n_u)]
+    errors = []
+    for k, (ec, gc) in enumerate(centred):
+        r = ec @ maps[k].T - gc
+        errors.append(math.sqrt(float(np.einsum("ij,ij->", r, r)) / len(r)))
+    sims = [Sim3(rots[k], mu_g[k] - maps[k] @ mu_e[k], float(scales[k])) for k in (0, 1)]
+    return sims, errors
 
 
 @dataclass(frozen=True)
