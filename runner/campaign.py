@@ -13,6 +13,7 @@ from runner.backends.base import Backend
 from runner.datasets import synth
 from runner.datasets.tum_mono import open_sequence
 from runner.datasets.views import prepare
+from runner.errors import DiskFullError, is_disk_full
 from runner.ledger import Ledger, ResultsLock
 from runner.plan import PlannedRun, plan
 from runner.results import export
@@ -81,6 +82,26 @@ def load_groundtruths(runs: list[PlannedRun]) -> dict:
 def run_campaign(
     spec: CampaignSpec, backend: Backend | None = None, on_event: Event | None = None, scheduler_hook=None, log=print
 ) -> CampaignResult:
+    """Plan, recover, prepare, run and export. A full disk at any step stops it with DiskFullError, whose
+    message says what to do; finished runs and the ledger are never damaged by it."""
+    try:
+        return _run_campaign(spec, backend, on_event, scheduler_hook, log)
+    except DiskFullError:
+        raise
+    except Exception as exc:
+        if is_disk_full(exc):
+            raise DiskFullError(f"{exc}\n{_full_disk_advice(spec)}") from exc
+        raise
+
+
+def _full_disk_advice(spec: CampaignSpec) -> str:
+    return (
+        f"Stopped: a disk is full (results {spec.results}, view cache {spec.cache}). Finished runs and the ledger "
+        "are intact; free some space, then run `make campaign` (or `slamrun campaign SPEC`) again to resume."
+    )
+
+
+def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) -> CampaignResult:
     results = spec.results
     assert results is not None
     ensure_datasets(spec, log)
@@ -106,7 +127,15 @@ def run_campaign(
             scheduler_hook(sched)
         ledger.set_meta("eta", {"pending": len(pending), "lanes": spec.lanes})
         sched.run(runs)
-        csv = export(ledger, results)
+        try:
+            csv = export(ledger, results)
+        except Exception as exc:
+            if not (sched.fatal or is_disk_full(exc)):
+                raise
+            sched.fatal = sched.fatal or f"{results}: the disk is full ({exc})"
+        if sched.fatal:
+            ledger.close()
+            raise DiskFullError(f"{sched.fatal}\n{_full_disk_advice(spec)}")
         counts = ledger.counts()
         infra = sum(1 for r in ledger.rows(state="failed") if r["failure"] == "infra")
         ledger.close()

@@ -40,5 +40,19 @@ class InfraError(SlamRunError):
     """An infrastructure fault (image missing, daemon gone, disk full): retried, never the method's result."""
 
 
+class DiskFullError(InfraError):
+    """The results or cache disk is full: the campaign stops; finished runs and the ledger stay intact."""
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    """An OSError for a full disk or quota, or SQLite's 'database or disk is full'."""
+    import errno
+    import sqlite3
+
+    if isinstance(exc, OSError):
+        return exc.errno in (errno.ENOSPC, errno.EDQUOT)
+    return isinstance(exc, sqlite3.OperationalError) and "full" in str(exc)
+
+
 class LedgerLockedError(SlamRunError):
     """Another runner holds the results directory."""

@@ -19,7 +19,7 @@ import numpy as np
 from methods.base import Method
 from runner.backends.base import Backend, ExecRequest
 from runner.datasets.views import PreparedView
-from runner.errors import InfraError, MethodFailure, TrajectoryFormatError
+from runner.errors import DiskFullError, InfraError, MethodFailure, TrajectoryFormatError, is_disk_full
 from runner.evaluation import EvalStatus, tum_mono
 from runner.logcap import tail
 from runner.paths import RunPaths
@@ -33,7 +33,19 @@ class RunOutcome:
     values: dict  # ledger columns
 
 
-def execute_run(
+def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Backend, paths: RunPaths, *a, **kw):
+    """Run once and record it (see `_execute_run`). A full disk anywhere in the run is a DiskFullError
+    and any other OSError an InfraError; the run's staging folder is removed either way."""
+    try:
+        return _execute_run(run, method, view, backend, paths, *a, **kw)
+    except OSError as exc:
+        paths.clear_staging()
+        if is_disk_full(exc):
+            raise DiskFullError(f"{run.key.id}: the disk is full ({exc})") from None
+        raise InfraError(f"{run.key.id}: {exc}") from None
+
+
+def _execute_run(
     run: PlannedRun,
     method: Method,
     view: PreparedView,
@@ -85,15 +97,15 @@ def execute_run(
     except InfraError:
         shutil.rmtree(stage, ignore_errors=True)
         raise
-    except OSError as exc:  # disk full and friends are the machine's fault, not the method's
-        shutil.rmtree(stage, ignore_errors=True)
-        raise InfraError(f"{run.key.id}: {exc}") from None
     if result.cancelled:
         shutil.rmtree(stage, ignore_errors=True)
         return RunOutcome("cancelled", {})
 
     log_tail = tail(RunPaths.log(stage))
     failure, message, traj = _classify(result, method, raw, view, log_tail)
+    if failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
+        shutil.rmtree(stage, ignore_errors=True)
+        raise DiskFullError(f"{run.key.id}: the disk is full ({failure}: {message})")
     values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
     if traj is not None and len(traj):
         write_tum(RunPaths.trajectory(stage), traj)
@@ -176,6 +188,11 @@ def _classify(
     if method.failure_from_log(log_tail) == "lost":
         return "lost?", "the method reported it was lost", traj
     return None, None, traj
+
+
+def _out_of_space(folder: Path, log_tail: str) -> bool:
+    """The method's log says so, or its work folder's filesystem has (almost) no space left."""
+    return "No space left on device" in log_tail or shutil.disk_usage(folder).free < 2**20
 
 
 def _try_read(method: Method, raw: Path, view: PreparedView) -> Trajectory | None:

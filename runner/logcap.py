@@ -9,6 +9,9 @@ from typing import BinaryIO
 
 
 class CappedLog:
+    """Head and tail of a process's output. A write error (a full disk) never stops the pump, so the
+    process is never blocked on a full pipe; `close()` raises it afterwards."""
+
     def __init__(self, path: Path, cap_bytes: int):
         self.path = path
         self.head_cap = cap_bytes // 2
@@ -18,16 +21,23 @@ class CappedLog:
         self._tail: deque[bytes] = deque()
         self._tail_size = 0
         self.dropped = 0
+        self.error: OSError | None = None
 
     @property
     def truncated(self) -> bool:
         return self.dropped > 0
 
     def write(self, data: bytes) -> None:
+        if self.error is not None:
+            return  # keep draining the stream; the error is raised by close()
         if self._head_written < self.head_cap:
             take = data[: self.head_cap - self._head_written]
-            self._fh.write(take)
-            self._fh.flush()
+            try:
+                self._fh.write(take)
+                self._fh.flush()
+            except OSError as exc:
+                self.error = exc
+                return
             self._head_written += len(take)
             data = data[len(take) :]
         if not data:
@@ -47,11 +57,20 @@ class CappedLog:
                 self.dropped += excess
 
     def close(self) -> None:
-        if self.dropped:
-            self._fh.write(f"\n[slamrun: log capped, {self.dropped} bytes dropped here]\n".encode())
-        for chunk in self._tail:
-            self._fh.write(chunk)
-        self._fh.close()
+        try:
+            if self.error is None:
+                if self.dropped:
+                    self._fh.write(f"\n[slamrun: log capped, {self.dropped} bytes dropped here]\n".encode())
+                for chunk in self._tail:
+                    self._fh.write(chunk)
+        except OSError as exc:
+            self.error = exc
+        try:
+            self._fh.close()
+        except OSError as exc:
+            self.error = self.error or exc
+        if self.error is not None:
+            raise self.error
 
     def pump(self, stream: BinaryIO) -> threading.Thread:
         """Copy a stream into the log in a background thread until EOF."""

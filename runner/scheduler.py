@@ -18,7 +18,7 @@ from pathlib import Path
 from methods import get as get_method
 from runner.backends.base import Backend
 from runner.datasets.views import PreparedView
-from runner.errors import InfraError
+from runner.errors import DiskFullError, InfraError, is_disk_full
 from runner.execute import execute_run
 from runner.ledger import Ledger
 from runner.paths import RunPaths
@@ -65,6 +65,7 @@ class Scheduler:
         self.cancel = threading.Event()  # stop runs in flight
         self._queue: list[PlannedRun] = []
         self._qlock = threading.Lock()
+        self.fatal: str | None = None  # why the campaign stopped by itself (a full disk)
         self._methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
 
     def run(self, runs: list[PlannedRun]) -> None:
@@ -100,10 +101,29 @@ class Scheduler:
         while (run := self._next()) is not None:
             try:
                 self._run_with_retries(run, lane)
-            except Exception:  # a bug: keep the traceback, record it, let the other runs go on
+            except DiskFullError as exc:  # the run did not finish: it goes back to pending
+                self._stop_for_full_disk(run, lane, str(exc), requeue=True)
+            except Exception as exc:
+                if is_disk_full(exc):  # the ledger could not be written: the next start recovers the row
+                    self._stop_for_full_disk(run, lane, f"{run.key.id}: the disk is full ({exc})", requeue=False)
+                    continue
+                # a bug: keep the traceback, record it, let the other runs go on
                 msg = traceback.format_exc()
                 self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": msg[-2000:]})
                 self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": msg})
+
+    def _stop_for_full_disk(self, run: PlannedRun, lane: Lane, message: str, requeue: bool) -> None:
+        """No new runs. A row the ledger cannot update stays `running`: the next start recovers it (imports
+        the run if its folder is complete, else requeues it)."""
+        self.fatal = self.fatal or message
+        self.request_stop()
+        if requeue:
+            try:
+                self.ledger.reset_to_pending(run.key.id)
+            except Exception as exc:  # noqa: BLE001 - only a full disk is expected here
+                if not is_disk_full(exc):
+                    raise
+        self.on_event("requeued", run, lane, {"message": message})
 
     def _run_with_retries(self, run: PlannedRun, lane: Lane) -> None:
         method = self._methods[run.method_index]
@@ -128,6 +148,8 @@ class Scheduler:
                     campaign=self.spec.name,
                     on_start=lambda pid, t0: self.ledger.set_process(run.key.id, pid, t0),
                 )
+            except DiskFullError:
+                raise
             except InfraError as exc:
                 if retry < self.spec.retries and not self.stop.is_set():
                     delay = self.spec.retry_backoff_s * 2**retry

@@ -308,3 +308,79 @@ def test_status_cli(tmp_path, tiny_dataset):
     out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 0
     assert "crashy: success 0 %" in out and "external: success 100 %" in out
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 48 MB tmpfs for the results directory (needs root; the CI machine is root)."""
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48m", "tmpfs", str(mount)]).returncode:
+        if os.environ.get("CI"):
+            pytest.fail("CI runs as root and must be able to mount a tmpfs for the full-disk test")
+        pytest.skip("mounting a tmpfs needs root")
+    yield mount
+    subprocess.run(["umount", "-l", str(mount)], check=False)
+
+
+def _fill(folder: Path) -> Path:
+    """Write a file until the filesystem is full; returns it (delete it to free the space)."""
+    filler = folder / "filler.bin"
+    chunk = b"\0" * 2**20
+    with open(filler, "wb") as f:
+        try:
+            while True:
+                f.write(chunk)
+                f.flush()
+        except OSError:
+            pass
+    for n in range(4096, 0, -1):  # then the last bytes, so that nothing at all fits
+        try:
+            with open(filler, "ab") as f:
+                f.write(b"\0" * n)
+        except OSError:
+            continue
+    return filler
+
+
+def test_full_disk_stops_keeps_finished_runs_and_resumes(tmp_path, tiny_dataset, small_disk):
+    results = small_disk / "results"
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=0.5)], trials=3, results=str(results))
+    proc = slamrun("campaign", str(spec))
+    assert _wait_for(lambda: sum(r["state"] == "done" for r in ledger_rows(results)) >= 3), proc.communicate(timeout=5)
+    filler = _fill(small_disk)
+    out, err = proc.communicate(timeout=120)  # it stops by itself, it does not hang
+    assert proc.returncode != 0
+    said = out + err
+    assert "disk" in said.lower() and "full" in said.lower(), said[-2000:]
+    assert "make campaign" in said or "again" in said, said[-2000:]
+    rows = ledger_rows(results)
+    assert len(rows) == 12
+    assert not [r for r in rows if r["state"] == "failed"], [r["message"] for r in rows if r["state"] == "failed"]
+    finished = {r["key"]: Path(r["run_dir"]) for r in rows if r["state"] == "done"}
+    assert len(finished) >= 3
+    before = {k: _snapshot(d) for k, d in finished.items()}
+
+    filler.unlink()
+    proc2 = slamrun("campaign", str(spec))
+    out, err = proc2.communicate(timeout=180)
+    assert proc2.returncode == 0, err
+    rows = ledger_rows(results)
+    assert len(rows) == 12 and all(r["state"] == "done" for r in rows), [(r["state"], r["message"]) for r in rows]
+    for key, run_dir in finished.items():
+        assert _snapshot(run_dir) == before[key]
+    assert not list((results / "runs").rglob(".*.tmp-*"))
+
+
+def test_full_disk_while_preparing_views_is_reported_then_resumes(tmp_path, tiny_dataset, small_disk):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], cache=str(small_disk / "cache"))
+    filler = _fill(small_disk)
+    proc = slamrun("campaign", str(spec))
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 1
+    assert "Traceback" not in err and "disk is full" in err and "again to resume" in err, err[-2000:]
+    filler.unlink()
+    proc = slamrun("campaign", str(spec))
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, err
+    assert all(r["state"] == "done" for r in ledger_rows(tmp_path / "results"))

@@ -122,8 +122,8 @@ class DockerBackend:
             raise InfraError(f"image {req.image} is missing; build it: make images") from None
         except docker.errors.APIError as exc:
             raise InfraError(f"docker could not create the container: {exc.explanation or exc}") from None
-        log = CappedLog(req.log_path, req.log_cap_bytes)
         try:
+            log = CappedLog(req.log_path, req.log_cap_bytes)  # may fail on a full disk: still remove the container
             return self._run(container, req, cancel, log, on_start)
         finally:
             try:
