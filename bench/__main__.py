@@ -118,7 +118,7 @@ def bench_scheduler(tmp: Path) -> None:
 
     from runner.campaign import run_campaign
     from runner.datasets.synth import generate
-    from runner.spec import load_spec
+    from runner.spec import DistributedSpec, load_spec
 
     print("scheduler: per-run overhead with a no-op method, against a bare spawn of the same command")
     generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
@@ -149,6 +149,22 @@ def bench_scheduler(tmp: Path) -> None:
     report("campaign, per run (no-op method)", f"{campaign_s / n * 1000:.1f} ms", "-")
     report("bare subprocess.run, per run", f"{bare_s / n * 1000:.1f} ms", "-")
     report("scheduler overhead per run", f"{overhead_ms:.1f} ms", "< 50 ms")
+    try:
+        import distributed  # noqa: F401
+    except ImportError:
+        return
+    dask_spec = loaded.model_copy(
+        update={"results": tmp / "res-dask", "distributed": DistributedSpec(address="local"), "lanes": 1}
+    )
+    t0 = time.perf_counter()
+    run_campaign(dask_spec.model_copy(update={"trials": 1}), log=lambda *a: None)
+    startup_s = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    run_campaign(dask_spec, log=lambda *a: None)
+    dask_s = time.perf_counter() - t0
+    report("Dask engine (1 local worker): cluster start + 1 run", f"{startup_s:.1f} s", "-")
+    report("Dask engine: per run, cluster start spread over the runs", f"{dask_s / n * 1000:.1f} ms", "-")
+    report("  extra per run over the local lanes", f"{(dask_s - campaign_s) / n * 1000:.1f} ms", "-")
 
 
 def bench_plan_status(tmp: Path) -> None:

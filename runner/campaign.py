@@ -52,7 +52,16 @@ def ensure_datasets(spec: CampaignSpec, log=print) -> None:
 
 
 def make_backend(spec: CampaignSpec) -> Backend:
-    if spec.backend == "local":
+    if spec.distributed is not None:
+        from runner.backends.dask import DaskBackend
+
+        return DaskBackend(spec.backend, spec.distributed.address, spec.results, local_workers=spec.lanes)
+    return make_local_backend(spec.backend)
+
+
+def make_local_backend(name: str) -> Backend:
+    """The backend that runs a process on this machine: a local process tree or a Docker container."""
+    if name == "local":
         from runner.backends.local import LocalBackend
 
         return LocalBackend()
@@ -126,7 +135,11 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         if scheduler_hook:
             scheduler_hook(sched)
         ledger.set_meta("eta", {"pending": len(pending), "lanes": spec.lanes})
-        sched.run(runs)
+        try:
+            sched.run(runs)
+        finally:
+            if hasattr(backend, "close"):
+                backend.close()
         try:
             csv = export(ledger, results)
         except Exception as exc:

@@ -150,6 +150,7 @@ def _execute_run(
         "sequence_dir": str(run.sequence_dir),
         "cpus": list(cpus) if cpus else None,
         "backend": backend.name,
+        "engine": getattr(backend, "engine", None),
         "timed_out": result.timed_out,
         "oom": result.oom,
         "log_truncated": result.log_truncated,

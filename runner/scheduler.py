@@ -8,6 +8,7 @@ runs in flight (they go back to pending).
 from __future__ import annotations
 
 import os
+import shutil
 import threading
 import time
 import traceback
@@ -191,5 +192,9 @@ def recover(ledger: Ledger, results: Path) -> dict[str, int]:
                 imported += 1
                 continue
         ledger.reset_to_pending(row["key"])
+        if row["run_dir"]:  # its half-written attempt: removing it also stops a process left on a Dask worker
+            final = Path(row["run_dir"])
+            for stage in final.parent.glob(f".{final.name}.tmp-*"):
+                shutil.rmtree(stage, ignore_errors=True)
         requeued += 1
     return {"imported": imported, "requeued": requeued, "killed": killed, "infra_reset": ledger.reset_infra_failures()}

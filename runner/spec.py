@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 import methods
 from runner.datasets.views import Direction
@@ -61,6 +61,17 @@ class MethodSpec(Strict):
         return self.label or self.name
 
 
+class DistributedSpec(Strict):
+    """Runs executed by a distributed engine's workers instead of this machine's lanes."""
+
+    engine: Literal["dask"] = Field("dask", description="The engine: a Dask distributed cluster.")
+    address: str = Field(
+        description="Scheduler address (tcp://host:8786), or 'local' for `lanes` worker processes on this "
+        "machine (loopback only; for trying it out). Results and view cache must be on a filesystem every "
+        "worker sees at the same path."
+    )
+
+
 class CampaignSpec(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Campaign name.")
     results: Path | None = Field(None, description="Results directory (default: results/<name>).")
@@ -74,6 +85,9 @@ class CampaignSpec(Strict):
     cpus_per_lane: int | None = Field(None, ge=1, description="CPUs per lane (default: all CPUs split evenly).")
     memory_limit_mb: int | None = Field(None, ge=64, description="Memory limit per run (containers).")
     backend: Literal["local", "docker"] = Field("local", description="Where runs execute.")
+    distributed: DistributedSpec | None = Field(
+        None, description="Hand the runs to a distributed engine's workers (each runs them with `backend`)."
+    )
     measurement: Literal["parallel", "exclusive"] = Field(
         "parallel", description="exclusive: one run at a time, nothing else (for timing)."
     )
@@ -93,6 +107,14 @@ class CampaignSpec(Strict):
         if len(set(v)) != len(v):
             raise ValueError("directions repeat")
         return v
+
+    @model_validator(mode="after")
+    def _exclusive_needs_one_machine(self) -> CampaignSpec:
+        if self.distributed is not None and self.measurement == "exclusive":
+            raise ValueError(
+                "measurement 'exclusive' (timing) needs one machine with nothing else running; drop `distributed`"
+            )
+        return self
 
 
 def _loc(loc: tuple) -> str:

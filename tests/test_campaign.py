@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
@@ -384,3 +385,97 @@ def test_full_disk_while_preparing_views_is_reported_then_resumes(tmp_path, tiny
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
     assert all(r["state"] == "done" for r in ledger_rows(tmp_path / "results"))
+
+
+def test_dask_engine_runs_on_workers_and_stops_them(tmp_path, tiny_dataset):
+    """A real Dask cluster (worker processes on 127.0.0.1): the runs execute in the workers, evaluate as
+    usual, and a SIGINT stops runs in flight on the workers without leaving processes behind."""
+    pytest.importorskip("distributed")
+    marker = tmp_path / "starts.txt"
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method(sleep=0.2, extra=["--marker", str(marker)])],
+        distributed={"engine": "dask", "address": "local"},
+    )
+    proc = slamrun("campaign", str(spec))
+    out, err = proc.communicate(timeout=180)
+    assert proc.returncode == 0, err[-3000:]
+    rows = ledger_rows(tmp_path / "results")
+    assert len(rows) == 4 and all(r["state"] == "done" and r["eval_status"] == "ok" for r in rows)
+    records = [json.loads((Path(r["run_dir"]) / "run.json").read_text()) for r in rows]
+    assert {rec["engine"] for rec in records} == {"dask"} and {rec["backend"] for rec in records} == {"local"}
+    starts = [line.split() for line in marker.read_text().splitlines()]
+    assert len(starts) == 4
+
+    (tmp_path / "h").mkdir()
+    hang = write_spec(
+        tmp_path / "h",
+        tiny_dataset,
+        [fake_method("hang")],
+        distributed={"engine": "dask", "address": "local"},
+        stop_grace_s=0.5,
+    )
+    results = tmp_path / "h" / "results"
+    proc = slamrun("campaign", str(hang))
+    assert _wait_for(lambda: sum(r["state"] == "running" for r in ledger_rows(results)) == 2, timeout=120)
+    assert _wait_for(lambda: len(_fake_processes("hang")) == 2, timeout=60)
+    workers = {p.ppid() for p in _fake_processes("hang")}
+    assert proc.pid not in workers  # started by the Dask workers
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err[-3000:]
+    assert _wait_for(lambda: not _fake_processes("hang"), timeout=30)
+    assert all(r["state"] == "pending" for r in ledger_rows(results))
+
+
+def _fake_processes(mode: str) -> list[psutil.Process]:
+    found = []
+    for p in psutil.process_iter(["cmdline"]):
+        cmd = p.info["cmdline"] or []
+        if any(c.endswith("fake_method.py") for c in cmd) and mode in cmd:
+            found.append(p)
+    return found
+
+
+def test_dask_engine_kill_9_then_the_next_start_kills_what_was_left(tmp_path, tiny_dataset):
+    pytest.importorskip("distributed")
+    engine = {"engine": "dask", "address": "local"}
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method("hang")], distributed=engine, timeout_s=4, trials=1)
+    results = tmp_path / "results"
+    proc = slamrun("campaign", str(spec))
+    assert _wait_for(lambda: sum(bool(r["pid"]) for r in ledger_rows(results)) == 2, timeout=120)
+    left = [p for p in _fake_processes("hang") if p.pid in {r["pid"] for r in ledger_rows(results)}]
+    assert len(left) == 2
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    proc2 = slamrun("campaign", str(spec))
+    assert _wait_for(lambda: not any(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in left), 60)
+    out, err = proc2.communicate(timeout=240)
+    assert proc2.returncode == 0, err[-3000:]
+    rows = ledger_rows(results)
+    assert len(rows) == 4 and all(r["failure"] == "timeout" for r in rows)  # the hang method times out
+    assert not _fake_processes("hang")
+
+
+def test_a_run_on_a_worker_stops_when_its_staging_folder_disappears(tmp_path, tiny_dataset):
+    """What a Dask worker does when the campaign machine crashed and its next start removed the attempt."""
+    from runner.backends.base import ExecRequest
+    from runner.backends.dask import _RemoteCancel
+    from runner.datasets.views import Direction, Profile, prepare
+
+    view = prepare(tiny_dataset / "seq_a", Direction.forward, Profile.native, tmp_path / "cache")
+    stage = tmp_path / ".00.tmp-1"
+    (stage / "raw").mkdir(parents=True)
+    req = ExecRequest(
+        argv=[sys.executable, "-c", "import time; time.sleep(60)"],
+        workdir=stage / "raw",
+        view=view,
+        log_path=tmp_path / "log.txt",
+        resources_path=tmp_path / "resources.csv",
+        timeout_s=60,
+    )
+    threading.Timer(1.0, shutil.rmtree, args=(stage,)).start()
+    t0 = time.monotonic()
+    result = LocalBackend().execute(req, _RemoteCancel(stage / "cancel.flag"))
+    assert result.cancelled and time.monotonic() - t0 < 15

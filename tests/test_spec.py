@@ -88,3 +88,25 @@ def test_plan_keys_are_stable_and_grow(tmp_path, tiny_dataset):
     keys_changed = {r.key.id for r in plan(load_spec(changed))}
     assert not keys_changed & set(keys2)  # a result-affecting parameter makes new keys
     assert len({k.split("/")[0] for k in keys_changed}) == 1
+
+
+def test_distributed_spec(tmp_path, tiny_dataset):
+    ok = load_spec(write_spec(tmp_path, tiny_dataset, [fake_method()], distributed={"address": "tcp://head:8786"}))
+    assert ok.distributed.engine == "dask" and ok.distributed.address == "tcp://head:8786"
+    bad = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method()],
+        distributed={"engine": "spark", "address": "x"},
+        measurement="exclusive",
+    )
+    with pytest.raises(SpecError) as err:
+        load_spec(bad)
+    msg = str(err.value)
+    assert "distributed.engine: Input should be 'dask'" in msg
+    timing = write_spec(
+        tmp_path, tiny_dataset, [fake_method()], distributed={"address": "local"}, measurement="exclusive"
+    )
+    with pytest.raises(SpecError) as err:
+        load_spec(timing)
+    assert "'exclusive' (timing) needs one machine" in str(err.value)
