@@ -479,3 +479,14 @@ def test_a_run_on_a_worker_stops_when_its_staging_folder_disappears(tmp_path, ti
     t0 = time.monotonic()
     result = LocalBackend().execute(req, _RemoteCancel(stage / "cancel.flag"))
     assert result.cancelled and time.monotonic() - t0 < 15
+
+
+def test_a_worker_that_cannot_see_the_results_folder_is_named(tmp_path):
+    import socket
+
+    from runner.backends.dask import _check_on_worker
+
+    problem = _check_on_worker("local", None, str(tmp_path / "not-shared" / ".probe"))
+    assert problem and socket.gethostname() in problem and "shared" in problem
+    (tmp_path / ".probe").write_text("x")
+    assert _check_on_worker("local", None, str(tmp_path / ".probe")) is None

@@ -207,3 +207,20 @@ def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo
     assert _no_containers(backend, "killtest")
     df = pd.read_csv(res.results_csv)
     assert (df.attempts >= 1).all() and (df.attempts == 2).any()  # the interrupted runs were redone
+
+
+def test_dask_workers_check_their_own_docker_images(backend, image, tmp_path):
+    """With the Dask engine, each worker checks its own Docker daemon and images before any run."""
+    pytest.importorskip("distributed")
+    import socket
+
+    from runner.backends.dask import DaskBackend
+
+    dask = DaskBackend("docker", "local", tmp_path, local_workers=1)
+    try:
+        dask.check({"reference_vo": image})  # present on this machine's daemon: fine
+        with pytest.raises(InfraError) as err:
+            dask.check({"nonexistent": "slamrun/does-not-exist:latest"})
+        assert socket.gethostname() in str(err.value) and "make images" in str(err.value)
+    finally:
+        dask.close()
