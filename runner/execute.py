@@ -11,6 +11,8 @@ import os
 import shutil
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,19 +35,7 @@ class RunOutcome:
     values: dict  # ledger columns
 
 
-def execute_run(run: PlannedRun, method: Method, view: PreparedView, backend: Backend, paths: RunPaths, *a, **kw):
-    """Run once and record it (see `_execute_run`). A full disk anywhere in the run is a DiskFullError
-    and any other OSError an InfraError; the run's staging folder is removed either way."""
-    try:
-        return _execute_run(run, method, view, backend, paths, *a, **kw)
-    except OSError as exc:
-        paths.clear_staging()
-        if is_disk_full(exc):
-            raise DiskFullError(f"{run.key.id}: the disk is full ({exc})") from None
-        raise InfraError(f"{run.key.id}: {exc}") from None
-
-
-def _execute_run(
+def execute_run(
     run: PlannedRun,
     method: Method,
     view: PreparedView,
@@ -60,111 +50,125 @@ def _execute_run(
     campaign: str = "",
     on_start=None,
 ) -> RunOutcome:
-    paths.clear_staging()
-    stage = paths.staging(attempt)
-    raw = RunPaths.raw(stage)
-    raw.mkdir(parents=True)
-    started = time.time()
-    pview, pwork = backend.process_paths(view, raw)  # as the method's process sees them
-    try:
-        for rel, content in method.configure(pview, pwork).items():
-            target = raw / rel
-            target.parent.mkdir(parents=True, exist_ok=True)
-            if isinstance(content, bytes):
-                target.write_bytes(content)
-            else:
-                target.write_text(content)
-        argv = method.command(pview, pwork)
-    except MethodFailure as exc:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise InfraError(f"{run.key.id}: cannot configure {run.method}: {exc}") from None
-    req = ExecRequest(
-        argv=argv,
-        workdir=raw,
-        view=view,
-        log_path=RunPaths.log(stage),
-        resources_path=RunPaths.resources(stage),
-        timeout_s=run.timeout_s,
-        cpus=cpus,
-        memory_mb=memory_mb,
-        log_cap_bytes=log_cap_bytes,
-        image=method.image,
-        needs_gpu=method.needs_gpu,
-        labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id},
-    )
-    try:
-        result = backend.execute(req, cancel, on_start)
-    except InfraError:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
-    if result.cancelled:
-        shutil.rmtree(stage, ignore_errors=True)
-        return RunOutcome("cancelled", {})
+    """Run once and record it. A full disk anywhere in the run is a DiskFullError and any other OSError
+    an InfraError (the machine's fault, not the method's); the run's staging folder is removed either way."""
+    with _os_errors_as_infra(run, paths):
+        paths.clear_staging()
+        stage = paths.staging(attempt)
+        raw = RunPaths.raw(stage)
+        raw.mkdir(parents=True)
+        started = time.time()
+        pview, pwork = backend.process_paths(view, raw)  # as the method's process sees them
+        try:
+            for rel, content in method.configure(pview, pwork).items():
+                target = raw / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                if isinstance(content, bytes):
+                    target.write_bytes(content)
+                else:
+                    target.write_text(content)
+            argv = method.command(pview, pwork)
+        except MethodFailure as exc:
+            shutil.rmtree(stage, ignore_errors=True)
+            raise InfraError(f"{run.key.id}: cannot configure {run.method}: {exc}") from None
+        req = ExecRequest(
+            argv=argv,
+            workdir=raw,
+            view=view,
+            log_path=RunPaths.log(stage),
+            resources_path=RunPaths.resources(stage),
+            timeout_s=run.timeout_s,
+            cpus=cpus,
+            memory_mb=memory_mb,
+            log_cap_bytes=log_cap_bytes,
+            image=method.image,
+            needs_gpu=method.needs_gpu,
+            labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id},
+        )
+        try:
+            result = backend.execute(req, cancel, on_start)
+        except InfraError:
+            shutil.rmtree(stage, ignore_errors=True)
+            raise
+        if result.cancelled:
+            shutil.rmtree(stage, ignore_errors=True)
+            return RunOutcome("cancelled", {})
 
-    log_tail = tail(RunPaths.log(stage))
-    failure, message, traj = _classify(result, method, raw, view, log_tail)
-    if failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
-        shutil.rmtree(stage, ignore_errors=True)
-        raise DiskFullError(f"{run.key.id}: the disk is full ({failure}: {message})")
-    values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
-    if traj is not None and len(traj):
-        write_tum(RunPaths.trajectory(stage), traj)
-        values["n_poses"] = len(traj)
-        if groundtruth is not None:
-            ev = tum_mono(groundtruth, traj)
-            values["eval_status"] = ev.status.value
-            if ev.status is EvalStatus.ok:
-                values.update(
-                    e_t=ev.e_t,
-                    e_r=ev.e_r,
-                    e_s=ev.e_s,
-                    e_s_sym=ev.e_s_sym,
-                    e_align=ev.e_align,
-                    e_start=ev.e_start,
-                    e_end=ev.e_end,
-                    e_rmse=ev.e_rmse,
-                )
-            elif not values["message"]:
-                values["message"] = f"evaluation {ev.status.value}: {ev.detail}"
-    if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
-        recovered = values.get("eval_status") == EvalStatus.ok.value
-        failure = None if recovered else "lost"
-        values["failure"] = failure
-    state = "failed" if failure else "done"
-    values["ended_at"] = time.time()
-    record = {
-        "key": run.key.id,
-        "label": run.key.label,
-        "method": run.method,
-        "dataset": run.dataset,
-        "sequence": run.key.sequence,
-        "direction": run.key.direction.value,
-        "trial": run.key.trial,
-        "settings": run.key.settings,
-        "params": method.params.model_dump(mode="json"),
-        "state": state,
-        "attempt": attempt,
-        "argv": argv,
-        "started_at": started,
-        "view": str(view.root),
-        "sequence_dir": str(run.sequence_dir),
-        "cpus": list(cpus) if cpus else None,
-        "backend": backend.name,
-        "engine": getattr(backend, "engine", None),
-        "timed_out": result.timed_out,
-        "oom": result.oom,
-        "log_truncated": result.log_truncated,
-        "trajectory_report": traj.report.__dict__ if traj is not None else None,
-        **values,
-    }
-    RunPaths.run_json(stage).write_text(json.dumps(record, indent=1, default=_json_default))
-    final = paths.final
-    if final.exists():  # an earlier attempt renamed but its ledger update was lost: replace it
-        shutil.rmtree(final)
-    final.parent.mkdir(parents=True, exist_ok=True)
-    os.rename(stage, final)
-    values["run_dir"] = str(final)
-    return RunOutcome(state, values)
+        log_tail = tail(RunPaths.log(stage))
+        failure, message, traj = _classify(result, method, raw, view, log_tail)
+        if failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
+            shutil.rmtree(stage, ignore_errors=True)
+            raise DiskFullError(f"{run.key.id}: the disk is full ({failure}: {message})")
+        values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
+        if traj is not None and len(traj):
+            write_tum(RunPaths.trajectory(stage), traj)
+            values["n_poses"] = len(traj)
+            if groundtruth is not None:
+                ev = tum_mono(groundtruth, traj)
+                values["eval_status"] = ev.status.value
+                if ev.status is EvalStatus.ok:
+                    values.update(
+                        e_t=ev.e_t,
+                        e_r=ev.e_r,
+                        e_s=ev.e_s,
+                        e_s_sym=ev.e_s_sym,
+                        e_align=ev.e_align,
+                        e_start=ev.e_start,
+                        e_end=ev.e_end,
+                        e_rmse=ev.e_rmse,
+                    )
+                elif not values["message"]:
+                    values["message"] = f"evaluation {ev.status.value}: {ev.detail}"
+        if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
+            recovered = values.get("eval_status") == EvalStatus.ok.value
+            failure = None if recovered else "lost"
+            values["failure"] = failure
+        state = "failed" if failure else "done"
+        values["ended_at"] = time.time()
+        record = {
+            "key": run.key.id,
+            "label": run.key.label,
+            "method": run.method,
+            "dataset": run.dataset,
+            "sequence": run.key.sequence,
+            "direction": run.key.direction.value,
+            "trial": run.key.trial,
+            "settings": run.key.settings,
+            "params": method.params.model_dump(mode="json"),
+            "state": state,
+            "attempt": attempt,
+            "argv": argv,
+            "started_at": started,
+            "view": str(view.root),
+            "sequence_dir": str(run.sequence_dir),
+            "cpus": list(cpus) if cpus else None,
+            "backend": backend.name,
+            "engine": getattr(backend, "engine", None),
+            "timed_out": result.timed_out,
+            "oom": result.oom,
+            "log_truncated": result.log_truncated,
+            "trajectory_report": traj.report.__dict__ if traj is not None else None,
+            **values,
+        }
+        RunPaths.run_json(stage).write_text(json.dumps(record, indent=1, default=_json_default))
+        final = paths.final
+        if final.exists():  # an earlier attempt renamed but its ledger update was lost: replace it
+            shutil.rmtree(final)
+        final.parent.mkdir(parents=True, exist_ok=True)
+        os.rename(stage, final)
+        values["run_dir"] = str(final)
+        return RunOutcome(state, values)
+
+
+@contextmanager
+def _os_errors_as_infra(run: PlannedRun, paths: RunPaths) -> Iterator[None]:
+    try:
+        yield
+    except OSError as exc:
+        paths.clear_staging()
+        if is_disk_full(exc):
+            raise DiskFullError(f"{run.key.id}: the disk is full ({exc})") from None
+        raise InfraError(f"{run.key.id}: {exc}") from None
 
 
 def _classify(

@@ -319,7 +319,7 @@ def small_disk(tmp_path):
     if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48m", "tmpfs", str(mount)]).returncode:
         if os.environ.get("CI"):
             pytest.fail("CI runs as root and must be able to mount a tmpfs for the full-disk test")
-        pytest.skip("mounting a tmpfs needs root")
+        pytest.skip(reason="mounting a tmpfs for the full-disk test needs root")
     yield mount
     subprocess.run(["umount", "-l", str(mount)], check=False)
 
