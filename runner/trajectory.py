@@ -98,20 +98,24 @@ def read_tum_many(
         # Rows are counted by newlines, so a batch takes files whose rows all end in one; a blank line
         # or a stray character makes the counts or the parse disagree and the batch take the slow path.
         plain = [
-            (d, body) for _, d in pending if isinstance(d, bytes) for body in [_skip_header(d)] if body[-1:] == b"\n"
+            (i, body)
+            for i, (_, data) in enumerate(pending)
+            if isinstance(data, bytes)
+            for body in [_skip_header(data)]
+            if body[-1:] == b"\n"
         ]
         tables = _fast_table(b"".join(body for _, body in plain), 8) if len(plain) > 1 else None
         parts = {}
         rows = np.array([body.count(b"\n") for _, body in plain], int)
         if tables is not None and len(tables) == rows.sum():
             ends = np.cumsum(rows)[:-1]
-            parts = {id(d): part for (d, _), part in zip(plain, np.split(tables, ends), strict=True)}
-        for path, data in pending:
+            parts = {i: part for (i, _), part in zip(plain, np.split(tables, ends), strict=True)}
+        for i, (path, data) in enumerate(pending):
             if isinstance(data, TrajectoryFormatError):
                 yield data
                 continue
             try:
-                table = parts.get(id(data))
+                table = parts.get(i)
                 if table is None:
                     table = _read_table(path, ncols=8, data=data)
                 yield _normalise(table, source=str(path))
