@@ -124,7 +124,6 @@ class Renderer:
             [[[(lo, hi)[(c >> k) & 1][k] for k in range(3)] for c in range(8)] for lo, hi in scene.boxes]
         ).reshape(-1, 8, 3)
         rays = rays_cam.reshape(*shape, 3).astype(np.float32)
-        self.rays = [np.ascontiguousarray(rays[..., k]) for k in range(3)]
         self.block_bounds = _block_bounds(rays, self.BLOCK)
         side = self.BLOCK * self.TILE_BLOCKS
         self.tiles = [
@@ -132,9 +131,7 @@ class Renderer:
             for r in range(0, shape[0], side)
             for c in range(0, shape[1], side)
         ]
-        self._tile_rays = [
-            np.ascontiguousarray(np.stack([rk[rows, cols] for rk in self.rays])) for rows, cols in self.tiles
-        ]
+        self._tile_rays = [np.ascontiguousarray(rays[rows, cols].transpose(2, 0, 1)) for rows, cols in self.tiles]
         self._room_lo = scene.room_lo.astype(np.float32).reshape(3, 1, 1)
         self._room_hi = scene.room_hi.astype(np.float32).reshape(3, 1, 1)
         self._box_lo = [lo.astype(np.float32).reshape(3, 1, 1) for lo, _ in scene.boxes]
