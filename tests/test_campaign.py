@@ -188,16 +188,21 @@ class FlakyBackend(LocalBackend):
         return super().execute(req, cancel, on_start)
 
 
-def test_infra_failures_are_retried(tmp_path, tiny_dataset):
-    spec = write_spec(
+def one_run_spec(tmp_path: Path, dataset: Path, retries: int) -> Path:
+    """A spec with a single run (one sequence, forward, one trial) of the fake method."""
+    return write_spec(
         tmp_path,
-        tiny_dataset,
+        dataset,
         [fake_method()],
         directions=["forward"],
         lanes=1,
-        retries=2,
-        datasets=one_sequence(tiny_dataset),
+        retries=retries,
+        datasets=one_sequence(dataset),
     )
+
+
+def test_infra_failures_are_retried(tmp_path, tiny_dataset):
+    spec = one_run_spec(tmp_path, tiny_dataset, retries=2)
     backend = FlakyBackend(fail=2)
     res = campaign(spec, backend=backend)
     df = pd.read_csv(res.results_csv)
@@ -205,15 +210,7 @@ def test_infra_failures_are_retried(tmp_path, tiny_dataset):
 
 
 def test_infra_give_up_then_retry_next_start(tmp_path, tiny_dataset):
-    spec = write_spec(
-        tmp_path,
-        tiny_dataset,
-        [fake_method()],
-        directions=["forward"],
-        lanes=1,
-        retries=1,
-        datasets=one_sequence(tiny_dataset),
-    )
+    spec = one_run_spec(tmp_path, tiny_dataset, retries=1)
     res = campaign(spec, backend=FlakyBackend(fail=100))
     df = pd.read_csv(res.results_csv)
     assert df.failure.tolist() == ["infra"] and "daemon gone" in df.message[0] and res.infra_failures == 1
