@@ -487,3 +487,11 @@ def test_a_worker_that_cannot_see_the_results_folder_is_named(tmp_path):
     assert problem and socket.gethostname() in problem and "shared" in problem
     (tmp_path / ".probe").write_text("x")
     assert _check_on_worker("local", None, str(tmp_path / ".probe")) is None
+
+
+def test_an_unreachable_dask_scheduler_is_named(tmp_path):
+    pytest.importorskip("distributed")
+    from runner.backends.dask import DaskBackend
+
+    with pytest.raises(InfraError, match=r"cannot reach the Dask scheduler at tcp://127\.0\.0\.1:9"):
+        DaskBackend("local", "tcp://127.0.0.1:9", tmp_path, connect_timeout_s=2)

@@ -63,7 +63,9 @@ class DaskBackend:
 
     engine = "dask"
 
-    def __init__(self, backend_name: str, address: str, results: Path, local_workers: int = 2):
+    def __init__(
+        self, backend_name: str, address: str, results: Path, local_workers: int = 2, connect_timeout_s: float = 30
+    ):
         try:
             from distributed import Client, LocalCluster
         except ImportError:
@@ -82,7 +84,7 @@ class DaskBackend:
                 )
                 self.client = Client(self._cluster)
             else:
-                self.client = Client(address, timeout=30)
+                self.client = Client(address, timeout=connect_timeout_s)
         except OSError as exc:
             raise InfraError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
 
