@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 SPEC   ?= configs/demo.yaml
 ARGS   ?=
 
-.PHONY: install campaign test bench lint images paper clean
+.PHONY: install campaign test bench lint images verify-images paper clean
 
 install: $(VENV)/.installed
 
@@ -28,8 +28,13 @@ lint: install
 	$(BIN)/ruff check runner methods tests bench docker
 	$(BIN)/ruff format --check runner methods tests bench
 
+IMAGE_ARGS = $(foreach m,$(METHOD),--method $(m)) $(if $(SOURCES),--sources $(SOURCES)) $(if $(MARCH),--march $(MARCH))
+
 images: install
-	$(BIN)/slamrun images $(if $(METHOD),--method $(METHOD))
+	$(BIN)/slamrun images $(IMAGE_ARGS) $(ARGS)
+
+verify-images: install
+	$(BIN)/slamrun images --verify $(IMAGE_ARGS) $(ARGS)
 
 paper: install
 	$(BIN)/slamrun campaign configs/paper.yaml

@@ -1,17 +1,77 @@
-"""Build the methods' Docker images by tag, from the registry's list: `make images [METHOD=name]`."""
+"""Build the methods' Docker images: `slamrun images` / `make images [METHOD=name] [SOURCES=DIR]`.
+
+Each image is built from `docker/<name>/Dockerfile` in a build context the runner assembles: the
+project's `docker/` and `methods/` folders, the upstream sources the Dockerfile copies
+(`COPY sources/<source>.tar.gz ...`, checked archives from a folder or GitHub, see runner/sources.py) and
+the inputs a build needs (`inputs/`: a vocabulary, weights, frames to train a vocabulary on). Build
+arguments (MARCH, JOBS, VOCABULARY, any --build-arg) reach the Dockerfile. The image carries labels saying
+what it holds (sources and commits, vocabulary, weights, target). Every build writes its log to
+`<log_dir>/<name>.log` and a record (`<name>.json`: time, size, labels); a failed build names the step and
+shows the end of its output.
+"""
 
 from __future__ import annotations
 
 import json
+import os
+import re
+import shutil
+import tempfile
+import time
 from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import methods
+from runner import sources as src
 from runner.errors import InfraError, SlamRunError
 
 ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_LOG_DIR = ROOT / ".cache" / "images"
 # Base images the method images build FROM, with their folders: built first, when missing.
 BASES = {"slamrun/tensorflow-cc:1.6": ROOT / "docker" / "tensorflow_cc" / "Dockerfile"}
+SOURCE_RE = re.compile(r"\bsources/([A-Za-z0-9_.+-]+)\.tar\.gz\b")
+LABEL = "slamrun"
+ANSI = re.compile(r"\x1b\[[0-9;]*m")  # the builder colours a step's stderr
+
+
+@dataclass(frozen=True)
+class Vocabulary:
+    """A bag-of-words vocabulary a method loads: where its source tree keeps it, and its format."""
+
+    source: str  # the source archive that normally holds it
+    path: str  # its path in that tree
+    format: str  # dbow3 (LDSO) or dbow2-text (ORB-SLAM2 family)
+
+
+VOCABULARIES = {
+    "ldso": Vocabulary("ldso", "vocab/orbvoc.dbow3", "dbow3"),
+}
+
+
+@dataclass
+class BuildOptions:
+    sources_dir: Path | None = None  # take source archives from here (no network)
+    source_url: str | None = None  # GitHub or a mirror of its archive addresses
+    source_cache: Path | None = None  # where downloaded archives are kept
+    march: str = "x86-64-v2"
+    jobs: int = field(default_factory=lambda: os.cpu_count() or 2)
+    vocabulary: dict[str, Path] = field(default_factory=dict)  # method (or "*") -> file
+    weights: dict[str, Path] = field(default_factory=dict)  # weight name -> file
+    train_vocabulary: bool = True  # train a small vocabulary when neither the source nor the user has one
+    build_args: dict[str, str] = field(default_factory=dict)
+    log_dir: Path = DEFAULT_LOG_DIR
+
+
+@dataclass
+class BuildRecord:
+    method: str
+    tag: str
+    seconds: float
+    size_mb: float
+    log: str
+    labels: dict[str, str]
+    finished: float
 
 
 def buildable() -> dict[str, tuple[str, Path]]:
@@ -23,55 +83,225 @@ def buildable() -> dict[str, tuple[str, Path]]:
     return out
 
 
-def build(
-    names: list[str] | None = None, log: Callable[[str], None] = print, build_args: dict | None = None
-) -> list[str]:
-    """Build the images of `names` (default: all); returns the tags built. The build context is the repo."""
-    from runner.backends.docker import DockerBackend
-
-    targets = buildable()
-    unknown = [n for n in names or [] if n not in targets]
-    if unknown:
-        raise SlamRunError(f"no image to build for {', '.join(unknown)} (methods with images: {', '.join(targets)})")
-    backend = DockerBackend()
-    client = backend.client.api
-    built = []
-    for name in names or list(targets):
-        tag, dockerfile = targets[name]
-        if not dockerfile.exists():
-            raise SlamRunError(f"{dockerfile}: missing; every method with an image needs its docker/<name>/ folder")
-        for base in bases_of(dockerfile):
-            if not client.images(name=base):
-                built += _build_one(client, base, BASES[base], log, build_args)
-        built += _build_one(client, tag, dockerfile, log, build_args)
-    return built
-
-
 def bases_of(dockerfile: Path) -> list[str]:
     """The project's own base images a Dockerfile builds FROM."""
     froms = [line.split()[1] for line in dockerfile.read_text().splitlines() if line.upper().startswith("FROM ")]
     return [f for f in froms if f in BASES]
 
 
-def _build_one(client, tag: str, dockerfile: Path, log, build_args) -> list[str]:
-    log(f"building {tag} from {dockerfile.relative_to(ROOT)}")
-    error = None
-    stream = client.build(
-        path=str(ROOT),
-        dockerfile=str(dockerfile.relative_to(ROOT)),
-        tag=tag,
-        rm=True,
-        decode=True,
-        buildargs=build_args or {},
+def sources_of(dockerfile: Path) -> list[str]:
+    """The upstream sources a Dockerfile copies from the build context (`sources/<name>.tar.gz`)."""
+    names = []
+    for line in dockerfile.read_text().splitlines():
+        if line.strip().upper().startswith(("COPY", "ADD")):
+            names += [n for n in SOURCE_RE.findall(line) if n not in names]
+    unknown = [n for n in names if n not in src.SOURCES]
+    if unknown:
+        raise SlamRunError(
+            f"{dockerfile}: copies unknown source(s) {', '.join(unknown)} (known: {', '.join(src.SOURCES)})"
+        )
+    return names
+
+
+def vocabulary_choice(name: str, archives: dict[str, Path], opts: BuildOptions) -> tuple[str, str]:
+    """How the image of `name` gets its vocabulary: (source | given | trained | none, what it is)."""
+    vocab = VOCABULARIES.get(name)
+    if vocab is None:
+        return "none", ""
+    given = opts.vocabulary.get(name) or opts.vocabulary.get("*")
+    if vocab.path in src.archive_members(archives[vocab.source]):
+        if given:
+            return "given", f"{Path(given).name} sha256 {src.file_sha256(Path(given))} (overrides the source's)"
+        return "source", f"{vocab.path} from {src.SOURCES[vocab.source].repo}@{src.SOURCES[vocab.source].commit}"
+    if given:
+        if not Path(given).is_file():
+            raise SlamRunError(f"{given}: vocabulary file not found")
+        return "given", f"{Path(given).name} sha256 {src.file_sha256(Path(given))}"
+    if opts.train_vocabulary:
+        return "trained", f"{vocab.format} trained at build time on synthetic frames (slamrun synth); not the study's"
+    repo = src.SOURCES[vocab.source]
+    raise SlamRunError(
+        f"{name} needs its vocabulary {vocab.path} ({vocab.format}), which the source archive "
+        f"{archives[vocab.source]} lacks: give the file with --vocabulary {name}=FILE (it is in the repository "
+        f"{repo.repo} at {vocab.path}), or let the build train a small one (without --no-train-vocabulary)"
     )
-    for chunk in stream:
-        text = chunk.get("stream", "").rstrip()
-        if text:
-            log(f"  {text}")
-        error = chunk.get("error", error)
+
+
+def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path, log: Callable[[str], None]) -> dict:
+    """Fill `ctx` with what the build of `name` reads; returns the labels describing it."""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    shutil.copytree(ROOT / "docker", ctx / "docker", ignore=ignore)
+    shutil.copytree(ROOT / "methods", ctx / "methods", ignore=ignore)
+    (ctx / "sources").mkdir()
+    inputs = ctx / "inputs"
+    inputs.mkdir()
+    (inputs / "README").write_text("Inputs of an image build (vocabulary, weights, training frames).\n")
+    archives = {}
+    for s in sources_of(dockerfile):
+        path = src.obtain(s, opts.sources_dir, opts.source_cache, opts.source_url)
+        archives[s] = path
+        _link_or_copy(path, ctx / "sources" / f"{s}.tar.gz")
+        log(f"source {s}: {src.SOURCES[s].repo}@{src.SOURCES[s].commit} ({path})")
+    labels = {
+        f"{LABEL}.method": name,
+        f"{LABEL}.march": opts.march,
+        f"{LABEL}.sources": json.dumps({s: f"{src.SOURCES[s].repo}@{src.SOURCES[s].commit}" for s in archives}),
+    }
+    kind, detail = vocabulary_choice(name, archives, opts)
+    if kind != "none":
+        labels[f"{LABEL}.vocabulary"] = f"{kind}: {detail}"
+        log(f"vocabulary of {name}: {kind}: {detail}")
+        if kind == "given":
+            given = opts.vocabulary.get(name) or opts.vocabulary.get("*")
+            (inputs / "vocabulary").mkdir()
+            shutil.copyfile(given, inputs / "vocabulary" / VOCABULARIES[name].path.rsplit("/", 1)[-1])
+        elif kind == "trained":
+            training_frames(inputs / "train-frames")
+    if opts.weights:
+        (inputs / "weights").mkdir()
+        for wname, path in opts.weights.items():
+            if not Path(path).is_file():
+                raise SlamRunError(f"{path}: weights file {wname} not found")
+            shutil.copyfile(path, inputs / "weights" / wname)
+        labels[f"{LABEL}.weights"] = json.dumps(
+            {w: f"{Path(p).name} sha256 {src.file_sha256(Path(p))}" for w, p in opts.weights.items()}
+        )
+    labels[f"{LABEL}.build-args"] = json.dumps({"VOCABULARY": kind, **opts.build_args})
+    return labels
+
+
+def training_frames(dest: Path, sequences: int = 3, frames: int = 120) -> None:
+    """Frames a vocabulary is trained on: synthetic indoor and outdoor scenes (seeds far from the demo's)."""
+    import zipfile
+
+    from runner.datasets.synth import generate
+
+    dest.mkdir(parents=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        for i in range(sequences):
+            seq = generate(Path(tmp) / f"s{i}", frames=frames, seed=9000 + i, scene_kind=("indoor", "outdoor")[i % 2])
+            with zipfile.ZipFile(seq / "images.zip") as zf:
+                for member in zf.namelist()[::2]:
+                    (dest / f"s{i}_{member}").write_bytes(zf.read(member))
+
+
+def _link_or_copy(a: Path, b: Path) -> None:
+    try:
+        os.link(a, b)
+    except OSError:
+        shutil.copyfile(a, b)
+
+
+def build(
+    names: list[str] | None = None,
+    log: Callable[[str], None] = print,
+    opts: BuildOptions | None = None,
+    only_missing: bool = False,
+) -> list[BuildRecord]:
+    """Build the images of `names` (default: all); returns a record per image built."""
+    from runner.backends.docker import DockerBackend
+
+    opts = opts or BuildOptions()
+    targets = buildable()
+    unknown = [n for n in names or [] if n not in targets]
+    if unknown:
+        raise SlamRunError(f"no image to build for {', '.join(unknown)} (methods with images: {', '.join(targets)})")
+    client = DockerBackend().client.api
+    records = []
+    for name in names or list(targets):
+        tag, dockerfile = targets[name]
+        if not dockerfile.exists():
+            raise SlamRunError(f"{dockerfile}: missing; every method with an image needs its docker/<name>/ folder")
+        if only_missing and client.images(name=tag):
+            continue
+        for base in bases_of(dockerfile):
+            if not client.images(name=base):
+                records.append(build_one(client, base.split("/")[-1].split(":")[0], base, BASES[base], opts, log))
+        records.append(build_one(client, name, tag, dockerfile, opts, log))
+    return records
+
+
+def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions, log) -> BuildRecord:
+    """One `docker build` in an assembled context, logged to `<log_dir>/<name>.log`."""
+    opts.log_dir.mkdir(parents=True, exist_ok=True)
+    log_path = opts.log_dir / f"{name}.log"
+    log(f"building {tag} from {dockerfile} (log: {log_path})")
+    t0 = time.monotonic()
+    with tempfile.TemporaryDirectory(prefix=f"slamrun-build-{name}-") as tmp, open(log_path, "w") as logf:
+
+        def note(line: str) -> None:
+            logf.write(line + "\n")
+            logf.flush()
+            log(line)
+
+        ctx = Path(tmp)
+        labels = assemble_context(name, dockerfile, opts, ctx, note)
+        shutil.copyfile(dockerfile, ctx / "Dockerfile.slamrun")
+        args = {
+            "MARCH": opts.march,
+            "JOBS": str(opts.jobs),
+            "VOCABULARY": json.loads(labels[f"{LABEL}.build-args"])["VOCABULARY"],
+            **opts.build_args,
+        }
+        note(f"build arguments: {json.dumps(args)}")
+        run_build(client, ctx, tag, args, labels, logf, log, log_path)
+    seconds = time.monotonic() - t0
+    size_mb = client.inspect_image(tag)["Size"] / 2**20
+    record = BuildRecord(name, tag, round(seconds, 1), round(size_mb, 1), str(log_path), labels, time.time())
+    (opts.log_dir / f"{name}.json").write_text(json.dumps(asdict(record), indent=1))
+    log(f"built {tag} in {seconds / 60:.1f} min, {size_mb:.0f} MB")
+    return record
+
+
+def run_build(client, ctx: Path, tag: str, args: dict, labels: dict, logf, log, log_path) -> None:
+    """Stream a build; an error names the step that failed, the end of its output and the log."""
+    step, tail, error = "(before the first step)", [], None
+    try:
+        stream = client.build(
+            path=str(ctx),
+            dockerfile="Dockerfile.slamrun",
+            tag=tag,
+            rm=True,
+            forcerm=True,
+            decode=True,
+            buildargs=args,
+            labels=labels,
+        )
+        for chunk in stream:
+            text = ANSI.sub("", chunk.get("stream", ""))
+            for line in text.splitlines():
+                logf.write(line + "\n")
+                if line.startswith("Step "):
+                    step, tail = line, []
+                    log(f"  {line}")
+                elif line.strip():
+                    tail = (tail + [line])[-20:]
+            if "error" in chunk:
+                error = chunk["error"].strip()
+                logf.write(f"ERROR: {error}\n")
+    except Exception as exc:  # noqa: BLE001 - the daemon refused the build or went away
+        raise InfraError(f"building {tag}: the Docker daemon failed ({exc}); the build log is {log_path}") from None
+    finally:
+        logf.flush()
     if error:
-        raise InfraError(f"building {tag} failed: {error.strip()}")
-    return [tag]
+        shown = "\n    ".join(tail[-12:])
+        raise InfraError(
+            f"building {tag} failed at {step}\n  {error}\n  last output:\n    {shown}\n  full build log: {log_path}"
+        )
+
+
+def image_labels(client, tag: str) -> dict[str, str]:
+    """The slamrun.* labels of a built image ({} when it has none)."""
+    labels = (client.inspect_image(tag).get("Config") or {}).get("Labels") or {}
+    return {k: v for k, v in labels.items() if k.startswith(f"{LABEL}.")}
+
+
+def last_record(name: str, log_dir: Path = DEFAULT_LOG_DIR) -> BuildRecord | None:
+    path = log_dir / f"{name}.json"
+    try:
+        return BuildRecord(**json.loads(path.read_text()))
+    except (OSError, ValueError, TypeError):
+        return None
 
 
 def describe() -> str:

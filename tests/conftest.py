@@ -80,3 +80,21 @@ def write_spec(tmp_path: Path, dataset: Path, methods: list[dict], **kw) -> Path
     path = tmp_path / "spec.yaml"
     path.write_text(yaml.safe_dump(spec))
     return path
+
+
+UPSTREAM = SHARED / "upstream"
+
+
+def unpack_upstream(name: str, dest: Path) -> Path:
+    """The real upstream tree of source `name` (runner/sources.py), unpacked from shared/upstream into `dest`;
+    skips when shared/upstream is absent."""
+    import tarfile
+
+    from runner.sources import SOURCES
+
+    archive = UPSTREAM / SOURCES[name].filename
+    if not archive.is_file():
+        pytest.skip(f"{archive} not found: the upstream archives live in shared/upstream beside the repo")
+    with tarfile.open(archive, "r:gz") as tar:
+        tar.extractall(dest, filter="data")
+    return dest / SOURCES[name].top

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import unpack_upstream
+
 ROOT = Path(__file__).resolve().parents[1]
 DOCKER = ROOT / "docker"
 
@@ -139,30 +141,41 @@ def test_svo_patches(tmp_path):
     assert "STAGE_PAUSED" in bench and "vo_->start();" in bench
 
 
-def test_dso_and_cnn_patches(tmp_path):
-    dso = {
-        "src/util/IndexThreadReduce.h": "#include <boost/bind.hpp>\n",
-        "src/util/Undistort.cpp": "cv::imread(f, CV_LOAD_IMAGE_GRAYSCALE);\n",
-    }
-    root = tree(tmp_path / "dso", dso)
-    assert run(DOCKER / "dso" / "patches.py", root).returncode == 0
-    assert "boost::placeholders" in (root / "src/util/IndexThreadReduce.h").read_text()
-    assert "cv::IMREAD_GRAYSCALE" in (root / "src/util/Undistort.cpp").read_text()
-    cnn = tree(
-        tmp_path / "cnn",
-        {
-            **dso,
-            "CMakeLists.txt": "set(TF /home/someone/tensorflow)\n"
-            "include_directories(/home/someone/monodepth-cpp/include)\n",
-        },
-    )
-    res = run(DOCKER / "cnn_dso" / "patches.py", cnn, "/opt/tf", "/opt/monodepth-cpp")
+def test_dso_patches_on_the_real_tree(tmp_path):
+    root = unpack_upstream("dso", tmp_path)
+    res = run(DOCKER / "dso" / "patches.py", root)
     assert res.returncode == 0, res.stderr
-    text = (cnn / "CMakeLists.txt").read_text()
-    assert "/home/" not in text and "/opt/tf" in text and "/opt/monodepth-cpp/include" in text
-    svo = tree(tmp_path / "cnnsvo", {"svo_ros/CMakeLists.txt": "set(X /home/a/tensorflow)\nset(Y /home/a/other)\n"})
-    res = run(DOCKER / "cnn_svo" / "patches.py", svo, "/opt/tf", "/opt/md")
-    assert res.returncode != 0 and "personal paths" in res.stderr
+    ird = (root / "src/util/IndexThreadReduce.h").read_text()
+    assert ird.index('#include "boost/thread.hpp"') < ird.index("using namespace boost::placeholders;")
+    rw = (root / "src/IOWrapper/OpenCV/ImageRW_OpenCV.cpp").read_text()
+    assert "CV_LOAD_IMAGE" not in rw and rw.count("cv::IMREAD_") == 4  # imread x3, imdecode x1
+    cmake = (root / "CMakeLists.txt").read_text()
+    assert "-std=c++14" in cmake and "c++0x" not in cmake
+    # patched twice (a second run on the same tree) fails instead of patching twice
+    again = run(DOCKER / "dso" / "patches.py", root)
+    assert again.returncode != 0
+
+
+def test_dsm_patches_on_the_real_tree(tmp_path):
+    root = unpack_upstream("dsm", tmp_path)
+    res = run(DOCKER / "dsm" / "patches.py", root)
+    assert res.returncode == 0, res.stderr
+    fs = (root / "dsm/src/FullSystem/FullSystem.h").read_text()
+    assert fs.index("#include <mutex>") < fs.index("#include <condition_variable>")
+    top = (root / "CMakeLists.txt").read_text()
+    assert "add_subdirectory(Headless)" in top and "QtVisualizer" not in top and "add_subdirectory(Examples)" not in top
+    assert top.rstrip().endswith(
+        "add_subdirectory(dsm)\nadd_subdirectory(Headless)  # slamrun: library + headless driver only (no Qt)"
+    )
+
+
+def test_a_moved_anchor_fails_naming_the_file(tmp_path):
+    root = unpack_upstream("dso", tmp_path)
+    ird = root / "src/util/IndexThreadReduce.h"
+    ird.write_text(ird.read_text().replace('#include "boost/thread.hpp"', "#include <boost/thread.hpp>"))
+    res = run(DOCKER / "dso" / "patches.py", root)
+    assert res.returncode != 0
+    assert "src/util/IndexThreadReduce.h" in res.stderr and "found 0 times" in res.stderr
 
 
 def test_portable_march(tmp_path):

@@ -20,6 +20,7 @@
 #include <opencv2/imgcodecs.hpp>
 
 #include "FullSystem/FullSystem.h"
+#include "Utils/Settings.h"
 
 static std::vector<std::string> listImages(const std::string &dir)
 {
@@ -70,6 +71,11 @@ int main(int argc, char **argv)
         return 1;
     }
     dsm::FullSystem system(w, h, K, argv[2], nullptr);
+    // With singleThreaded = false, frames are mapped asynchronously (and dropped when the queue grows) and
+    // getTrajectory() is not synchronised with the mapping thread; DSM's wait is private, so block after
+    // every frame: when the loop ends (or tracking is lost) the mapping thread is idle.
+    dsm::Settings &settings = dsm::Settings::getInstance();
+    if (!settings.singleThreaded) settings.blockUntilMapped = true;
     for (size_t i = 0; i < images.size(); ++i)
     {
         cv::Mat img = cv::imread(images[i], cv::IMREAD_GRAYSCALE);

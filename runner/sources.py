@@ -1,0 +1,303 @@
+"""The upstream sources the method images build from, each named once by its full commit.
+
+A source is the archive GitHub serves for a commit (`https://github.com/<owner>/<repo>/archive/<commit>.tar.gz`,
+one top folder `<repo>-<commit>/`). It comes from a folder (`slamrun images --sources DIR`) or from the network
+(then kept in a download cache). Each archive is checked before a build: by its SHA-256 where the project
+records one, and, since GitHub's archives are not byte-stable, by a digest of the tree it holds (every path,
+its executable bit and its content), which any faithful archive of the commit reproduces.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import tarfile
+import tempfile
+import urllib.error
+import urllib.request
+from dataclasses import dataclass
+from pathlib import Path
+
+from runner.errors import SlamRunError
+
+GITHUB = "https://github.com"
+
+
+class SourceError(SlamRunError):
+    """A source archive is missing, unreachable or not the pinned tree."""
+
+
+@dataclass(frozen=True)
+class Source:
+    name: str  # the name Dockerfiles use: COPY sources/<name>.tar.gz
+    repo: str  # owner/name on GitHub
+    commit: str  # full 40-hex commit
+    sha256: str  # of the archive as stored in the study's folder of upstream archives
+    tree: str  # tree_digest() of its content
+    absent: tuple[str, ...] = ()  # large files the stored archives lack (vocabularies, GIFs)
+
+    @property
+    def filename(self) -> str:
+        return f"{self.repo.split('/')[1]}-{self.commit}.tar.gz"
+
+    @property
+    def top(self) -> str:
+        return f"{self.repo.split('/')[1]}-{self.commit}"
+
+    def url(self, base: str = GITHUB) -> str:
+        return f"{base.rstrip('/')}/{self.repo}/archive/{self.commit}.tar.gz"
+
+
+# name, owner/repo, commit, sha256 of the stored archive, files the stored archives lack (not in the tree digest)
+_TABLE = (
+    (
+        "orb_slam2",
+        "raulmur/ORB_SLAM2",
+        "f2e6f51cdc8d067655d90a78c06261378e07e8f3",
+        "9470620833e1e57aff2aec40a5e90a8c4f55f4bbb7da218dbe234210db320404",
+        ("Vocabulary/ORBvoc.txt.tar.gz",),
+    ),
+    (
+        "df_orb_slam",
+        "834810269/DF-ORB-SLAM",
+        "462425d61903fa6efc71dde3011cbc3c920c2c16",
+        "d071d346217e4e1612cd441f16cfca8eb32cf39f33e68d3bcf3ebe84a61cc8cb",
+        ("Vocabulary/ORBvoc.txt.tar.gz",),
+    ),
+    (
+        "lsd_slam",
+        "tum-vision/lsd_slam",
+        "d1e6f0e1a027889985d2e6b4c0fe7a90b0c75067",
+        "0ddbb5c3256d7bddb4780d2e99fabe57b5b69a858ffd199ecc0366d87b0e677f",
+        (),
+    ),
+    (
+        "dso",
+        "JakobEngel/dso",
+        "7b0c99f01d238f801c625beaff90240bcb007198",
+        "4c3266cf9733af6af1cfe91df25fd770ee0f706d5556af46a661a3cea8d7dfca",
+        (),
+    ),
+    (
+        "svo",
+        "uzh-rpg/rpg_svo",
+        "d6161063b47f36ce78252ee4c4fedf3f6d8f2898",
+        "bab58b0732a03168a4896865d6b888024c7f5f9c4c24e7db301ef8263a8f082b",
+        (),
+    ),
+    (
+        "ldso",
+        "tum-vision/LDSO",
+        "9b0c48cfd3b3ee95a8dbf1aef2371ed4fca6f81a",
+        "b9b39de4a6aa77e50f234ac931912c5e605fe9a0c9f5d5079a02a5d1ff2fd6df",
+        ("vocab/orbvoc.dbow3",),
+    ),
+    (
+        "dsm",
+        "jzubizarreta/dsm",
+        "36ab5cf20ba4f83fc30c48cb0106c85e98aa9008",
+        "1ec626b114e1a8bf649ddcc2f163195001403f0fca769100861f918784aee4a9",
+        (),
+    ),
+    (
+        "dynaslam",
+        "BertaBescos/DynaSLAM",
+        "8f894a8b9d63c0a608fd871d63c10796491b9312",
+        "c99080b422cf68887f8fb98705b46279a899267a243f96bf35185d8c15ea7f34",
+        ("Vocabulary/ORBvoc.txt.tar.gz",),
+    ),
+    (
+        "cnn_dso",
+        "muskie82/CNN-DSO",
+        "46562f00f5237279ecc5777769107058fd31e264",
+        "157813e5371566db4f872cfeafba2476f532e55e8dd35eab0ead7850b2b23776",
+        (),
+    ),
+    (
+        "cnn_svo",
+        "yan99033/CNN-SVO",
+        "d5591ea88103f8d1b26e5296129bf3b3196a14f1",
+        "72af2e352f67a8fc6a2a5fd010ee1fa38e58456316a73be0e7c70d267191abb7",
+        (),
+    ),
+    (
+        "sophus",
+        "strasdat/Sophus",
+        "a621ff2e56c56c839a6c40418d42c3c254424b5c",
+        "ff3b929eee08bd569a10d797158f13528ac30b866ac4c1d4bfbeed65adad93a6",
+        (),
+    ),
+    (
+        "pangolin-0.6",
+        "stevenlovegrove/Pangolin",
+        "dd801d244db3a8e27b7fe8020cd751404aa818fd",
+        "cc7326281613773bc22949da9cd3e06fe68b45a9c848e1a3740f6613e7fb5f2d",
+        (),
+    ),
+    (
+        "pangolin-0.5",
+        "stevenlovegrove/Pangolin",
+        "7987c9ba6b6c2c46fdcf50baae28bfa4f8352696",
+        "e5ea71753fc4ea5c6b6576f12c375ba42a97a61b8b5e740eb21f3e95bb819050",
+        (),
+    ),
+    (
+        "rpg_vikit",
+        "uzh-rpg/rpg_vikit",
+        "10871da6d84c8324212053c40f468c6ab4862ee0",
+        "be35a2b470d0c7307a931a4c337eb1a710bf42d9ae831f9812db2a8ab321e32f",
+        (),
+    ),
+    (
+        "fast",
+        "uzh-rpg/fast",
+        "1153981a7d0263909e998789a5b5029412c28f5a",
+        "75b156ca526ed01a3c27c9b9cd55402e54956a0fea870e4111a71c8676ab4ce3",
+        (),
+    ),
+    (
+        "monodepth-cpp",
+        "yan99033/monodepth-cpp",
+        "1ea2fc30b96deba4e4d094088e4dc9f4c9c7980a",
+        "f538a24032c14f1d7d25cf55fd27c5134d3e27b8e005952e2dfe03fb818c2696",
+        (),
+    ),
+    (
+        "g2o",
+        "RainerKuemmerle/g2o",
+        "17fce87df9d5b2aa7b4239be1fbac9d40c95d72f",
+        "2e9e07587d3f6f06c92b55932a879eecbcbfa65d6863e7070a3df2fbd28854d1",
+        (),
+    ),
+)
+# tree_digest() of each source (absent files excluded), computed from the stored archives
+_TREES = {
+    "orb_slam2": "de0da80496099c3ec5f1c14e9bc64382734ec86d1c6b20b7784d48612106e7f1",
+    "df_orb_slam": "e627762c09476849fe5a6d674039716e105898936eacc425f82967ef6911bc6e",
+    "lsd_slam": "93409377ef6bf87ade71a7c9a3a01aea41e9f0033ea0273ef4f3177912ca6176",
+    "dso": "1fcce03d08190b7850738b94b589f0a3d648be75b46863c401bbc1e9beb77d3f",
+    "svo": "1c4cd0c48c07e3183b17a2fb4235b78f11961a2541eee52782e21ea89ed68cb3",
+    "ldso": "af56865268cbc17eb46ad3becdc474ee36f2f8925e7427dc336d77bdebefc5c2",
+    "dsm": "b56e326732b091996fc6b7af820f528c881ee1fee98fa8c8f695c0b75591dd1b",
+    "dynaslam": "87c56f71a912a1152dfd44d3fbdef9d7171dccc94d8e90619da01c54281c00a9",
+    "cnn_dso": "4924798bf7fad673fc27b2a9853419c8e7fdaa5c3ff4d1eea97e29c934259640",
+    "cnn_svo": "d5bd421d9725dfe656f289c095bf4a0e754e9ebab5d8a3c1499b61eff1a42c91",
+    "sophus": "eb40e486714c49fd3a311d2bd0598a8e3710f54fff9ffc700035eeb6143903f5",
+    "pangolin-0.6": "47161a2af7b2a7aa31203bc473f8aa73e2e3b0e1dea8e6b6fa41f7557ff56223",
+    "pangolin-0.5": "5f26ab14d5f6c8a1c78bb63c072cf1f730b9ca5c2630cee1411196ac541a7bca",
+    "rpg_vikit": "7c9e09f4433287f1b23863859ed0ba54eefc93d0ef43a2ad300f6801bb7da5de",
+    "fast": "b67642e64abe584df9154e7533a70d51de09716518553ff0e40604b335c9156e",
+    "monodepth-cpp": "ce43a2595cc78ee27ca5032022c3773984ef2aad97ec3acb66a80e28647dfac0",
+    "g2o": "e56f748c20bffba0f6880ad1a7b8c65fbbdd551e57ed190735c04faa7d86a70d",
+}
+SOURCES: dict[str, Source] = {
+    name: Source(name, repo, commit, sha, _TREES[name], absent) for name, repo, commit, sha, absent in _TABLE
+}
+
+
+def tree_digest(archive: Path, exclude: tuple[str, ...] = ()) -> str:
+    """SHA-256 over the archive's tree (paths below the top folder, executable bits, contents, link targets),
+    leaving out the paths in `exclude`.
+
+    Independent of compression, member order and timestamps, so any faithful archive of a commit gives it.
+    """
+    entries = []
+    try:
+        with tarfile.open(archive, "r:gz") as tar:
+            for m in tar:
+                parts = m.name.split("/", 1)
+                if len(parts) < 2 or not parts[1] or m.isdir():
+                    continue
+                rel = parts[1].rstrip("/")
+                if rel in exclude:
+                    continue
+                if m.isfile():
+                    data = tar.extractfile(m).read()
+                    kind = "x" if m.mode & 0o111 else "f"
+                    entries.append(f"{kind} {rel} {hashlib.sha256(data).hexdigest()}")
+                elif m.issym() or m.islnk():
+                    entries.append(f"l {rel} {m.linkname}")
+    except (tarfile.TarError, OSError, EOFError) as exc:
+        raise SourceError(f"{archive}: not a readable .tar.gz archive ({exc})") from None
+    return hashlib.sha256("\n".join(sorted(entries)).encode()).hexdigest()
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def check_archive(source: Source, path: Path) -> str:
+    """Raise SourceError unless `path` holds the pinned tree; returns how it was checked."""
+    actual = file_sha256(path)
+    if source.sha256 and actual == source.sha256:
+        return "sha256"
+    tree = tree_digest(path, source.absent)
+    if source.tree and tree == source.tree:
+        return "tree"
+    expected = f"sha256 {source.sha256}" + (f" or tree digest {source.tree}" if source.tree else "")
+    raise SourceError(
+        f"{path}: not the archive of {source.repo} @ {source.commit} (sha256 {actual}, tree digest {tree}; "
+        f"expected {expected}); replace it with {source.url()}"
+    )
+
+
+def archive_members(path: Path) -> set[str]:
+    """Paths below the archive's top folder (to see whether a vocabulary is in the source)."""
+    with tarfile.open(path, "r:gz") as tar:
+        return {m.name.split("/", 1)[1] for m in tar if "/" in m.name and m.isfile()}
+
+
+def default_cache() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "slamrun" / "sources"
+
+
+def obtain(
+    name: str,
+    sources_dir: Path | None = None,
+    cache: Path | None = None,
+    base_url: str | None = None,
+    timeout_s: float = 60.0,
+) -> Path:
+    """The checked archive of source `name`: from `sources_dir` when given, else the download cache, else the
+    network (`base_url`, default GitHub, or $SLAMRUN_SOURCES_URL)."""
+    try:
+        source = SOURCES[name]
+    except KeyError:
+        raise SourceError(f"unknown source {name!r} (known: {', '.join(sorted(SOURCES))})") from None
+    if sources_dir is not None:
+        path = Path(sources_dir) / source.filename
+        if not path.is_file():
+            raise SourceError(
+                f"{path}: missing; {source.repo} @ {source.commit} is needed: fetch {source.url()} into {sources_dir} "
+                f"(or build without --sources to download it)"
+            )
+        check_archive(source, path)
+        return path
+    cache = Path(cache or default_cache())
+    path = cache / source.filename
+    if path.is_file():
+        check_archive(source, path)
+        return path
+    url = source.url(base_url or os.environ.get("SLAMRUN_SOURCES_URL") or GITHUB)
+    cache.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=cache, prefix=source.filename, suffix=".part")
+    try:
+        with os.fdopen(fd, "wb") as out, urllib.request.urlopen(url, timeout=timeout_s) as resp:
+            shutil.copyfileobj(resp, out)
+        check_archive(source, Path(tmp))
+        os.replace(tmp, path)
+    except (urllib.error.URLError, OSError) as exc:
+        raise SourceError(
+            f"cannot download {url} ({getattr(exc, 'reason', exc)}): {source.repo} @ {source.commit} is needed; "
+            f"put {source.filename} into a folder and pass it with --sources DIR (make images SOURCES=DIR)"
+        ) from None
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path

@@ -1,0 +1,200 @@
+"""Verify method images the way a user would: `slamrun images --verify` / `make verify-images`.
+
+Per method: build the image when it is missing, run a short campaign with `backend: docker` on synthetic
+sequences (two scenes, forward and backward, two trials), and report one row: built, build time, image
+size, runs ok, e_align relative to the scene's extent (median and worst), fps and RAM. A method passes
+when every run ended done and evaluated and the median e_align stays under its bound.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from runner.errors import SlamRunError
+from runner.images import ROOT, BuildOptions, build, buildable, last_record
+
+DEFAULT_RESULTS = ROOT / ".cache" / "verify"
+SEQUENCES = ("room_a", "room_b")
+FRAMES = 300
+TRIALS = 2
+# e_align / scene extent a verified image must stay under (median over its runs)
+BOUNDS = {"dso": 0.02}
+DEFAULT_BOUND = 0.05
+
+
+@dataclass
+class VerifyRow:
+    method: str
+    built: bool
+    build_min: float | None = None
+    size_mb: float | None = None
+    runs_ok: int = 0
+    runs: int = 0
+    e_align_rel_median: float | None = None
+    e_align_rel_max: float | None = None
+    bound: float = DEFAULT_BOUND
+    fps: float | None = None
+    ram_mb: float | None = None
+    vocabulary: str | None = None
+    note: str = ""
+
+    @property
+    def passed(self) -> bool:
+        return (
+            self.built
+            and self.runs > 0
+            and self.runs_ok == self.runs
+            and self.e_align_rel_median is not None
+            and self.e_align_rel_median < self.bound
+        )
+
+
+def scene_extent(sequence: Path) -> float:
+    """Diagonal of the bounding box of the camera path (the full ground truth of a synthetic sequence, else
+    the rows of groundtruthSync.txt that carry numbers)."""
+    full = sequence / "groundtruth_full.txt"
+    gt = np.loadtxt(full if full.exists() else sequence / "groundtruthSync.txt")
+    pos = gt[:, 1:4][np.isfinite(gt[:, 1:4]).all(axis=1)]
+    if len(pos) < 2:
+        raise SlamRunError(f"{sequence}: no ground-truth positions to measure the scene by")
+    return float(np.linalg.norm(pos.max(axis=0) - pos.min(axis=0)))
+
+
+def verify(
+    names: list[str] | None,
+    opts: BuildOptions,
+    results: Path | None = None,
+    log: Callable[[str], None] = print,
+    trials: int = TRIALS,
+    frames: int = FRAMES,
+) -> list[VerifyRow]:
+    from runner.backends.docker import DockerBackend
+
+    results = Path(results or DEFAULT_RESULTS).resolve()
+    names = names or [n for n in buildable() if n != "reference_vo"]
+    client = DockerBackend().client.api
+    rows = []
+    for name in names:
+        row = VerifyRow(name, built=False, bound=BOUNDS.get(name, DEFAULT_BOUND))
+        rows.append(row)
+        try:
+            build([name], log=log, opts=opts, only_missing=True)
+        except SlamRunError as exc:
+            row.note = f"build failed: {str(exc).splitlines()[0]}"
+            log(f"verify {name}: {row.note}")
+            continue
+        tag = buildable()[name][0]
+        info = client.inspect_image(tag)
+        row.built = True
+        row.size_mb = round(info["Size"] / 2**20, 1)
+        labels = (info.get("Config") or {}).get("Labels") or {}
+        row.vocabulary = labels.get("slamrun.vocabulary")
+        record = last_record(name, opts.log_dir)
+        if record is not None and record.tag == tag:
+            row.build_min = round(record.seconds / 60, 1)
+        _campaign(name, row, results, trials, frames, log)
+    (results / "verify.json").write_text(json.dumps([asdict(r) | {"passed": r.passed} for r in rows], indent=1))
+    (results / "verify.md").write_text(markdown_table(rows))
+    return rows
+
+
+def _campaign(name: str, row: VerifyRow, results: Path, trials: int, frames: int, log) -> None:
+    from runner.campaign import run_campaign
+    from runner.ledger import Ledger
+    from runner.spec import load_spec
+
+    data = results / "data"
+    spec = {
+        "name": f"verify-{name}",
+        "results": str(results / name),
+        "cache": str(results / "views"),
+        "datasets": [
+            {
+                "name": "synth",
+                "path": str(data),
+                "sequences": list(SEQUENCES),
+                "synthetic": {"frames": frames, "seed": 0, "size": "640x480", "scene": "indoor"},
+            }
+        ],
+        "methods": [{"name": name}],
+        "directions": ["forward", "backward"],
+        "trials": trials,
+        "lanes": 1,
+        "timeout_s": 900,
+        "backend": "docker",
+        "report": False,
+    }
+    results.mkdir(parents=True, exist_ok=True)
+    path = results / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(spec, sort_keys=False))
+    run_campaign(load_spec(path), log=log)
+    extents = {seq: scene_extent(data / seq) for seq in SEQUENCES}
+    ledger = Ledger(results / name / "ledger.sqlite")
+    try:
+        done = [r for r in ledger.rows() if r["active"]]
+    finally:
+        ledger.close()
+    ok = [r for r in done if r["state"] == "done" and r["e_align"] is not None]
+    row.runs, row.runs_ok = len(done), len(ok)
+    rel = [r["e_align"] / extents[r["sequence"]] for r in ok]
+    if rel:
+        row.e_align_rel_median = statistics.median(rel)
+        row.e_align_rel_max = max(rel)
+    fps = [r["fps"] for r in ok if r["fps"]]
+    ram = [r["ram_peak_mb"] for r in ok if r["ram_peak_mb"]]
+    row.fps = round(statistics.median(fps), 1) if fps else None
+    row.ram_mb = round(statistics.median(ram)) if ram else None
+    failed = [f"{r['sequence']}/{r['direction']}/{r['trial']}: {r['failure']}" for r in done if r not in ok]
+    if failed:
+        row.note = "not ok: " + "; ".join(failed[:4]) + (f" (+{len(failed) - 4})" if len(failed) > 4 else "")
+
+
+def _fmt(v, spec: str = "", none: str = "-") -> str:
+    return none if v is None else format(v, spec)
+
+
+def markdown_table(rows: list[VerifyRow]) -> str:
+    head = (
+        "| method | built | build (min) | image (MB) | runs ok | e_align / extent, median (max) | bound | fps | "
+        "RAM (MB) | verified |\n|---|---|---|---|---|---|---|---|---|---|\n"
+    )
+    lines = []
+    for r in rows:
+        e = "-" if r.e_align_rel_median is None else f"{r.e_align_rel_median:.4f} ({r.e_align_rel_max:.4f})"
+        verdict = "yes" if r.passed else f"no: {r.note}" if r.note else "no"
+        lines.append(
+            f"| {r.method} | {'yes' if r.built else 'no'} | {_fmt(r.build_min)} | {_fmt(r.size_mb, '.0f')} | "
+            f"{r.runs_ok}/{r.runs} | {e} | {r.bound:.2f} | {_fmt(r.fps)} | {_fmt(r.ram_mb)} | {verdict} |"
+        )
+    return head + "\n".join(lines) + "\n"
+
+
+def print_table(rows: list[VerifyRow], console) -> None:
+    from rich.table import Table
+
+    table = Table(title="method images, verified on synthetic sequences (backend: docker)")
+    for col in ("method", "built", "build min", "MB", "runs ok", "e_align/extent med (max)", "bound", "fps", "RAM MB"):
+        table.add_column(col)
+    table.add_column("verified")
+    for r in rows:
+        e = "-" if r.e_align_rel_median is None else f"{r.e_align_rel_median:.4f} ({r.e_align_rel_max:.4f})"
+        table.add_row(
+            r.method,
+            "yes" if r.built else "no",
+            _fmt(r.build_min),
+            _fmt(r.size_mb, ".0f"),
+            f"{r.runs_ok}/{r.runs}",
+            e,
+            f"{r.bound:.2f}",
+            _fmt(r.fps),
+            _fmt(r.ram_mb),
+            "yes" if r.passed else f"no {r.note}".strip(),
+        )
+    console.print(table)

@@ -1,0 +1,128 @@
+"""The image build path against a real Docker engine: build arguments, sources and labels reach the build,
+a failing step is named with the end of its output, and every build keeps its log."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from runner.errors import InfraError, SlamRunError
+from runner.images import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
+from runner.sources import SOURCES
+from tests.conftest import UPSTREAM
+from tests.test_docker import _unavailable
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def client():
+    from runner.backends.docker import DockerBackend
+
+    try:
+        api = DockerBackend().client.api
+    except InfraError as exc:
+        _unavailable(f"no Docker engine: {exc}")
+    if not api.images(name="debian:bookworm-slim"):
+        _unavailable("no debian:bookworm-slim base image (scripts/make-offline-base.sh builds it offline)")
+    if not UPSTREAM.is_dir():
+        pytest.skip(f"{UPSTREAM} not found")
+    return api
+
+
+@pytest.fixture
+def opts(tmp_path) -> BuildOptions:
+    return BuildOptions(sources_dir=UPSTREAM, log_dir=tmp_path / "logs", march="x86-64-v3", jobs=3)
+
+
+def test_dockerfiles_name_their_sources():
+    assert sources_of(ROOT / "docker" / "dso" / "Dockerfile") == ["pangolin-0.6", "dso"]
+    for dockerfile in (ROOT / "docker").glob("*/Dockerfile"):
+        assert all(s in SOURCES for s in sources_of(dockerfile)), dockerfile  # raises on an unknown name
+
+
+def test_build_arguments_sources_and_labels_reach_the_image(client, opts, tmp_path):
+    dockerfile = tmp_path / "Dockerfile"
+    dockerfile.write_text(
+        "FROM debian:bookworm-slim\nARG MARCH\nARG JOBS\nARG VOCABULARY\nARG EXTRA=unset\n"
+        "COPY sources/sophus.tar.gz /tmp/\n"
+        'RUN echo "$MARCH $JOBS $VOCABULARY $EXTRA" > /args && tar -tzf /tmp/sophus.tar.gz | head -1 > /top\n'
+    )
+    opts.build_args = {"EXTRA": "given"}
+    tag = "slamrun-test/args:latest"
+    try:
+        record = build_one(client, "args-test", tag, dockerfile, opts, log=lambda m: None)
+        out = _run(client, tag, "cat /args /top")
+        assert out.split("\n")[0] == "x86-64-v3 3 none given"
+        assert out.split("\n")[1].split("/")[0] == SOURCES["sophus"].top
+        labels = image_labels(client, tag)
+        assert json.loads(labels["slamrun.sources"]) == {"sophus": f"strasdat/Sophus@{SOURCES['sophus'].commit}"}
+        assert labels["slamrun.march"] == "x86-64-v3"
+        assert Path(record.log).read_text().count("Step ") >= 7
+        saved = json.loads((opts.log_dir / "args-test.json").read_text())
+        assert saved["tag"] == tag and saved["seconds"] > 0 and saved["size_mb"] > 0
+    finally:
+        client.remove_image(tag, force=True)
+
+
+def test_a_patch_whose_anchor_is_missing_fails_the_build_naming_step_and_file(client, opts, tmp_path):
+    """The real DSO archive and patch script, with the anchor's line changed as an upstream edit would."""
+    if not client.images(name="slamrun/reference_vo:latest"):
+        build(["reference_vo"], log=lambda m: None)  # a small image with python3
+    dockerfile = tmp_path / "Dockerfile"
+    dockerfile.write_text(
+        "FROM slamrun/reference_vo:latest\nUSER root\n"
+        "COPY docker/common /b/common\nCOPY docker/dso /b/dso\nCOPY sources/dso.tar.gz /b/\n"
+        "RUN /b/common/unpack.sh /b/dso.tar.gz /opt/dso "
+        "&& sed -i 's|\"boost/thread.hpp\"|<boost/thread.hpp>|' /opt/dso/src/util/IndexThreadReduce.h "
+        "&& python3 /b/dso/patches.py /opt/dso\n"
+    )
+    with pytest.raises(InfraError) as err:
+        build_one(client, "anchor-test", "slamrun-test/anchor:latest", dockerfile, opts, log=lambda m: None)
+    msg = str(err.value)
+    assert "failed at Step 6/6 : RUN /b/common/unpack.sh" in msg
+    assert "src/util/IndexThreadReduce.h" in msg and "found 0 times" in msg
+    log = opts.log_dir / "anchor-test.log"
+    assert str(log) in msg and "found 0 times" in log.read_text()
+    assert not client.images(name="slamrun-test/anchor:latest")
+
+
+def test_a_build_refuses_a_damaged_source_before_docker_runs(client, opts, tmp_path):
+    folder = tmp_path / "sources"
+    folder.mkdir()
+    (folder / SOURCES["sophus"].filename).write_bytes((UPSTREAM / SOURCES["dso"].filename).read_bytes())
+    opts.sources_dir = folder
+    dockerfile = tmp_path / "Dockerfile"
+    dockerfile.write_text("FROM debian:bookworm-slim\nCOPY sources/sophus.tar.gz /tmp/\n")
+    with pytest.raises(SlamRunError, match=f"{folder / SOURCES['sophus'].filename}: not the archive of strasdat"):
+        build_one(client, "bad-source", "slamrun-test/bad:latest", dockerfile, opts, log=lambda m: None)
+
+
+def test_vocabulary_choice(tmp_path):
+    archives = {"ldso": UPSTREAM / SOURCES["ldso"].filename}
+    if not archives["ldso"].is_file():
+        pytest.skip("no shared/upstream")
+    assert vocabulary_choice("dso", archives, BuildOptions()) == ("none", "")
+    kind, detail = vocabulary_choice("ldso", archives, BuildOptions())
+    assert kind == "trained" and "not the study's" in detail  # the archive here lacks vocab/orbvoc.dbow3
+    given = tmp_path / "orbvoc.dbow3"
+    given.write_bytes(b"vocabulary")
+    kind, detail = vocabulary_choice("ldso", archives, BuildOptions(vocabulary={"ldso": given}))
+    assert kind == "given" and "sha256" in detail
+    with pytest.raises(SlamRunError) as err:
+        vocabulary_choice("ldso", archives, BuildOptions(train_vocabulary=False))
+    assert "vocab/orbvoc.dbow3" in str(err.value) and "--vocabulary ldso=FILE" in str(err.value)
+
+
+def _run(client, tag: str, cmd: str) -> str:
+    container = client.create_container(
+        tag, ["sh", "-c", cmd], host_config=client.create_host_config(network_mode="none")
+    )
+    try:
+        client.start(container)
+        client.wait(container, timeout=60)
+        return client.logs(container).decode().strip()
+    finally:
+        client.remove_container(container, force=True)

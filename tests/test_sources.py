@@ -1,0 +1,152 @@
+"""Upstream source archives: checked by checksum or tree, taken from a folder, a download cache or a server.
+
+Real archives (shared/upstream); the network path talks to a server on 127.0.0.1 only."""
+
+from __future__ import annotations
+
+import gzip
+import http.server
+import io
+import shutil
+import tarfile
+import threading
+from pathlib import Path
+
+import pytest
+
+from runner import sources as src
+from runner.sources import SOURCES, SourceError, check_archive, obtain
+from tests.conftest import SHARED
+
+UPSTREAM = SHARED / "upstream"
+
+
+@pytest.fixture(scope="module")
+def upstream() -> Path:
+    if not UPSTREAM.is_dir():
+        pytest.skip(f"{UPSTREAM} not found: the upstream archives live in shared/upstream beside the repo")
+    return UPSTREAM
+
+
+def repack(archive: Path, out: Path, edit=None, add: dict[str, bytes] | None = None, level: int = 1) -> Path:
+    """Re-pack a real archive (other compression, other member dates), optionally editing one member."""
+    buf = io.BytesIO()
+    with tarfile.open(archive, "r:gz") as tin, tarfile.open(fileobj=buf, mode="w") as tout:
+        top = None
+        for m in tin:
+            top = top or m.name.split("/")[0]
+            data = tin.extractfile(m).read() if m.isfile() else None
+            if data is not None and edit is not None:
+                data = edit(m.name, data)
+                m.size = len(data)
+            m.mtime = 1
+            tout.addfile(m, io.BytesIO(data) if data is not None else None)
+        for rel, data in (add or {}).items():
+            info = tarfile.TarInfo(f"{top}/{rel}")
+            info.size = len(data)
+            tout.addfile(info, io.BytesIO(data))
+    out.write_bytes(gzip.compress(buf.getvalue(), compresslevel=level))
+    return out
+
+
+def test_every_recorded_source_matches_its_archive(upstream):
+    listed = {
+        line.split("|")[4].strip() for line in (upstream / "README.md").read_text().splitlines() if ".tar.gz |" in line
+    }
+    assert {s.filename for s in SOURCES.values()} == listed
+    for s in SOURCES.values():
+        assert check_archive(s, upstream / s.filename) == "sha256", s.name
+
+
+def test_a_repacked_archive_of_the_same_tree_is_accepted(upstream, tmp_path):
+    dso = SOURCES["dso"]
+    other = repack(upstream / dso.filename, tmp_path / dso.filename, level=9)
+    assert src.file_sha256(other) != dso.sha256
+    assert check_archive(dso, other) == "tree"
+
+
+def test_the_full_repository_archive_matches_though_the_vocabulary_is_absent_here(upstream, tmp_path):
+    orb = SOURCES["orb_slam2"]
+    full = repack(upstream / orb.filename, tmp_path / orb.filename, add={"Vocabulary/ORBvoc.txt.tar.gz": b"voc" * 100})
+    assert check_archive(orb, full) == "tree"
+    assert "Vocabulary/ORBvoc.txt.tar.gz" in src.archive_members(full)
+
+
+def test_a_changed_archive_is_refused_naming_the_file(upstream, tmp_path):
+    dso = SOURCES["dso"]
+    target = "src/util/IndexThreadReduce.h"
+
+    def edit(name, data):
+        return data + b"\n// changed\n" if name.endswith(target) else data
+
+    folder = tmp_path / "sources"
+    folder.mkdir()
+    repack(upstream / dso.filename, folder / dso.filename, edit=edit)
+    with pytest.raises(SourceError) as err:
+        obtain("dso", sources_dir=folder)
+    msg = str(err.value)
+    assert str(folder / dso.filename) in msg and dso.commit in msg and dso.sha256 in msg
+    # another repository's archive under the pinned name is refused too
+    shutil.copyfile(upstream / SOURCES["sophus"].filename, folder / dso.filename)
+    with pytest.raises(SourceError, match="not the archive of JakobEngel/dso"):
+        obtain("dso", sources_dir=folder)
+    (folder / dso.filename).write_bytes(b"not a tarball")
+    with pytest.raises(SourceError, match="not a readable .tar.gz"):
+        obtain("dso", sources_dir=folder)
+
+
+def test_a_missing_archive_names_what_to_fetch_and_from_where(tmp_path):
+    with pytest.raises(SourceError) as err:
+        obtain("ldso", sources_dir=tmp_path)
+    msg = str(err.value)
+    assert SOURCES["ldso"].filename in msg
+    assert "https://github.com/tum-vision/LDSO/archive/9b0c48cfd3b3ee95a8dbf1aef2371ed4fca6f81a.tar.gz" in msg
+    with pytest.raises(SourceError, match="unknown source 'nope'"):
+        obtain("nope", sources_dir=tmp_path)
+
+
+@pytest.fixture
+def archive_server(upstream):
+    """Serves shared/upstream at GitHub's archive addresses, on 127.0.0.1; counts the requests."""
+    by_path = {f"/{s.repo}/archive/{s.commit}.tar.gz": upstream / s.filename for s in SOURCES.values()}
+    hits = []
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802
+            hits.append(self.path)
+            path = by_path.get(self.path)
+            if path is None:
+                self.send_error(404)
+                return
+            data = path.read_bytes()
+            self.send_response(200)
+            self.send_header("Content-Length", str(len(data)))
+            self.end_headers()
+            self.wfile.write(data)
+
+        def log_message(self, *a):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    yield f"http://127.0.0.1:{httpd.server_address[1]}", hits
+    httpd.shutdown()
+    httpd.server_close()
+
+
+def test_download_into_the_cache_then_reuse(archive_server, tmp_path):
+    url, hits = archive_server
+    cache = tmp_path / "cache"
+    path = obtain("sophus", cache=cache, base_url=url)
+    assert path == cache / SOURCES["sophus"].filename and path.is_file()
+    assert obtain("sophus", cache=cache, base_url=url) == path
+    assert hits == [f"/strasdat/Sophus/archive/{SOURCES['sophus'].commit}.tar.gz"]  # the second came from the cache
+    assert not list(cache.glob("*.part"))
+
+
+def test_an_unreachable_server_names_the_address_and_the_folder_option(archive_server, tmp_path):
+    url, _ = archive_server
+    with pytest.raises(SourceError) as err:
+        obtain("dso", cache=tmp_path, base_url=url + "/missing")
+    assert "/missing/JakobEngel/dso/archive/" in str(err.value) and "--sources DIR" in str(err.value)
+    assert not list(tmp_path.iterdir())  # no partial download left behind
