@@ -91,8 +91,15 @@ def read_tum_output(path: Path) -> Trajectory:
     """A method's TUM output, with the method-failure kinds for a missing or empty file."""
     if not path.exists():
         raise MethodFailure("no_output", f"the method wrote no {path.name}")
-    traj = read_tum(path)
+    return require_poses(read_tum(path), path)
+
+
+def require_poses(traj: Trajectory, path: Path) -> Trajectory:
+    """The trajectory, unless it holds no pose: `no_output` when every row was NaN or infinite (the method
+    wrote garbage), `not_initialized` when the file was empty."""
     if len(traj) == 0:
+        if traj.report.n_nonfinite_dropped:
+            raise MethodFailure("no_output", f"{path.name}: all {traj.report.n_rows} rows are NaN or infinite")
         raise MethodFailure("not_initialized", f"{path.name} holds no pose")
     return traj
 

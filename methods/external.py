@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from methods.base import Method, read_tum_output
+from methods.base import Method, read_tum_output, require_poses
 from runner.datasets.views import PreparedView, Profile
 from runner.errors import MethodFailure
 from runner.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
@@ -34,6 +34,9 @@ class ExternalParams(BaseModel):
     format: OutputFormat = Field(OutputFormat.tum, description="Format of the output file.")
     profile: Profile = Field(Profile.native, description="Prepared view the executable consumes.")
     cwd: str | None = Field(None, description="Working directory (default: the run's work directory).")
+    image: str | None = Field(
+        None, description="Docker image to run argv in with backend: docker (paths then are /data and /work)."
+    )
     not_initialized_pattern: str | None = Field(None, description="Log regex meaning 'never initialised'.")
     lost_pattern: str | None = Field(None, description="Log regex meaning 'lost'.")
 
@@ -46,6 +49,27 @@ class External(Method):
     @property
     def profile(self) -> Profile:  # type: ignore[override]
         return self.params.profile
+
+    @property
+    def image(self) -> str | None:  # type: ignore[override]
+        return self.params.image
+
+    def problems(self, backend: str) -> list[str]:
+        out = []
+        if backend == "docker" and not self.params.image:
+            out.append("external runs in Docker only with params.image (the image to run argv in)")
+        known = self.placeholders(
+            PreparedView(Path("/data"), "s", "forward", Profile.native, 1, 0, 1, 1, 1, None), Path("/w")
+        )
+        for i, arg in enumerate(self.params.argv):
+            try:
+                arg.format_map(known)
+            except (KeyError, ValueError, IndexError) as exc:
+                out.append(
+                    f"params.argv[{i}]: {arg[:60]!r}: bad placeholder {exc} (known: {', '.join(sorted(known))}; "
+                    "write {{ and }} for literal braces)"
+                )
+        return out
 
     @property
     def not_initialized_pattern(self) -> str | None:  # type: ignore[override]
@@ -92,6 +116,4 @@ class External(Method):
             traj = read_timestamped_3x4(path)
         else:
             traj = read_4x4_matrices(path, np.asarray(view.view_timestamps()))
-        if len(traj) == 0:
-            raise MethodFailure("not_initialized", f"{path.name} holds no pose")
-        return view.to_original(traj)
+        return view.to_original(require_poses(traj, path))

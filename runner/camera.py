@@ -138,13 +138,18 @@ def read_camera_txt(path: str | Path) -> CameraFile:
     """Parse a TUM-Mono camera.txt (4 lines; an optional model name such as `FOV` may lead line 1)."""
     path = Path(path)
     try:
-        lines = [ln.split() for ln in path.read_text().splitlines() if ln.strip()]
+        lines = [ln.split() for ln in path.read_bytes().decode("ascii").splitlines() if ln.strip()]
     except FileNotFoundError:
         raise DatasetError(f"{path}: missing; expected the FOV calibration (4 lines)") from None
+    except UnicodeDecodeError as exc:
+        raise DatasetError(
+            f"{path}: not a text file (byte {exc.start} is not ASCII); expected the FOV calibration as 4 text lines "
+            "'fx fy cx cy omega', 'width height', 'crop|full|none', 'width height'"
+        ) from None
     if len(lines) < 4:
         raise DatasetError(f"{path}: {len(lines)} lines, expected 4 (intrinsics, input size, mode, output size)")
     first = lines[0]
-    if first and first[0].isalpha():
+    if first and first[0].isalpha() and first[0].lower() not in ("nan", "inf", "infinity"):
         if first[0].lower() not in ("fov", "pinhole"):
             raise DatasetError(f"{path}:1: camera model {first[0]!r} not supported; expected FOV or Pinhole")
         first = first[1:]
@@ -158,13 +163,22 @@ def read_camera_txt(path: str | Path) -> CameraFile:
         vals.append(0.0)
     if len(vals) != 5:
         raise DatasetError(f"{path}:1: {len(vals)} values, expected 'fx fy cx cy omega'")
+    if not all(math.isfinite(v) for v in vals):
+        raise DatasetError(f"{path}:1: {' '.join(first)}: every value must be a finite number (no nan or inf)")
+    if min(w, h, ow, oh) <= 0:
+        raise DatasetError(f"{path}: image sizes must be positive (input {w}x{h}, output {ow}x{oh})")
     fx, fy, cx, cy, omega = vals
     if cx < 1 and cy < 1:  # relative to the image size
         fx, fy, cx, cy = fx * w, fy * h, cx * w - 0.5, cy * h - 0.5
     mode_tokens = lines[2]
     explicit = None
     if len(mode_tokens) == 5:
-        explicit = tuple(float(v) for v in mode_tokens)
+        try:
+            explicit = tuple(float(v) for v in mode_tokens)
+        except ValueError:
+            raise DatasetError(f"{path}:3: {' '.join(mode_tokens)}: expected 5 numbers or crop, full, none") from None
+        if not all(math.isfinite(v) for v in explicit):
+            raise DatasetError(f"{path}:3: every value must be a finite number")
         mode = "explicit"
     else:
         mode = mode_tokens[0].lower()

@@ -9,15 +9,17 @@ from pathlib import Path
 import yaml
 
 import methods
+from runner.backends import make_backend
 from runner.backends.base import Backend
 from runner.datasets import synth
 from runner.datasets.tum_mono import open_sequence
-from runner.datasets.views import prepare
-from runner.errors import DiskFullError, is_disk_full
+from runner.datasets.views import prepare, remove_damaged
+from runner.errors import DaemonUnreachable, DatasetError, DiskFullError, LedgerLostError, is_disk_full
 from runner.ledger import Ledger, ResultsLock
 from runner.plan import PlannedRun, plan
+from runner.recovery import collect_leftovers, import_finished, recover
 from runner.results import export
-from runner.scheduler import Event, Scheduler, recover
+from runner.scheduler import Event, Scheduler
 from runner.spec import CampaignSpec
 
 
@@ -51,32 +53,44 @@ def ensure_datasets(spec: CampaignSpec, log=print) -> None:
             )
 
 
-def make_backend(spec: CampaignSpec) -> Backend:
-    if spec.distributed is not None:
-        from runner.backends.dask import DaskBackend
-
-        return DaskBackend(spec.backend, spec.distributed.address, spec.results, local_workers=spec.lanes)
-    return make_local_backend(spec.backend)
-
-
-def make_local_backend(name: str) -> Backend:
-    """The backend that runs a process on this machine: a local process tree or a Docker container."""
-    if name == "local":
-        from runner.backends.local import LocalBackend
-
-        return LocalBackend()
-    from runner.backends.docker import DockerBackend  # noqa: PLC0415 (optional dependency)
-
-    return DockerBackend()
-
-
 def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], log=print) -> dict:
+    """The views the runs `keys` need, prepared (and checked) now; damaged ones left from earlier go first."""
+    removed = remove_damaged(spec.cache)
+    if removed:
+        log(f"removed {removed} damaged view(s) from {spec.cache}")
     views = {}
     for r in runs:
         k = (str(r.sequence_dir), r.key.direction, r.profile)
         if r.key.id in keys and k not in views:
             views[k] = prepare(r.sequence_dir, r.key.direction, r.profile, spec.cache, frame_format=spec.frame_format)
     return views
+
+
+def check_sequences(spec: CampaignSpec, skip_ungenerated: bool = False) -> list[str]:
+    """Open every sequence of the spec as a run would; one DatasetError lists every problem. Returns the
+    warnings (a sequence that cannot be evaluated although the spec asks for evaluation). With
+    `skip_ungenerated`, synthetic sequences not generated yet are left out."""
+    problems, warnings = [], []
+    for ds in spec.datasets:
+        for seq in ds.sequences:
+            folder = ds.path / seq
+            if skip_ungenerated and ds.synthetic is not None and not (folder / "times.txt").exists():
+                continue
+            try:
+                sequence = open_sequence(folder)
+                if spec.evaluate:
+                    if sequence.groundtruth_path is None:
+                        warnings.append(
+                            f"{folder}: no groundtruthSync.txt: its runs cannot be evaluated (they are kept, "
+                            "without metrics); add the file or set evaluate: false"
+                        )
+                    else:
+                        sequence.groundtruth()
+            except DatasetError as exc:
+                problems.append(str(exc))
+    if problems:
+        raise DatasetError(f"{len(problems)} sequence(s) cannot be used:\n" + "\n".join(problems))
+    return warnings
 
 
 def load_groundtruths(runs: list[PlannedRun]) -> dict:
@@ -114,6 +128,8 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
     results = spec.results
     assert results is not None
     ensure_datasets(spec, log)
+    for warning in check_sequences(spec):
+        log(f"warning: {warning}")
     lock = ResultsLock(results)
     lock.acquire()
     try:
@@ -121,17 +137,26 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         ledger.set_meta("campaign", spec.name)
         ledger.set_meta("spec", spec.model_dump(mode="json"))
         (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
-        recovered = recover(ledger, results)
+        docker_here = spec.backend == "docker" and spec.distributed is None
+        recovered = recover(ledger, results, keep_attempts=docker_here)
         runs = plan(spec)
         added = ledger.sync_plan(runs)
+        recovered["imported"] += import_finished(ledger, runs, results)
         backend = backend or make_backend(spec)
-        if hasattr(backend, "remove_leftovers"):
-            backend.remove_leftovers(spec.name)
-        backend.check({m.name: methods.get(m.name).image for m in spec.methods})
+        backend.check({m.run_label: methods.get(m.name)(m.params).image for m in spec.methods})
         pending = set(ledger.pending_keys())
         views = prepare_views(spec, runs, pending, log)
         gts = load_groundtruths(runs) if spec.evaluate else {}
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
+        if hasattr(backend, "leftovers"):  # containers left by a killed runner or a lost daemon
+            n = collect_leftovers(
+                backend, spec.name, ledger, runs, sched.methods, views, gts, results, int(spec.log_cap_mb * 2**20)
+            )
+            if n:
+                log(f"collected {n} run(s) whose container finished while the runner or the daemon was away")
+            recovered["collected"] = n
+        elif hasattr(backend, "remove_leftovers"):
+            backend.remove_leftovers(spec.name)
         if scheduler_hook:
             scheduler_hook(sched)
         ledger.set_meta("eta", {"pending": len(pending), "lanes": spec.lanes})
@@ -140,6 +165,14 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         finally:
             if hasattr(backend, "close"):
                 backend.close()
+        remove_damaged(spec.cache)  # no run in flight any more
+        if isinstance(sched.fatal_error, LedgerLostError):
+            ledger.close()
+            raise sched.fatal_error
+        if isinstance(sched.fatal_error, DaemonUnreachable):
+            export(ledger, results)
+            ledger.close()
+            raise sched.fatal_error
         try:
             csv = export(ledger, results)
         except Exception as exc:

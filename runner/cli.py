@@ -81,9 +81,29 @@ def _parser() -> argparse.ArgumentParser:
     rp.add_argument("results", type=Path, help="a results directory")
     rp.set_defaults(func=cmd_report)
 
-    im = sub.add_parser("images", help="build the methods' Docker images")
+    im = sub.add_parser("images", help="build (and verify) the methods' Docker images")
     im.add_argument("--method", action="append", help="only this method (repeatable)")
     im.add_argument("--list", action="store_true", help="list the buildable images and exit")
+    im.add_argument("--sources", type=Path, help="folder of upstream source archives (no network needed)")
+    im.add_argument("--source-url", help="base address of the source archives (default https://github.com)")
+    im.add_argument("--march", default="x86-64-v2", help="-march target the methods are compiled for")
+    im.add_argument("--jobs", type=int, help="parallel compile jobs (default: all cores)")
+    im.add_argument(
+        "--vocabulary", action="append", default=[], metavar="[METHOD=]FILE", help="a vocabulary file for the build"
+    )
+    im.add_argument("--weights", action="append", default=[], metavar="NAME=FILE", help="a weights file for the build")
+    im.add_argument(
+        "--no-train-vocabulary", action="store_true", help="fail instead of training a vocabulary the source lacks"
+    )
+    im.add_argument("--build-arg", action="append", default=[], metavar="KEY=VALUE", help="extra Docker build argument")
+    im.add_argument("--log-dir", type=Path, help="where build logs and records go (default .cache/images)")
+    im.add_argument("--missing", action="store_true", help="build only the images that do not exist yet")
+    im.add_argument(
+        "--verify",
+        action="store_true",
+        help="build what is missing, run a short Docker campaign per image, print a table of results",
+    )
+    im.add_argument("--results", type=Path, help="results folder of --verify (default .cache/verify)")
     im.set_defaults(func=cmd_images)
 
     ds = sub.add_parser("dataset", help="dataset tools")
@@ -273,16 +293,18 @@ def cmd_status(args) -> int:
     ledger = Ledger(path)
     df = results_frame(ledger)
     t = Table(title=f"{ledger.meta('campaign', args.results.name)}: states per method and direction")
-    for c in ("method", "direction", "pending", "running", "done", "failed", "success %"):
+    for c in ("method", "direction", "pending", "running", "done", "failed", "infra", "success %"):
         t.add_column(c)
     for (m, d), g in df.groupby(["method", "direction"], sort=True):
-        fin = g.status.isin(["done", "failed"]).sum()
-        rate = f"{100 * (g.status == 'done').sum() / fin:.0f}" if fin else "-"
-        t.add_row(m, d, *[str(int((g.status == s).sum())) for s in ("pending", "running", "done", "failed")], rate)
+        s = method_summary(g).iloc[0]
+        running = int((g.status == "running").sum())
+        t.add_row(
+            m, d, str(s.pending - running), str(running), str(s.done), str(s.failed), str(s.infra), _fmt(s.success_pct)
+        )
     console.print(t)
     summ = method_summary(df)
     for _, r in summ.iterrows():
-        console.print(f"{r['method']}: success {_fmt(r['success_pct'])} % of {r['done'] + r['failed']} finished")
+        console.print(f"{r['method']}: success {_fmt(r['success_pct'])} % of {r['done'] + r['failed']} method results")
     left = int(df.status.isin(["pending", "running"]).sum())
     walls = df.wall_s.dropna()
     lanes = (ledger.meta("eta") or {}).get("lanes", 1)
@@ -298,11 +320,16 @@ def cmd_status(args) -> int:
 
 
 def cmd_validate(args) -> int:
+    from runner.campaign import check_sequences
     from runner.plan import plan
     from runner.spec import load_spec
 
     spec = load_spec(args.spec)
-    console.print(f"{args.spec}: valid, {len(plan(spec))} runs")
+    for warning in check_sequences(spec, skip_ungenerated=True):
+        console.print(f"warning: {warning}")
+    todo = sum(1 for d in spec.datasets if d.synthetic for s in d.sequences if not (d.path / s / "times.txt").exists())
+    later = f" ({todo} synthetic sequence(s) generated on first use)" if todo else ""
+    console.print(f"{args.spec}: valid, {len(plan(spec))} runs{later}")
     return 0
 
 
@@ -337,7 +364,7 @@ def cmd_evaluate(args) -> int:
     import numpy as np
 
     from runner.errors import TrajectoryFormatError
-    from runner.evaluation import tum_mono
+    from runner.evaluation import tum_mono_file
     from runner.trajectory import Trajectory, read_tum_many
 
     data = np.loadtxt(args.gt, comments="#", ndmin=2) if args.gt.exists() else None
@@ -348,7 +375,7 @@ def cmd_evaluate(args) -> int:
         if isinstance(traj, TrajectoryFormatError):
             d = {"status": "unreadable", "detail": str(traj)}
         else:
-            d = tum_mono(gt, traj).to_dict()
+            d = tum_mono_file(gt, traj).to_dict()
         detail = d.get("detail") if d["status"] != "ok" else None
         d = {
             "file": str(f),
@@ -413,16 +440,45 @@ def cmd_report(args) -> int:
 
 def cmd_images(args) -> int:
     import methods
-    from runner.images import build, buildable
+    from runner.images import BuildOptions, build, buildable
 
     if args.list:
         for name, (tag, dockerfile) in buildable().items():
             gpu = " (GPU optional, CPU by default)" if methods.REGISTRY[name].gpu_capable else ""
             console.print(f"{name}: {tag} <- {dockerfile.parent.name}/Dockerfile{gpu}")
         return 0
-    tags = build(args.method, log=lambda m: print(m, flush=True))
-    console.print(f"built {len(tags)} image(s): {', '.join(tags)}")
+    opts = BuildOptions(
+        sources_dir=args.sources,
+        source_url=args.source_url,
+        march=args.march,
+        vocabulary=dict(_pair(v, "*") for v in args.vocabulary),
+        weights=dict(_pair(w) for w in args.weights),
+        train_vocabulary=not args.no_train_vocabulary,
+        build_args=dict(_pair(b) for b in args.build_arg),
+    )
+    if args.jobs:
+        opts.jobs = args.jobs
+    if args.log_dir:
+        opts.log_dir = args.log_dir
+    if args.verify:
+        from runner.verify_images import print_table, verify
+
+        rows = verify(args.method, opts, args.results, log=lambda m: print(m, flush=True))
+        print_table(rows, console)
+        return 0 if all(r.passed for r in rows) else 1
+    records = build(args.method, log=lambda m: print(m, flush=True), opts=opts, only_missing=args.missing)
+    console.print(f"built {len(records)} image(s): {', '.join(r.tag for r in records) or '-'}")
     return 0
+
+
+def _pair(text: str, default_key: str | None = None) -> tuple[str, Path | str]:
+    """KEY=VALUE (or VALUE alone when a default key is allowed)."""
+    if "=" in text:
+        key, value = text.split("=", 1)
+        return key, value
+    if default_key is None:
+        raise SlamRunError(f"{text!r}: expected KEY=VALUE")
+    return default_key, text
 
 
 def cmd_download(args) -> int:

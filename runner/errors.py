@@ -40,6 +40,10 @@ class InfraError(SlamRunError):
     """An infrastructure fault (image missing, daemon gone, disk full): retried, never the method's result."""
 
 
+class DaemonUnreachable(InfraError):
+    """The Docker daemon stopped answering: the campaign stops starting runs until it is back."""
+
+
 class DiskFullError(InfraError):
     """The results or cache disk is full: the campaign stops; finished runs and the ledger stay intact."""
 
@@ -52,6 +56,10 @@ def is_disk_full(exc: BaseException) -> bool:
     if isinstance(exc, OSError):
         return exc.errno in (errno.ENOSPC, errno.EDQUOT)
     return isinstance(exc, sqlite3.OperationalError) and "full" in str(exc)
+
+
+class LedgerLostError(SlamRunError):
+    """The ledger file vanished (or was replaced) while a campaign ran: no new run starts."""
 
 
 class LedgerLockedError(SlamRunError):

@@ -19,12 +19,19 @@ from pathlib import Path
 import numpy as np
 
 from methods.base import Method
-from runner.backends.base import Backend, ExecRequest
+from runner.backends.base import Backend, ExecRequest, ExecResult
 from runner.datasets.views import PreparedView
-from runner.errors import DiskFullError, InfraError, MethodFailure, TrajectoryFormatError, is_disk_full
+from runner.errors import (
+    DaemonUnreachable,
+    DiskFullError,
+    InfraError,
+    MethodFailure,
+    TrajectoryFormatError,
+    is_disk_full,
+)
 from runner.evaluation import EvalStatus, tum_mono
 from runner.logcap import tail
-from runner.paths import RunPaths
+from runner.paths import RunPaths, finished_record
 from runner.plan import PlannedRun
 from runner.trajectory import Trajectory, write_tum
 
@@ -51,7 +58,8 @@ def execute_run(
     on_start=None,
 ) -> RunOutcome:
     """Run once and record it. A full disk anywhere in the run is a DiskFullError and any other OSError
-    an InfraError (the machine's fault, not the method's); the run's staging folder is removed either way."""
+    an InfraError (the machine's fault, not the method's); the run's staging folder is removed either way,
+    except when the Docker daemon went away mid-run (the next start may collect the finished container)."""
     with _os_errors_as_infra(run, paths):
         paths.clear_staging()
         stage = paths.staging(attempt)
@@ -83,17 +91,40 @@ def execute_run(
             log_cap_bytes=log_cap_bytes,
             image=method.image,
             needs_gpu=method.needs_gpu,
-            labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id},
+            labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id, "slamrun.attempt": str(attempt)},
+            token=paths.token(attempt),
         )
         try:
             result = backend.execute(req, cancel, on_start)
+        except DaemonUnreachable:
+            raise  # the staging folder stays: the container may finish without the daemon
         except InfraError:
             shutil.rmtree(stage, ignore_errors=True)
             raise
         if result.cancelled:
             shutil.rmtree(stage, ignore_errors=True)
             return RunOutcome("cancelled", {})
+        extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
+        extra["engine"] = getattr(backend, "engine", None)
+        return finish_attempt(run, method, view, paths, attempt, result, started, groundtruth, extra)
 
+
+def finish_attempt(
+    run: PlannedRun,
+    method: Method,
+    view: PreparedView,
+    paths: RunPaths,
+    attempt: int,
+    result: ExecResult,
+    started: float,
+    groundtruth: Trajectory | None,
+    extra: dict,
+) -> RunOutcome:
+    """What a finished process left in its staging folder, read, evaluated, recorded in run.json and renamed
+    into place. Also used to collect a container that finished while the Docker daemon was away."""
+    with _os_errors_as_infra(run, paths):
+        stage = paths.staging(attempt)
+        raw = RunPaths.raw(stage)
         log_tail = tail(RunPaths.log(stage))
         failure, message, traj = _classify(result, method, raw, view, log_tail)
         if failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
@@ -123,6 +154,8 @@ def execute_run(
             recovered = values.get("eval_status") == EvalStatus.ok.value
             failure = None if recovered else "lost"
             values["failure"] = failure
+        if traj is not None and traj.report.n_nonfinite_dropped and not values["message"]:
+            values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the output dropped"
         state = "failed" if failure else "done"
         values["ended_at"] = time.time()
         record = {
@@ -131,29 +164,31 @@ def execute_run(
             "method": run.method,
             "dataset": run.dataset,
             "sequence": run.key.sequence,
+            "data": run.key.data,
             "direction": run.key.direction.value,
             "trial": run.key.trial,
             "settings": run.key.settings,
             "params": method.params.model_dump(mode="json"),
             "state": state,
             "attempt": attempt,
-            "argv": argv,
             "started_at": started,
             "view": str(view.root),
             "sequence_dir": str(run.sequence_dir),
-            "cpus": list(cpus) if cpus else None,
-            "backend": backend.name,
-            "engine": getattr(backend, "engine", None),
             "timed_out": result.timed_out,
             "oom": result.oom,
             "log_truncated": result.log_truncated,
             "trajectory_report": traj.report.__dict__ if traj is not None else None,
+            **extra,
             **values,
         }
         RunPaths.run_json(stage).write_text(json.dumps(record, indent=1, default=_json_default))
         final = paths.final
-        if final.exists():  # an earlier attempt renamed but its ledger update was lost: replace it
-            shutil.rmtree(final)
+        if final.exists():  # a finished run is never overwritten
+            earlier = finished_record(final, run.key.id)
+            if earlier is not None:  # it finished in an earlier attempt: that one stands, this one is dropped
+                shutil.rmtree(stage, ignore_errors=True)
+                return RunOutcome(earlier["state"], {**earlier, "run_dir": str(final)})
+            final.rename(final.with_name(f".{final.name}.incomplete-{int(time.time())}"))  # kept for a look
         final.parent.mkdir(parents=True, exist_ok=True)
         os.rename(stage, final)
         values["run_dir"] = str(final)

@@ -11,7 +11,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
-from runner.errors import LedgerLockedError, SlamRunError
+from runner.errors import LedgerLockedError, LedgerLostError, SlamRunError
 from runner.plan import PlannedRun
 
 STATES = ("pending", "running", "done", "failed")
@@ -110,10 +110,14 @@ class Ledger:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
         except sqlite3.DatabaseError as exc:
-            raise SlamRunError(f"{self.path}: not a readable ledger ({exc}); move it aside to start afresh") from None
+            raise SlamRunError(
+                f"{self.path}: not a readable ledger ({exc}); move it aside and run the same command again: "
+                "every finished run is imported from its folder under runs/, nothing is redone"
+            ) from None
         self._db.row_factory = sqlite3.Row
         self._lock = threading.Lock()
         cols = ", ".join(f"{c} {_coltype(c)}" for c in ALL_COLUMNS if c != "key")
+        self._inode = os.stat(self.path).st_ino
         with self._lock:
             self._db.execute(f"CREATE TABLE IF NOT EXISTS runs (key TEXT PRIMARY KEY, {cols})")
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT)")
@@ -183,8 +187,22 @@ class Ledger:
             )
             return cur.rowcount
 
+    def check_present(self) -> None:
+        """LedgerLostError when the ledger file is no longer the one this object writes (deleted or replaced)."""
+        try:
+            same = os.stat(self.path).st_ino == self._inode
+        except FileNotFoundError:
+            same = False
+        if not same:
+            raise LedgerLostError(
+                f"{self.path} vanished during the campaign (deleted or replaced); no new run was started. The "
+                f"finished runs are safe in {self.path.parent / 'runs'}: run the same command again and they are "
+                "imported into a new ledger"
+            )
+
     def mark_running(self, key: str, run_dir: str) -> int:
-        """Mark a run started; returns its attempt number (1-based)."""
+        """Mark a run started; returns its attempt number (1-based). LedgerLostError when the file vanished."""
+        self.check_present()
         with self._lock:
             self._db.execute(
                 "UPDATE runs SET state = 'running', attempts = attempts + 1, started_at = ?, "
@@ -223,6 +241,9 @@ class Ledger:
     def get(self, key: str) -> dict | None:
         row = self._db.execute("SELECT * FROM runs WHERE key = ?", (key,)).fetchone()
         return dict(row) if row else None
+
+    def pending_rows(self) -> list[dict]:
+        return [dict(r) for r in self._db.execute("SELECT * FROM runs WHERE active = 1 AND state = 'pending'")]
 
     def pending_keys(self) -> list[str]:
         return [r[0] for r in self._db.execute("SELECT key FROM runs WHERE active = 1 AND state = 'pending'")]

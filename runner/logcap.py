@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import select
 import threading
 from collections import deque
 from pathlib import Path
@@ -72,11 +74,24 @@ class CappedLog:
         if self.error is not None:
             raise self.error
 
-    def pump(self, stream: BinaryIO) -> threading.Thread:
-        """Copy a stream into the log in a background thread until EOF."""
+    def pump(self, stream: BinaryIO, stop: threading.Event | None = None) -> threading.Thread:
+        """Copy a pipe into the log in a background thread until EOF, or until `stop` is set and nothing is
+        left to read (a process that escaped its run may hold the pipe open forever)."""
+        fd = stream.fileno()
 
         def loop() -> None:
-            while chunk := stream.read1(65536) if hasattr(stream, "read1") else stream.read(65536):
+            while True:
+                ready, _, _ = select.select([fd], [], [], 0.1)
+                if not ready:
+                    if stop is not None and stop.is_set():
+                        return
+                    continue
+                try:
+                    chunk = os.read(fd, 65536)
+                except OSError:
+                    return
+                if not chunk:
+                    return
                 self.write(chunk)
 
         t = threading.Thread(target=loop, daemon=True, name="log-pump")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,6 +19,9 @@ class RunPaths:
     @property
     def final(self) -> Path:
         return self.results / self.key.relpath
+
+    def token(self, attempt: int) -> str:
+        return run_token(self.final, attempt)
 
     def staging(self, attempt: int) -> Path:
         """Where an attempt writes before the rename that makes it complete."""
@@ -49,3 +54,23 @@ class RunPaths:
         if parent.exists():
             for p in parent.glob(f".{self.final.name}.tmp-*"):
                 shutil.rmtree(p, ignore_errors=True)
+
+
+def finished_record(run_dir: Path, key: str) -> dict | None:
+    """The run.json of a run that finished in `run_dir` (done, or failed by the method's own behaviour), or
+    None when the folder holds no complete run of this key."""
+    try:
+        rec = json.loads((run_dir / "run.json").read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(rec, dict) or rec.get("key") != key or rec.get("state") not in ("done", "failed"):
+        return None
+    if rec.get("failure") == "infra":
+        return None
+    return rec
+
+
+def run_token(run_dir: Path, attempt: int) -> str:
+    """The token in the environment of every process of a run's attempt (see backends.local): derived from
+    the run's folder, so crash recovery finds the processes of a stale attempt from its ledger row alone."""
+    return hashlib.sha256(f"{Path(run_dir).resolve()}|{attempt}".encode()).hexdigest()[:32]

@@ -8,29 +8,36 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import methods
+from runner.datasets.tum_mono import sequence_identity
 from runner.datasets.views import Direction, Profile
 from runner.spec import CampaignSpec, MethodSpec
 
 
 @dataclass(frozen=True)
 class RunKey:
-    """(method label, sequence, direction, trial, settings hash): the ledger's primary key."""
+    """(method label, sequence and its data, direction, trial, settings hash): the ledger's primary key."""
 
     label: str
     sequence: str
     direction: Direction
     trial: int
     settings: str  # hash of the settings that change results
+    data: str = "none"  # digest of the sequence's content (runner.datasets.tum_mono.sequence_identity)
 
     @property
     def id(self) -> str:
-        return f"{self.label}@{self.settings}/{self.sequence}/{self.direction.value}/{self.trial:02d}"
+        return f"{self.label}@{self.settings}/{self.sequence}@{self.data}/{self.direction.value}/{self.trial:02d}"
 
     @property
     def relpath(self) -> Path:
-        """runs/<label>@<settings>/<sequence>/<direction>/<trial>: a new setting never reuses a folder."""
+        """runs/<label>@<settings>/<sequence>@<data>/<direction>/<trial>: new settings or new data never reuse a
+        folder."""
         return (
-            Path("runs") / f"{self.label}@{self.settings}" / self.sequence / self.direction.value / f"{self.trial:02d}"
+            Path("runs")
+            / f"{self.label}@{self.settings}"
+            / f"{self.sequence}@{self.data}"
+            / self.direction.value
+            / f"{self.trial:02d}"
         )
 
 
@@ -64,9 +71,10 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
         directions = m.directions or spec.directions
         for ds in spec.datasets:
             for seq in ds.sequences:
+                data = sequence_identity(ds.path / seq)
                 for direction in directions:
                     for trial in range(trials):
-                        key = RunKey(m.run_label, seq, direction, trial, h)
+                        key = RunKey(m.run_label, seq, direction, trial, h, data)
                         run = PlannedRun(
                             key, mi, m.name, ds.name, ds.path / seq, method.profile, m.timeout_s or spec.timeout_s
                         )

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from runner.ledger import FAILURES, METRIC_COLUMNS, RESOURCE_COLUMNS, Ledger
+from runner.ledger import METHOD_FAILURES, METRIC_COLUMNS, RESOURCE_COLUMNS, Ledger
 
 COLUMNS = (
     "method",
@@ -57,22 +57,30 @@ def export(ledger: Ledger, results: Path) -> Path:
 
 
 def method_summary(df: pd.DataFrame) -> pd.DataFrame:
-    """Per method: runs, state counts, failures by kind, success rate, medians of the main metrics."""
+    """Per method: runs, state counts, failures by kind, success rate, medians of the main metrics.
+
+    Infrastructure failures (`infra`) are not the method's result: they have their own column and are
+    left out of `failed` and of the success rate (done / (done + method failures)).
+    """
     out = []
     for method, g in df.groupby("method", sort=False):
-        finished = g[g.status.isin(["done", "failed"])]
+        infra = (g.status == "failed") & (g.failure == "infra")
+        method_failed = (g.status == "failed") & ~infra
+        done = int((g.status == "done").sum())
+        results = done + int(method_failed.sum())
         ok = g[g.eval_status == "ok"]
         row = {
             "method": method,
             "runs": len(g),
-            "done": int((g.status == "done").sum()),
-            "failed": int((g.status == "failed").sum()),
+            "done": done,
+            "failed": int(method_failed.sum()),
+            "infra": int(infra.sum()),
             "pending": int(g.status.isin(["pending", "running"]).sum()),
-            "success_pct": 100.0 * (g.status == "done").sum() / len(finished) if len(finished) else np.nan,
+            "success_pct": 100.0 * done / results if results else np.nan,
             "evaluated": len(ok),
         }
-        for kind in FAILURES:
-            row[kind] = int((g.failure == kind).sum())
+        for kind in METHOD_FAILURES:
+            row[kind] = int((method_failed & (g.failure == kind)).sum())
         for m in ("e_t", "e_r", "e_s_sym", "e_align", "e_rmse"):
             row[f"median_{m}"] = ok[m].median() if len(ok) else np.nan
         row["median_fps"] = g.fps.median() if g.fps.notna().any() else np.nan

@@ -8,21 +8,27 @@ runs in flight (they go back to pending).
 from __future__ import annotations
 
 import os
-import shutil
 import threading
 import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 
 from methods import get as get_method
 from runner.backends.base import Backend
-from runner.datasets.views import PreparedView
-from runner.errors import DiskFullError, InfraError, is_disk_full
+from runner.datasets.views import PreparedView, prepare, verify_view
+from runner.errors import (
+    DaemonUnreachable,
+    DatasetError,
+    DiskFullError,
+    InfraError,
+    LedgerLostError,
+    SlamRunError,
+    is_disk_full,
+)
 from runner.execute import execute_run
 from runner.ledger import Ledger
-from runner.paths import RunPaths
+from runner.paths import RunPaths, finished_record
 from runner.plan import PlannedRun
 from runner.spec import CampaignSpec
 from runner.trajectory import Trajectory
@@ -66,8 +72,10 @@ class Scheduler:
         self.cancel = threading.Event()  # stop runs in flight
         self._queue: list[PlannedRun] = []
         self._qlock = threading.Lock()
+        self._view_lock = threading.Lock()
         self.fatal: str | None = None  # why the campaign stopped by itself (a full disk)
-        self._methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
+        self.fatal_error: SlamRunError | None = None  # the error that stopped it (full disk, ledger lost)
+        self.methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
 
     def run(self, runs: list[PlannedRun]) -> None:
         pending = set(self.ledger.pending_keys())
@@ -104,6 +112,10 @@ class Scheduler:
                 self._run_with_retries(run, lane)
             except DiskFullError as exc:  # the run did not finish: it goes back to pending
                 self._stop_for_full_disk(run, lane, str(exc), requeue=True)
+            except LedgerLostError as exc:  # nothing can be recorded any more: stop starting runs
+                self.fatal_error = self.fatal_error or exc
+                self.request_stop()
+                self.on_event("requeued", run, lane, {"message": str(exc)})
             except Exception as exc:
                 if is_disk_full(exc):  # the ledger could not be written: the next start recovers the row
                     self._stop_for_full_disk(run, lane, f"{run.key.id}: the disk is full ({exc})", requeue=False)
@@ -117,6 +129,7 @@ class Scheduler:
         """No new runs. A row the ledger cannot update stays `running`: the next start recovers it (imports
         the run if its folder is complete, else requeues it)."""
         self.fatal = self.fatal or message
+        self.fatal_error = self.fatal_error or DiskFullError(message)
         self.request_stop()
         if requeue:
             try:
@@ -126,14 +139,43 @@ class Scheduler:
                     raise
         self.on_event("requeued", run, lane, {"message": message})
 
+    def _checked_view(self, run: PlannedRun, lane: Lane) -> PreparedView:
+        """The run's prepared view, whole: one found missing or damaged (deleted cache, a method that wrote
+        into it) is prepared again first, so no run is charged for it. A view that cannot be rebuilt is an
+        infrastructure failure."""
+        k = (str(run.sequence_dir), run.key.direction, run.profile)
+        view = self.views[k]
+        problem = verify_view(view.root)
+        if problem is None:
+            return view
+        self.on_event("view", run, lane, {"message": f"{problem}; preparing it again"})
+        with self._view_lock:
+            if self.views[k].root == view.root:
+                try:
+                    self.views[k] = prepare(
+                        run.sequence_dir,
+                        run.key.direction,
+                        run.profile,
+                        self.spec.cache,
+                        frame_format=self.spec.frame_format,
+                    )
+                except DatasetError as exc:
+                    raise InfraError(f"{run.key.id}: its view is damaged and cannot be prepared again: {exc}") from None
+            return self.views[k]
+
     def _run_with_retries(self, run: PlannedRun, lane: Lane) -> None:
-        method = self._methods[run.method_index]
-        view = self.views[(str(run.sequence_dir), run.key.direction, run.profile)]
+        method = self.methods[run.method_index]
         paths = RunPaths(self.spec.results, run.key)
+        rec = finished_record(paths.final, run.key.id)
+        if rec is not None:  # finished earlier and not in the ledger (it was lost): record it, never redo it
+            self.ledger.finish(run.key.id, rec["state"], {**rec, "run_dir": str(paths.final)})
+            self.on_event("finished", run, lane, {**rec, "imported": True})
+            return
         for retry in range(self.spec.retries + 1):
             attempt = self.ledger.mark_running(run.key.id, str(paths.final))
             self.on_event("started", run, lane, {"attempt": attempt})
             try:
+                view = self._checked_view(run, lane)
                 outcome = execute_run(
                     run,
                     method,
@@ -151,6 +193,12 @@ class Scheduler:
                 )
             except DiskFullError:
                 raise
+            except DaemonUnreachable as exc:  # no run can start: stop; the next start collects or redoes it
+                self.fatal_error = self.fatal_error or exc
+                self.request_stop()
+                self.ledger.reset_to_pending(run.key.id)
+                self.on_event("requeued", run, lane, {"message": str(exc)})
+                return
             except InfraError as exc:
                 if retry < self.spec.retries and not self.stop.is_set():
                     delay = self.spec.retry_backoff_s * 2**retry
@@ -169,32 +217,3 @@ class Scheduler:
             self.ledger.finish(run.key.id, outcome.state, outcome.values)
             self.on_event("finished", run, lane, {"state": outcome.state, **outcome.values})
             return
-
-
-def recover(ledger: Ledger, results: Path) -> dict[str, int]:
-    """After a crash: finished-but-unrecorded runs are imported, stale `running` rows go back to pending."""
-    import json
-
-    from runner.backends.local import kill_stale
-
-    imported = requeued = killed = 0
-    for row in ledger.stale_running():
-        if row["pid"]:
-            killed += kill_stale(row["pid"], row["pid_start"])
-        run_json = Path(row["run_dir"] or "") / "run.json"
-        if row["run_dir"] and run_json.exists():
-            try:
-                rec = json.loads(run_json.read_text())
-            except ValueError:
-                rec = None
-            if rec and rec.get("key") == row["key"] and rec.get("state") in ("done", "failed"):
-                ledger.finish(row["key"], rec["state"], {**rec, "run_dir": row["run_dir"]})
-                imported += 1
-                continue
-        ledger.reset_to_pending(row["key"])
-        if row["run_dir"]:  # its half-written attempt: removing it also stops a process left on a Dask worker
-            final = Path(row["run_dir"])
-            for stage in final.parent.glob(f".{final.name}.tmp-*"):
-                shutil.rmtree(stage, ignore_errors=True)
-        requeued += 1
-    return {"imported": imported, "requeued": requeued, "killed": killed, "infra_reset": ledger.reset_infra_failures()}

@@ -31,6 +31,7 @@ class ReadReport:
     n_quat_non_unit: int = 0
     n_quat_far_from_unit: int = 0
     max_quat_norm_error: float = 0.0
+    n_nonfinite_dropped: int = 0  # rows with a NaN or infinite timestamp, position or quaternion
 
 
 @dataclass(frozen=True, eq=False)
@@ -341,9 +342,14 @@ def _fast_table(data: bytes, ncols: int) -> np.ndarray | None:
 
 def _normalise(data: np.ndarray, source: str) -> Trajectory:
     n_rows = len(data)
-    if n_rows == 0:
+    finite = np.isfinite(data).all(axis=1)
+    n_nonfinite = 0
+    if not finite.all():  # a row that is not a pose: dropped and counted
+        n_nonfinite = int(np.count_nonzero(~finite))
+        data = data[finite]
+    if len(data) == 0:
         empty = np.zeros((0, 3)), np.zeros((0, 4))
-        return Trajectory(np.zeros(0), *empty, report=ReadReport())
+        return Trajectory(np.zeros(0), *empty, report=ReadReport(n_rows=n_rows, n_nonfinite_dropped=n_nonfinite))
     step = np.diff(data[:, 0])
     was_unsorted = bool(np.any(step < 0))
     n_dup = 0
@@ -355,11 +361,10 @@ def _normalise(data: np.ndarray, source: str) -> Trajectory:
         data = data[keep]
     quat = data[:, 4:8]
     norm = np.sqrt(np.einsum("ij,ij->i", quat, quat))
-    if (norm < 1e-12).any():  # NaN norms never compare true: only finite zero quaternions
+    if (norm < 1e-12).any():
         bad = int(np.flatnonzero(norm < 1e-12)[0])
         raise TrajectoryFormatError(f"{source}: zero quaternion at timestamp {data[bad, 0]!r}")
-    err = np.abs(norm - 1.0)
-    finite_err = err if np.isfinite(err.sum()) else err[np.isfinite(err)]
+    finite_err = np.abs(norm - 1.0)
     report = ReadReport(
         n_rows=n_rows,
         was_unsorted=was_unsorted,
@@ -367,7 +372,7 @@ def _normalise(data: np.ndarray, source: str) -> Trajectory:
         n_quat_non_unit=int(np.count_nonzero(finite_err > NON_UNIT_TOL)),
         n_quat_far_from_unit=int(np.count_nonzero(finite_err > FAR_FROM_UNIT_TOL)),
         max_quat_norm_error=float(finite_err.max()) if finite_err.size else 0.0,
+        n_nonfinite_dropped=n_nonfinite,
     )
-    with np.errstate(invalid="ignore"):
-        quat = quat / norm[:, None]
+    quat = quat / norm[:, None]
     return Trajectory(data[:, 0].copy(), data[:, 1:4].copy(), quat, report=report)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.evaluation import EvalStatus, ate, rpe, tum_mono
+from runner.evaluation import EvalStatus, ate, rpe, tum_mono, tum_mono_file
 from runner.trajectory import Trajectory, from_arrays, read_tum
 from tests.conftest import SHARED_DATA as DATA
 
@@ -104,7 +104,11 @@ def test_failure_cases():
     assert tum_mono(gt, empty).status is EvalStatus.empty
     with_nan = np.nan_to_num(gt.positions)
     with_nan[5, 1] = np.nan
-    assert tum_mono(gt, estimate_from(gt, with_nan)).status is EvalStatus.nan
+    raw = Trajectory(gt.timestamps, with_nan, np.tile([0, 0, 0, 1.0], (len(gt), 1)))
+    assert tum_mono(gt, raw).status is EvalStatus.nan  # NaN in the arrays
+    read = estimate_from(gt, with_nan)  # a reader drops the row and counts it ...
+    assert len(read) == len(gt) - 1 and read.report.n_nonfinite_dropped == 1
+    assert tum_mono_file(gt, read).status is EvalStatus.nan  # ... and the benchmark rejects such a file
     shifted = from_arrays(ok.timestamps + 0.0011, ok.positions, ok.quaternions)
     res = tum_mono(gt, shifted)
     assert res.status is EvalStatus.unassociated and np.isnan(res.e_t)

@@ -36,8 +36,11 @@ def load_results(path: Path) -> pd.DataFrame:
 
 
 def evaluated(df: pd.DataFrame, metrics: list[str]) -> pd.DataFrame:
-    """Runs with every metric finite (the study's 'blank runs' are the others)."""
+    """Runs that ended `done` with every metric finite (the study's 'blank runs' are the others; a run that
+    timed out or got lost is a failure even when it wrote poses that could be evaluated)."""
     present = [m for m in metrics if m in df.columns]
+    if "status" in df.columns:
+        df = df[df["status"] == "done"]
     return df.dropna(subset=present)
 
 

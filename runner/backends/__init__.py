@@ -1,0 +1,32 @@
+"""Backends run one run's process: a local process tree, a Docker container, or either on a Dask worker.
+
+Choosing one belongs here, beside them; the campaign and the Dask workers both ask `make_backend`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from runner.backends.base import Backend
+    from runner.spec import CampaignSpec
+
+
+def make_backend(spec: CampaignSpec) -> Backend:
+    """The backend a spec asks for: on a Dask cluster when it has `distributed:`, else on this machine."""
+    if spec.distributed is not None:
+        from runner.backends.dask import DaskBackend
+
+        return DaskBackend(spec.backend, spec.distributed.address, spec.results, local_workers=spec.lanes)
+    return make_local_backend(spec.backend)
+
+
+def make_local_backend(name: str) -> Backend:
+    """The backend that runs a process on this machine: a local process tree or a Docker container."""
+    if name == "local":
+        from runner.backends.local import LocalBackend
+
+        return LocalBackend()
+    from runner.backends.docker import DockerBackend
+
+    return DockerBackend()

@@ -29,6 +29,7 @@ class ExecRequest:
     needs_gpu: bool = False
     labels: dict[str, str] = field(default_factory=dict)
     env: dict[str, str] = field(default_factory=dict)
+    token: str = ""  # marks every process of the run (RunPaths.token); a backend may make its own
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ class _RemoteCancel:
 
 
 def _execute_on_worker(backend_name: str, req: ExecRequest, flag: str) -> ExecResult:
-    from runner.campaign import make_local_backend
+    from runner.backends import make_local_backend
 
     def started(pid: int, t0: float) -> None:  # tells the campaign machine, through the shared folder
         tmp = Path(flag).parent / "process.txt.tmp"
@@ -50,7 +50,7 @@ def _check_on_worker(backend_name: str, images: dict | None, probe: str) -> str 
     if not Path(probe).exists():
         return f"{host}: cannot see {probe}; the results directory must be on a filesystem shared with the workers"
     try:
-        from runner.campaign import make_local_backend
+        from runner.backends import make_local_backend
 
         make_local_backend(backend_name).check(images)
     except Exception as exc:  # noqa: BLE001 - reported with the worker's name
@@ -103,7 +103,7 @@ class DaskBackend:
             raise InfraError("Dask workers cannot run the campaign:\n  " + "\n  ".join(bad))
 
     def process_paths(self, view, workdir):
-        from runner.campaign import make_local_backend
+        from runner.backends import make_local_backend
 
         return make_local_backend(self.name).process_paths(view, workdir)
 

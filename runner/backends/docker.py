@@ -16,7 +16,7 @@ from pathlib import Path
 
 from runner.backends.base import ExecRequest, ExecResult, supervise
 from runner.datasets.views import PreparedView
-from runner.errors import InfraError
+from runner.errors import DaemonUnreachable, InfraError
 from runner.logcap import CappedLog
 from runner.monitor import Gpu, ResourceSeries, Sample
 
@@ -25,6 +25,35 @@ WORK = Path("/work")
 CONTAINER_UID = 1000  # the non-root user our images create; a root host hands /work to it
 LABEL_CAMPAIGN = "slamrun.campaign"
 LABEL_RUN = "slamrun.run"
+
+
+def docker_host() -> str:
+    """Where the Docker client looks for the daemon."""
+    return os.environ.get("DOCKER_HOST") or "unix:///var/run/docker.sock"
+
+
+def _reason(exc: BaseException) -> str:
+    """The innermost cause of a requests/urllib3 error, e.g. 'Connection refused'."""
+    text = str(exc)
+    for marker in ("Connection refused", "No such file or directory", "Connection aborted", "Connection reset"):
+        if marker in text:
+            return marker
+    return text[:200]
+
+
+def _timed_out(exc: BaseException) -> bool:
+    """A wait that timed out (the container still runs), as requests reports it over TCP or a unix socket."""
+    import requests
+
+    return isinstance(exc, requests.exceptions.ReadTimeout) or "timed out" in str(exc).lower()
+
+
+def _timestamp(text: str):
+    """Docker's RFC 3339 time with nanoseconds, to a datetime (microseconds)."""
+    from datetime import datetime
+
+    main, _, frac = text.rstrip("Z").partition(".")
+    return datetime.fromisoformat(f"{main}.{(frac + '000000')[:6]}+00:00")
 
 
 def _docker():
@@ -52,10 +81,25 @@ class DockerBackend:
                 self._client.ping()
             except Exception as exc:  # noqa: BLE001 - any failure here means: no daemon to talk to
                 self._client = None
-                raise InfraError(
-                    f"cannot reach the Docker daemon ({exc}); start it (scripts/start-dockerd.sh) or use backend: local"
+                raise DaemonUnreachable(
+                    f"Docker daemon unreachable at {docker_host()} ({_reason(exc)}); start it "
+                    "(scripts/start-dockerd.sh, or `systemctl start docker`) or use backend: local"
                 ) from None
         return self._client
+
+    def daemon_answers(self) -> bool:
+        try:
+            self.client.api.ping()
+            return True
+        except Exception:  # noqa: BLE001 - refused, socket gone, aborted: no daemon
+            return False
+
+    def daemon_lost(self, exc: BaseException) -> DaemonUnreachable:
+        return DaemonUnreachable(
+            f"Docker daemon unreachable at {docker_host()} ({_reason(exc)}): no new run is started. Start it again "
+            "(scripts/start-dockerd.sh, or `systemctl start docker`) and run the same command: finished runs are "
+            "kept, a run whose container completed meanwhile is collected, the others are redone"
+        )
 
     # ------------------------------------------------------------ before the first run
     def check(self, images: dict[str, str | None] | None = None) -> None:
@@ -74,12 +118,40 @@ class DockerBackend:
         if problems:
             raise InfraError("Docker images:\n  " + "\n  ".join(problems))
 
+    def leftovers(self, campaign: str) -> list:
+        """Containers of this campaign that a killed runner or a lost daemon left behind."""
+        return self.client.containers.list(all=True, filters={"label": f"{LABEL_CAMPAIGN}={campaign}"})
+
     def remove_leftovers(self, campaign: str) -> int:
         """Remove containers of this campaign that a killed runner left behind."""
-        found = self.client.containers.list(all=True, filters={"label": f"{LABEL_CAMPAIGN}={campaign}"})
+        found = self.leftovers(campaign)
         for c in found:
             c.remove(force=True)
         return len(found)
+
+    @staticmethod
+    def collect(container, log_path: Path, log_cap_bytes: int, n_frames: int) -> ExecResult | None:
+        """The result of a leftover container that exited by itself (None while it runs, or when it never
+        started): its exit code, its wall time from the daemon's record and its log. The resource samples
+        were lost with the runner that took them; only wall time and fps are known."""
+        state = container.attrs.get("State") or {}
+        if state.get("Status") != "exited" or not state.get("StartedAt") or not state.get("FinishedAt"):
+            return None
+        wall_s = (_timestamp(state["FinishedAt"]) - _timestamp(state["StartedAt"])).total_seconds()
+        if wall_s <= 0:
+            return None
+        log = CappedLog(log_path, log_cap_bytes)
+        try:
+            log.write(container.logs(stdout=True, stderr=True))
+        finally:
+            log.close()
+        return ExecResult(
+            exit_code=state.get("ExitCode"),
+            wall_s=wall_s,
+            oom=bool(state.get("OOMKilled")),
+            log_truncated=log.truncated,
+            resources={"wall_s": wall_s, "fps": n_frames / wall_s if n_frames else None, "n_frames": n_frames},
+        )
 
     def process_paths(self, view: PreparedView, workdir: Path) -> tuple[PreparedView, Path]:
         return view.at(DATA), WORK
@@ -122,16 +194,27 @@ class DockerBackend:
             raise InfraError(f"image {req.image} is missing; build it: make images") from None
         except docker.errors.APIError as exc:
             raise InfraError(f"docker could not create the container: {exc.explanation or exc}") from None
+        except Exception as exc:  # noqa: BLE001 - requests' ConnectionError: is the daemon there?
+            if not self.daemon_answers():
+                raise self.daemon_lost(exc) from None
+            raise
+        daemon_lost = False
         try:
             log = CappedLog(req.log_path, req.log_cap_bytes)  # may fail on a full disk: still remove the container
             return self._run(container, req, cancel, log, on_start)
+        except DaemonUnreachable:
+            daemon_lost = True  # the container is left for the next start to collect or remove
+            raise
         finally:
-            try:
-                container.remove(force=True)
-            except docker.errors.NotFound:
-                pass
-            except docker.errors.APIError as exc:  # the daemon went away: the next start removes it by label
-                raise InfraError(f"could not remove container {container.short_id}: {exc}") from None
+            if not daemon_lost:
+                try:
+                    container.remove(force=True)
+                except docker.errors.NotFound:
+                    pass
+                except Exception as exc:  # noqa: BLE001 - the daemon went away: the next start removes it by label
+                    if not self.daemon_answers():
+                        raise self.daemon_lost(exc) from None
+                    raise InfraError(f"could not remove container {container.short_id}: {exc}") from None
 
     def _run(self, container, req: ExecRequest, cancel: threading.Event, log: CappedLog, on_start) -> ExecResult:
         docker = _docker()
@@ -141,6 +224,11 @@ class DockerBackend:
         except docker.errors.APIError as exc:
             log.close()
             raise InfraError(f"docker could not start the container: {exc.explanation or exc}") from None
+        except Exception as exc:  # noqa: BLE001 - requests' ConnectionError: is the daemon there?
+            log.close()
+            if not self.daemon_answers():
+                raise self.daemon_lost(exc) from None
+            raise
         if on_start:
             on_start(0, 0.0)
         pump = threading.Thread(target=self._pump_logs, args=(container, log), daemon=True)
@@ -154,10 +242,17 @@ class DockerBackend:
             try:
                 exit_code = container.wait(timeout=min(0.2, max(remaining, 0.01))).get("StatusCode")
                 return True
-            except Exception:  # noqa: BLE001 - the wait timed out (requests' ReadTimeout / ConnectionError)
-                return False
+            except Exception as exc:  # noqa: BLE001 - requests' ReadTimeout / ConnectionError, or a dead daemon
+                if _timed_out(exc) or self.daemon_answers():
+                    return False
+                raise self.daemon_lost(exc) from None
 
-        timed_out, cancelled = supervise(step, t0, req.timeout_s, cancel)
+        try:
+            timed_out, cancelled = supervise(step, t0, req.timeout_s, cancel)
+        except DaemonUnreachable:
+            monitor.stop()
+            log.close()
+            raise
         if exit_code is None:
             try:
                 container.kill()

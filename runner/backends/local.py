@@ -7,6 +7,7 @@ import signal
 import subprocess
 import threading
 import time
+import uuid
 
 import psutil
 
@@ -16,6 +17,8 @@ from runner.logcap import CappedLog
 from runner.monitor import Gpu, ProcessTreeMonitor
 
 KILL_GRACE_S = 3.0
+PUMP_DRAIN_S = 2.0
+TOKEN_VAR = "SLAMRUN_RUN_TOKEN"  # in the environment of every process a run starts
 
 
 class LocalBackend:
@@ -39,7 +42,8 @@ class LocalBackend:
             if cpus:
                 os.sched_setaffinity(0, cpus)
 
-        env = {**os.environ, **req.env}
+        token = req.token or uuid.uuid4().hex  # every process of the run inherits it, however it detaches
+        env = {**os.environ, **req.env, TOKEN_VAR: token}
         log = CappedLog(req.log_path, req.log_cap_bytes)
         t0 = time.monotonic()
         try:
@@ -56,7 +60,8 @@ class LocalBackend:
         except (FileNotFoundError, PermissionError) as exc:
             log.close()
             raise InfraError(f"cannot start {req.argv[0]!r}: {exc}; check the method's executable") from None
-        pump = log.pump(proc.stdout)
+        pump_stop = threading.Event()
+        pump = log.pump(proc.stdout, pump_stop)
         monitor = ProcessTreeMonitor(proc.pid, self.sample_interval_s, self.gpu).start()
         if on_start:
             on_start(proc.pid, psutil.Process(proc.pid).create_time())
@@ -70,13 +75,17 @@ class LocalBackend:
 
         timed_out, cancelled = supervise(step, t0, req.timeout_s, cancel)
         if timed_out or cancelled:
-            kill_tree(proc, monitor.descendants())
+            kill_tree(proc, monitor.descendants() + processes_with_token(token))
         exit_code = proc.wait()
         wall_s = time.monotonic() - t0
-        kill_tree(proc, monitor.descendants())  # children left behind by a finished parent
+        # every process of the run ends with it: children left by a finished parent, in its group or not
+        kill_tree(proc, monitor.descendants() + processes_with_token(token))
         series = monitor.stop()
-        pump.join(timeout=5)
-        proc.stdout.close()
+        pump.join(timeout=PUMP_DRAIN_S)  # the rest of the output, once its writers are gone
+        pump_stop.set()
+        pump.join(timeout=PUMP_DRAIN_S)
+        if not pump.is_alive():
+            proc.stdout.close()
         log.close()
         series.write_csv(req.resources_path)
         return ExecResult(
@@ -110,6 +119,34 @@ def kill_tree(proc: subprocess.Popen, known: list[psutil.Process]) -> None:
                 proc.wait(timeout=0.2)
             except subprocess.TimeoutExpired:
                 pass
+
+
+def kill_processes(procs: list[psutil.Process]) -> int:
+    """SIGKILL these processes and wait for them; returns how many there were."""
+    for p in procs:
+        try:
+            p.kill()
+        except psutil.Error:
+            pass
+    psutil.wait_procs(procs, timeout=3)
+    return len(procs)
+
+
+def processes_with_token(token: str) -> list[psutil.Process]:
+    """Processes whose environment holds this run's token: its descendants, even those that left its
+    process group and session and were re-parented (a process that clears its environment escapes)."""
+    needle = f"{TOKEN_VAR}={token}".encode()
+    found = []
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/environ", "rb") as f:
+                if needle in f.read():
+                    found.append(psutil.Process(int(entry.name)))
+        except (OSError, psutil.Error):
+            continue
+    return found
 
 
 def kill_stale(pid: int, pid_start: float | None) -> bool:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -228,3 +229,53 @@ def read_vignette(path: Path) -> np.ndarray:
     """Vignette normalised to a maximum of 1."""
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED).astype(np.float32)
     return img / img.max()
+
+
+def sequence_identity(root: str | Path) -> str:
+    """A short digest of a sequence's content as methods see it, for run keys: new data makes new runs.
+
+    The small files in full (times.txt, camera.txt, pcalib.txt, vignette.png); the frames by name, size
+    and CRC-32 from images.zip's directory (no decompression), or by name, size and first 4 KiB in images/.
+    Independent of paths and file dates, so a moved or copied dataset keeps its runs. "none" when the
+    folder has no times.txt (a synthetic sequence not generated yet).
+    """
+    root = Path(root)
+    stamp = tuple(
+        _stat_or_none(root / n)
+        for n in ("times.txt", "camera.txt", "pcalib.txt", "vignette.png", "images.zip", "images")
+    )
+    return _identity(root, stamp)
+
+
+def _stat_or_none(p: Path) -> tuple | None:
+    try:
+        st = p.stat()
+        return (st.st_size, st.st_mtime_ns, st.st_ino)
+    except OSError:
+        return None
+
+
+@functools.lru_cache(maxsize=4096)
+def _identity(root: Path, stamp: tuple) -> str:
+    import hashlib
+
+    if stamp[0] is None:
+        return "none"
+    h = hashlib.sha256()
+    for name in ("times.txt", "camera.txt", "pcalib.txt", "vignette.png"):
+        p = root / name
+        h.update(name.encode() + b"\0" + (p.read_bytes() if p.exists() else b"-") + b"\0")
+    zip_path = root / "images.zip"
+    if zip_path.exists():
+        try:
+            with zipfile.ZipFile(zip_path) as zf:
+                for info in zf.infolist():
+                    h.update(f"{info.filename}|{info.file_size}|{info.CRC}\n".encode())
+        except (zipfile.BadZipFile, OSError):
+            h.update(b"unreadable zip|%d" % zip_path.stat().st_size)
+    elif (root / "images").is_dir():
+        for p in sorted((root / "images").iterdir()):
+            with open(p, "rb") as f:
+                head = f.read(4096)
+            h.update(f"{p.name}|{p.stat().st_size}|".encode() + hashlib.sha256(head).digest())
+    return h.hexdigest()[:10]

@@ -30,7 +30,7 @@ from runner.datasets.tum_mono import Sequence, open_sequence
 from runner.errors import DatasetError
 from runner.trajectory import Trajectory
 
-VIEW_FORMAT_VERSION = 2
+VIEW_FORMAT_VERSION = 3  # 3: a manifest of the view's files in view.json
 
 
 class Direction(StrEnum):
@@ -140,38 +140,134 @@ def view_key(seq: Sequence, direction: Direction, profile: Profile, frame_format
 
 
 def prepare(
-    sequence_dir: Path | str,
+    sequence_dir: Path | Path,
     direction: Direction,
     profile: Profile,
     cache_dir: Path | str,
     workers: int = 2,
     frame_format: str = "png",
 ) -> PreparedView:
-    """The prepared view, built now if the cache lacks it (safe across threads and processes)."""
+    """The prepared view, built now if the cache lacks it (safe across threads and processes).
+
+    A view found damaged (a file changed, added or removed since it was built: `verify_view`) is not used:
+    a new generation of it is built beside it (`<key>.g<n>`), so a run still reading the old one is not
+    disturbed; `remove_damaged` deletes the old ones when no run is in flight.
+    """
     seq = open_sequence(sequence_dir)
     cache_dir = Path(cache_dir)
     cache_dir.mkdir(parents=True, exist_ok=True)
     if frame_format not in FRAME_FORMATS:
         raise ValueError(f"frame format {frame_format!r}; expected one of {FRAME_FORMATS}")
     key = view_key(seq, direction, profile, frame_format)
-    final = cache_dir / key
-    if (final / "view.json").exists():
+    final = _latest_generation(cache_dir, key)
+    if final is not None and verify_view(final) is None:
         return PreparedView.load(final)
     with open(cache_dir / f".{key}.lock", "w") as lock:
         fcntl.flock(lock, fcntl.LOCK_EX)  # one builds, the others wait here and then find it built
-        if (final / "view.json").exists():
+        final = _latest_generation(cache_dir, key)
+        if final is not None and verify_view(final) is None:
             return PreparedView.load(final)
+        generation = 0 if final is None else _generation(final.name, key) + 1
+        final = cache_dir / (key if generation == 0 else f"{key}.g{generation}")
         tmp = cache_dir / f".{key}.tmp-{os.getpid()}"
         if tmp.exists():
-            shutil.rmtree(tmp)
+            _remove(tmp)
         tmp.mkdir()
         try:
             _build(seq, direction, profile, tmp, workers, frame_format)
+            _seal(tmp)
             os.rename(tmp, final)
         except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
+            _remove(tmp)
             raise
     return PreparedView.load(final)
+
+
+def _generation(name: str, key: str) -> int:
+    return 0 if name == key else int(name[len(key) + 2 :])
+
+
+def _latest_generation(cache_dir: Path, key: str) -> Path | None:
+    found = [p for p in (cache_dir / key, *cache_dir.glob(f"{key}.g*")) if (p / "view.json").exists()]
+    return max(found, key=lambda p: _generation(p.name, key)) if found else None
+
+
+def verify_view(root: Path) -> str | None:
+    """Why a prepared view cannot be trusted (missing, a file changed, added or removed since it was built),
+    or None when it is whole. Compares names, sizes and modification times with the manifest in view.json."""
+    try:
+        meta = json.loads((root / "view.json").read_text())
+    except FileNotFoundError:
+        return f"{root}: missing"
+    except (OSError, ValueError) as exc:
+        return f"{root}/view.json unreadable ({exc})"
+    expected = {rel: (size, mtime) for rel, size, mtime in meta.get("manifest", [])}
+    found = _manifest(root)
+    if found == expected:
+        return None
+    added = sorted(found.keys() - expected.keys())
+    missing = sorted(expected.keys() - found.keys())
+    changed = sorted(k for k in found.keys() & expected.keys() if found[k] != expected[k])
+    parts = [
+        f"{len(v)} {what} (e.g. {v[0]})"
+        for what, v in (("added", added), ("missing", missing), ("changed", changed))
+        if v
+    ]
+    return f"{root}: damaged since it was prepared: " + ", ".join(parts)
+
+
+def _manifest(root: Path) -> dict[str, tuple[int, int]]:
+    out = {}
+    for dirpath, _, files in os.walk(root):
+        for name in files:
+            full = os.path.join(dirpath, name)
+            rel = os.path.relpath(full, root)
+            if rel != "view.json":
+                st = os.stat(full)
+                out[rel] = (st.st_size, st.st_mtime_ns)
+    return out
+
+
+def _seal(root: Path) -> None:
+    """Record the view's files in view.json and make them read-only (a method must not write the view)."""
+    meta = json.loads((root / "view.json").read_text())
+    meta["manifest"] = [[rel, size, mtime] for rel, (size, mtime) in sorted(_manifest(root).items())]
+    (root / "view.json").write_text(json.dumps(meta))
+    for dirpath, dirs, files in os.walk(root):
+        for name in files:
+            os.chmod(os.path.join(dirpath, name), 0o444)
+        for name in dirs:
+            os.chmod(os.path.join(dirpath, name), 0o555)
+    os.chmod(root, 0o555)
+
+
+def _remove(root: Path) -> None:
+    """rmtree of a (read-only) view."""
+    try:
+        os.chmod(root, 0o755)
+    except OSError:
+        pass
+    for dirpath, dirs, _ in os.walk(root):
+        for name in dirs:
+            try:
+                os.chmod(os.path.join(dirpath, name), 0o755)
+            except OSError:
+                pass
+    shutil.rmtree(root, ignore_errors=True)
+
+
+def remove_damaged(cache_dir: Path) -> int:
+    """Delete every view in the cache that `verify_view` finds damaged and that a newer generation
+    replaces; call it when no run is in flight. Returns how many were removed."""
+    cache_dir = Path(cache_dir)
+    if not cache_dir.is_dir():
+        return 0
+    removed = 0
+    for p in cache_dir.iterdir():
+        if p.is_dir() and not p.name.startswith(".") and verify_view(p) is not None:
+            _remove(p)
+            removed += 1
+    return removed
 
 
 def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, workers: int, frame_format: str) -> None:
