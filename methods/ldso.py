@@ -1,8 +1,10 @@
 """LDSO (tum-vision/LDSO @ 9b0c48c): DSO with loop closure, on the native view.
 
-`run_dso_tum_mono files= calib= gamma= vignette= preset=0 nogui=1 loopclosing=0 output=FILE vocab=FILE`
-writes FILE (loop-corrected) and FILE.noloop (TUM, camera-to-world, all keyframes). With nogui=1 it
-segfaults at exit after writing: exit 139 is accepted when the output is complete.
+`run_dso_tum_mono files= calib= gamma= vignette= preset=0 mode=0 nogui=1 nolog=1 quiet=1 loopclosing=0
+output=FILE vocab=FILE` writes FILE (pose-graph corrected) and FILE.noloop (TUM, camera-to-world, every
+keyframe). It loads the vocabulary even with loopclosing=0 (and aborts without one). Upstream segfaults at
+exit with nogui=1 after writing (a null viewer); the image patches that, and exit 139 is still accepted
+when the output is complete, for images built otherwise.
 """
 
 from __future__ import annotations
@@ -32,6 +34,9 @@ class Ldso(Dso):
         return [
             self.exe(),
             *self.dataset_args(view),
+            "mode=0" if p.photometric else "mode=1",
+            "nolog=1",
+            "quiet=1",
             f"loopclosing={int(p.loop_closure)}",
             f"output={workdir / self.output_file}",
             f"vocab={p.vocabulary}",

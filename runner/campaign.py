@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from runner.datasets.views import prepare, remove_damaged
 from runner.errors import DaemonUnreachable, DatasetError, DiskFullError, LedgerLostError, is_disk_full
 from runner.ledger import Ledger, ResultsLock
 from runner.plan import PlannedRun, plan
+from runner.preparer import ViewPreparer
 from runner.recovery import collect_leftovers, import_finished, recover
 from runner.results import export
 from runner.scheduler import Event, Scheduler
@@ -64,6 +66,27 @@ def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], lo
         if r.key.id in keys and k not in views:
             views[k] = prepare(r.sequence_dir, r.key.direction, r.profile, spec.cache, frame_format=spec.frame_format)
     return views
+
+
+def session_record(spec: CampaignSpec) -> dict:
+    """Who runs the campaign now, since when, on how many lanes (for status, --watch and the ETA)."""
+    import psutil
+
+    me = psutil.Process()
+    lanes = 1 if spec.measurement == "exclusive" else spec.lanes
+    return {"pid": me.pid, "pid_start": me.create_time(), "started_at": time.time(), "lanes": lanes, "ended_at": None}
+
+
+def session_alive(session: dict | None) -> bool:
+    """Whether the campaign process of a session record still runs (same PID and start time)."""
+    import psutil
+
+    if not session or session.get("ended_at"):
+        return False
+    try:
+        return abs(psutil.Process(session["pid"]).create_time() - session["pid_start"]) < 0.01
+    except (psutil.Error, KeyError, TypeError):
+        return False
 
 
 def check_sequences(spec: CampaignSpec, skip_ungenerated: bool = False) -> list[str]:
@@ -145,12 +168,17 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         backend = backend or make_backend(spec)
         backend.check({m.run_label: methods.get(m.name)(m.params).image for m in spec.methods})
         pending = set(ledger.pending_keys())
-        views = prepare_views(spec, runs, pending, log)
+        removed = remove_damaged(spec.cache)
+        if removed:
+            log(f"removed {removed} damaged view(s) from {spec.cache}")
+        # views are prepared in the background, in the order the runs start; a lane waits only for its own
+        order = [(str(r.sequence_dir), r.key.direction, r.profile) for r in runs if r.key.id in pending]
+        views = ViewPreparer(order, spec.cache, spec.frame_format).start()
         gts = load_groundtruths(runs) if spec.evaluate else {}
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
         if hasattr(backend, "leftovers"):  # containers left by a killed runner or a lost daemon
             n = collect_leftovers(
-                backend, spec.name, ledger, runs, sched.methods, views, gts, results, int(spec.log_cap_mb * 2**20)
+                backend, spec.name, ledger, runs, sched.methods, views.get, gts, results, int(spec.log_cap_mb * 2**20)
             )
             if n:
                 log(f"collected {n} run(s) whose container finished while the runner or the daemon was away")
@@ -160,11 +188,21 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         if scheduler_hook:
             scheduler_hook(sched)
         ledger.set_meta("eta", {"pending": len(pending), "lanes": spec.lanes})
+        session = session_record(spec)
+        ledger.set_meta("session", session)
         try:
             sched.run(runs)
         finally:
+            views.close()
             if hasattr(backend, "close"):
                 backend.close()
+            try:
+                ledger.set_meta(
+                    "session",
+                    {**session, "ended_at": time.time(), "runs_from": sched.started_at, "runs_to": sched.ended_at},
+                )
+            except Exception:  # noqa: BLE001 - a lost ledger or a full disk: status then sees the process gone
+                pass
         remove_damaged(spec.cache)  # no run in flight any more
         if isinstance(sched.fatal_error, LedgerLostError):
             ledger.close()

@@ -33,23 +33,44 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("slamrun")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="slamrun", description="Run and compare monocular SLAM/VO methods.")
+    p.add_argument("--version", action="version", version=f"slamrun {_version()}")
     sub = p.add_subparsers()
 
     c = sub.add_parser("campaign", help="run a campaign (resumes where it stopped)")
-    c.add_argument("spec", type=Path)
+    c.add_argument("spec", type=Path, help="the campaign's YAML spec")
     c.add_argument("--results", type=Path, help="results directory (overrides the spec)")
     c.add_argument("--lanes", type=int, help="parallel runs (overrides the spec)")
     c.add_argument("--no-report", action="store_true", help="skip the report at the end")
+    c.add_argument(
+        "--dry-run", action="store_true", help="say what would run, prepare and take; run nothing, write nothing"
+    )
     c.set_defaults(func=cmd_campaign)
 
-    s = sub.add_parser("status", help="states per method and direction, with an ETA")
-    s.add_argument("results", type=Path)
+    pl = sub.add_parser("plan", help="the same as `campaign SPEC --dry-run`")
+    pl.add_argument("spec", type=Path, help="the campaign's YAML spec")
+    pl.add_argument("--results", type=Path, help="results directory (overrides the spec)")
+    pl.set_defaults(func=cmd_plan)
+
+    s = sub.add_parser("status", help="states per method and direction, failures, ETA (read-only, no lock)")
+    s.add_argument("results", type=Path, help="a campaign's results directory")
+    s.add_argument("--watch", action="store_true", help="refresh in place until the campaign ends")
+    s.add_argument("--interval", type=float, default=2.0, help="seconds between refreshes with --watch")
+    s.add_argument("--json", action="store_true", help="print the figures as one JSON object")
     s.set_defaults(func=cmd_status)
 
-    v = sub.add_parser("validate", help="check a spec and list every problem")
-    v.add_argument("spec", type=Path)
+    v = sub.add_parser("validate", help="check a spec and its sequences; list every problem")
+    v.add_argument("spec", type=Path, help="the campaign's YAML spec")
     v.set_defaults(func=cmd_validate)
 
     sc = sub.add_parser("schema", help="print the spec's JSON Schema")
@@ -59,20 +80,21 @@ def _parser() -> argparse.ArgumentParser:
     lm.set_defaults(func=cmd_list_methods)
 
     e = sub.add_parser("evaluate", help="TUM-Mono metrics of trajectory files against a ground truth")
-    e.add_argument("--gt", type=Path, required=True)
+    e.add_argument("--gt", type=Path, required=True, help="the sequence's groundtruthSync.txt")
     e.add_argument("--json", action="store_true", help="one JSON object per line")
-    e.add_argument("traj", type=Path, nargs="+")
+    e.add_argument("traj", type=Path, nargs="+", help="TUM trajectory files")
+    e.add_argument("--jobs", type=int, help="worker processes (default: every core); output stays in input order")
     e.set_defaults(func=cmd_evaluate)
 
     pr = sub.add_parser("prepare", help="build the prepared views a spec needs")
-    pr.add_argument("spec", type=Path)
+    pr.add_argument("spec", type=Path, help="the campaign's YAML spec")
     pr.set_defaults(func=cmd_prepare)
 
     st = sub.add_parser("stats", help="the study's statistics of a results table")
     st.add_argument("results", type=Path, help="results.csv, results.parquet or a results directory")
     st.add_argument("--json", action="store_true", help="print the statistics as JSON")
     st.add_argument("--level", type=float, default=0.999, help="chi-square quantile of the outlier cut-off")
-    st.add_argument("--adjust", default="holm", choices=["holm", "bonferroni", "BH", "none"])
+    st.add_argument("--adjust", default="holm", choices=["holm", "bonferroni", "BH", "none"], help="p-value adjustment")
     st.add_argument("--alpha", type=float, default=0.05, help="significance level of the letters")
     st.add_argument("--metrics", nargs="+", help="metric columns (default: the study's six)")
     st.set_defaults(func=cmd_stats)
@@ -98,6 +120,7 @@ def _parser() -> argparse.ArgumentParser:
     im.add_argument("--build-arg", action="append", default=[], metavar="KEY=VALUE", help="extra Docker build argument")
     im.add_argument("--log-dir", type=Path, help="where build logs and records go (default .cache/images)")
     im.add_argument("--missing", action="store_true", help="build only the images that do not exist yet")
+    im.add_argument("--no-cache", action="store_true", help="rebuild every step (a from-scratch build time)")
     im.add_argument(
         "--verify",
         action="store_true",
@@ -109,18 +132,18 @@ def _parser() -> argparse.ArgumentParser:
     ds = sub.add_parser("dataset", help="dataset tools")
     dsub = ds.add_subparsers()
     dl = dsub.add_parser("download", help="download TUM-Mono sequences (resumable)")
-    dl.add_argument("name", choices=["tum-mono"])
-    dl.add_argument("dest", type=Path)
+    dl.add_argument("name", choices=["tum-mono"], help="the dataset")
+    dl.add_argument("dest", type=Path, help="folder to download into")
     dl.add_argument("--sequences", default="1-50", help="numbers and ranges, e.g. 1-5,7")
     dl.add_argument("--url", help="base address of the sequence zips (default: the dataset's site)")
     dl.set_defaults(func=cmd_download)
 
     sy = sub.add_parser("synth", help="write a synthetic sequence in the TUM-Mono layout")
-    sy.add_argument("out", type=Path)
-    sy.add_argument("--frames", type=int, default=300)
-    sy.add_argument("--seed", type=int, default=0)
-    sy.add_argument("--size", default="640x480")
-    sy.add_argument("--scene", choices=["indoor", "outdoor"], default="indoor")
+    sy.add_argument("out", type=Path, help="the sequence folder to write")
+    sy.add_argument("--frames", type=int, default=300, help="number of frames")
+    sy.add_argument("--seed", type=int, default=0, help="random seed of the scene and its texture")
+    sy.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT")
+    sy.add_argument("--scene", choices=["indoor", "outdoor"], default="indoor", help="room or courtyard scale")
     sy.set_defaults(func=cmd_synth)
     return p
 
@@ -130,6 +153,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def cmd_campaign(args) -> int:
     from runner.campaign import run_campaign
+    from runner.display import LiveProgress
     from runner.spec import load_spec
 
     spec = load_spec(args.spec)
@@ -141,7 +165,9 @@ def cmd_campaign(args) -> int:
     if args.no_report:
         updates["report"] = False
     spec = spec.model_copy(update=updates)
-    progress = _Progress(sys.stdout.isatty())
+    if args.dry_run:
+        return _print_dry_run(spec)
+    progress = LiveProgress(spec.results, console, sys.stdout.isatty())
     sched_ref = {}
 
     def on_signal(signum, _frame):
@@ -162,11 +188,13 @@ def cmd_campaign(args) -> int:
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
     t0 = time.monotonic()
-    result = run_campaign(
-        spec, on_event=progress.event, scheduler_hook=lambda s: sched_ref.update(s=s), log=progress.note
-    )
-    progress.close()
-    _print_summary(result.results, result.results_csv)
+    try:
+        result = run_campaign(
+            spec, on_event=progress.event, scheduler_hook=lambda s: sched_ref.update(s=s), log=progress.note
+        )
+    finally:
+        progress.close()
+    _print_summary(spec.name, result.results, result.results_csv)
     console.print(
         f"{sum(result.counts.values())} runs: "
         + ", ".join(f"{k} {v}" for k, v in result.counts.items())
@@ -189,69 +217,58 @@ def cmd_campaign(args) -> int:
     return 0
 
 
-class _Progress:
-    """A rich progress display on a terminal; plain lines otherwise."""
+def cmd_plan(args) -> int:
+    from runner.spec import load_spec
 
-    def __init__(self, tty: bool):
-        self.tty = tty
-        self.done = self.failed = 0
-        self.total = None
-        self.lanes: dict[int, str] = {}
-        self.t0 = time.monotonic()
-        self._progress = None
-        if tty:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-
-            self._progress = Progress(
-                TextColumn("{task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("failed {task.fields[failed]}"),
-                TimeRemainingColumn(),
-                console=console,
-            )
-            self._task = self._progress.add_task("runs", total=None, failed=0)
-            self._progress.start()
-
-    def note(self, msg: str) -> None:
-        (self._progress.console if self._progress else console).print(msg)
-
-    def event(self, kind: str, run, lane, info: dict) -> None:
-        if kind == "started":
-            self.lanes[lane.index] = f"{run.key.label}/{run.key.sequence}/{run.key.direction.value}/{run.key.trial}"
-        elif kind == "finished":
-            self.done += 1
-            self.failed += info.get("state") == "failed"
-            self.lanes.pop(lane.index, None)
-            what = info.get("failure") or "ok"
-            metric = info.get("e_align")
-            extra = f" e_align={metric:.4g}" if isinstance(metric, float) else ""
-            line = f"[lane {lane.index}] {run.key.id}: {info.get('state')} ({what}){extra}"
-            if not self.tty:
-                print(line, flush=True)
-        elif kind in ("retry", "requeued"):
-            self.note(f"[lane {lane.index}] {run.key.id}: {kind} {info.get('message', '')}")
-        if self._progress:
-            lanes = " | ".join(f"L{i}: {v}" for i, v in sorted(self.lanes.items()))
-            self._progress.update(
-                self._task, completed=self.done, failed=self.failed, description=f"runs [{lanes}]" if lanes else "runs"
-            )
-
-    def close(self) -> None:
-        if self._progress:
-            self._progress.stop()
+    spec = load_spec(args.spec)
+    if args.results:
+        spec = spec.model_copy(update={"results": args.results.resolve()})
+    return _print_dry_run(spec)
 
 
-def _print_summary(results: Path, csv: Path) -> None:
+def _print_dry_run(spec) -> int:
+    from runner.dryrun import dry_run
+    from runner.progress import duration
+
+    d = dry_run(spec)
+    t = Table(title=f"{spec.name}: what `slamrun campaign` would run (nothing was run or written)")
+    for c in ("method", "direction", "runs", "new", "pending", "done", "failed"):
+        t.add_column(c, justify="left" if c in ("method", "direction") else "right")
+    for g in d.groups:
+        t.add_row(g["method"], g["direction"], *(str(g[k]) for k in ("runs", "new", "pending", "done", "failed")))
+    console.print(t)
+    console.print(
+        f"{d.to_run} run(s) to run of {d.total} ({d.done} done, {d.failed} failed as the method's result)"
+        + (f"; {d.infra} infrastructure failure(s) to retry" if d.infra else "")
+    )
+    if d.views_to_prepare or d.views_unknown:
+        console.print(
+            f"{d.views_to_prepare} view(s) to prepare in {spec.cache}, about {d.view_bytes / 2**30:.2f} GB"
+            + (f", and {d.views_unknown} of synthetic sequences generated on first use" if d.views_unknown else "")
+        )
+    else:
+        console.print("every view it needs is prepared")
+    if d.to_run:
+        basis = f" ({d.eta_basis}, from this results folder's timings)" if d.eta_s is not None else ""
+        console.print(
+            f"estimated duration: {duration(d.eta_s) if d.eta_s is not None else 'unknown (no timing yet)'}"
+            f" on {d.lanes} lane(s){basis}"
+        )
+    return 0
+
+
+def _print_summary(campaign: str, results: Path, csv: Path) -> None:
     import pandas as pd
 
+    from runner.display import failed_runs_table
+    from runner.ledger import Ledger
     from runner.results import method_summary
 
     df = pd.read_csv(csv)
     if df.empty:
         return
     summ = method_summary(df)
-    t = Table(title=f"per method ({results.name})")
+    t = Table(title=f"{campaign}: per method")
     cols = [
         "method",
         "runs",
@@ -272,6 +289,15 @@ def _print_summary(results: Path, csv: Path) -> None:
     for _, r in summ.iterrows():
         t.add_row(*[_fmt(r[c]) for c in cols + fails])
     console.print(t)
+    ledger = Ledger(results / "ledger.sqlite", read_only=True)
+    try:
+        failed, more = failed_runs_table(ledger.rows(), campaign)
+    finally:
+        ledger.close()
+    if failed is not None:
+        console.print(failed)
+        if more:
+            console.print(f"... and {more} more failed run(s): `slamrun status {results}` or results.csv")
 
 
 def _fmt(v) -> str:
@@ -284,35 +310,27 @@ def _fmt(v) -> str:
 
 
 def cmd_status(args) -> int:
-    from runner.ledger import Ledger
-    from runner.results import method_summary, results_frame
+    from runner.display import read_figures, status_view
 
-    path = args.results / "ledger.sqlite"
-    if not path.exists():
+    f = read_figures(args.results)
+    if f is None:
         raise SlamRunError(f"{args.results}: no ledger.sqlite; is this a results directory of `slamrun campaign`?")
-    ledger = Ledger(path)
-    df = results_frame(ledger)
-    t = Table(title=f"{ledger.meta('campaign', args.results.name)}: states per method and direction")
-    for c in ("method", "direction", "pending", "running", "done", "failed", "infra", "success %"):
-        t.add_column(c)
-    for (m, d), g in df.groupby(["method", "direction"], sort=True):
-        s = method_summary(g).iloc[0]
-        running = int((g.status == "running").sum())
-        t.add_row(
-            m, d, str(s.pending - running), str(running), str(s.done), str(s.failed), str(s.infra), _fmt(s.success_pct)
-        )
-    console.print(t)
-    summ = method_summary(df)
-    for _, r in summ.iterrows():
-        console.print(f"{r['method']}: success {_fmt(r['success_pct'])} % of {r['done'] + r['failed']} method results")
-    left = int(df.status.isin(["pending", "running"]).sum())
-    walls = df.wall_s.dropna()
-    lanes = (ledger.meta("eta") or {}).get("lanes", 1)
-    if left and len(walls):
-        eta = walls.mean() * left / max(lanes, 1)
-        console.print(f"{left} runs left, ETA ~{eta / 60:.1f} min at {lanes} lane(s)")
-    else:
-        console.print(f"{left} runs left")
+    if args.json:
+        print(json.dumps(f.to_dict()))
+        return 0
+    if not args.watch:
+        console.print(status_view(f))
+        return 0
+    from rich.live import Live
+
+    with Live(status_view(f), console=console, refresh_per_second=1) as live:
+        while True:
+            time.sleep(args.interval)
+            f = read_figures(args.results) or f
+            live.update(status_view(f))
+            if not f.active:
+                break
+    console.print("the campaign is not running")
     return 0
 
 
@@ -363,32 +381,20 @@ def cmd_list_methods(args) -> int:
 def cmd_evaluate(args) -> int:
     import numpy as np
 
-    from runner.errors import TrajectoryFormatError
-    from runner.evaluation import tum_mono_file
-    from runner.trajectory import Trajectory, read_tum_many
+    from runner.batch_eval import evaluate_files
+    from runner.trajectory import Trajectory
 
     data = np.loadtxt(args.gt, comments="#", ndmin=2) if args.gt.exists() else None
     if data is None or data.shape[1] != 8:
         raise SlamRunError(f"{args.gt}: expected a groundtruthSync file of 'timestamp tx ty tz qx qy qz qw' rows")
     gt = Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
-    for f, traj in zip(args.traj, read_tum_many(args.traj), strict=True):
-        if isinstance(traj, TrajectoryFormatError):
-            d = {"status": "unreadable", "detail": str(traj)}
-        else:
-            d = tum_mono_file(gt, traj).to_dict()
-        detail = d.get("detail") if d["status"] != "ok" else None
-        d = {
-            "file": str(f),
-            **{
-                k: d.get(k) for k in ("status", "e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse", "n_poses")
-            },
-            **({"detail": detail} if detail else {}),
-        }
+    for d in evaluate_files(gt, args.traj, args.jobs):
         if args.json:
             print(json.dumps(d))
         else:
             vals = " ".join(f"{k}={v:.6g}" for k, v in d.items() if isinstance(v, float))
-            print(f"{f}: {d['status']} {vals}" + (f"({detail})" if detail else ""))
+            detail = d.get("detail")
+            print(f"{d['file']}: {d['status']} {vals}" + (f"({detail})" if detail else ""))
     return 0
 
 
@@ -455,6 +461,7 @@ def cmd_images(args) -> int:
         weights=dict(_pair(w) for w in args.weights),
         train_vocabulary=not args.no_train_vocabulary,
         build_args=dict(_pair(b) for b in args.build_arg),
+        no_cache=args.no_cache,
     )
     if args.jobs:
         opts.jobs = args.jobs

@@ -20,7 +20,7 @@ import numpy as np
 
 from methods.base import Method
 from runner.backends.base import Backend, ExecRequest, ExecResult
-from runner.datasets.views import PreparedView
+from runner.datasets.views import PreparedView, verify_view
 from runner.errors import (
     DaemonUnreachable,
     DiskFullError,
@@ -42,7 +42,36 @@ class RunOutcome:
     values: dict  # ledger columns
 
 
+@dataclass(frozen=True)
+class Launched:
+    """A run whose process has ended (not cancelled): what finish_attempt needs next."""
+
+    result: ExecResult
+    started: float
+    extra: dict
+
+
 def execute_run(
+    run: PlannedRun,
+    method: Method,
+    view: PreparedView,
+    backend: Backend,
+    paths: RunPaths,
+    attempt: int,
+    cancel: threading.Event,
+    groundtruth: Trajectory | None = None,
+    **kw,
+) -> RunOutcome:
+    """launch_run then finish_attempt, in this thread."""
+    launched = launch_run(run, method, view, backend, paths, attempt, cancel, **kw)
+    if isinstance(launched, RunOutcome):
+        return launched
+    return finish_attempt(
+        run, method, view, paths, attempt, launched.result, launched.started, groundtruth, launched.extra
+    )
+
+
+def launch_run(
     run: PlannedRun,
     method: Method,
     view: PreparedView,
@@ -53,13 +82,13 @@ def execute_run(
     cpus: tuple[int, ...] | None = None,
     memory_mb: int | None = None,
     log_cap_bytes: int = 20 * 2**20,
-    groundtruth: Trajectory | None = None,
     campaign: str = "",
     on_start=None,
-) -> RunOutcome:
-    """Run once and record it. A full disk anywhere in the run is a DiskFullError and any other OSError
-    an InfraError (the machine's fault, not the method's); the run's staging folder is removed either way,
-    except when the Docker daemon went away mid-run (the next start may collect the finished container)."""
+) -> Launched | RunOutcome:
+    """Configure the run and run its process to its end (a RunOutcome only when cancelled). A full disk
+    anywhere is a DiskFullError and any other OSError an InfraError (the machine's fault, not the method's);
+    the run's staging folder is removed either way, except when the Docker daemon went away mid-run (the
+    next start may collect the finished container)."""
     with _os_errors_as_infra(run, paths):
         paths.clear_staging()
         stage = paths.staging(attempt)
@@ -106,7 +135,9 @@ def execute_run(
             return RunOutcome("cancelled", {})
         extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
         extra["engine"] = getattr(backend, "engine", None)
-        return finish_attempt(run, method, view, paths, attempt, result, started, groundtruth, extra)
+        if method.image and hasattr(backend, "describe_image"):
+            extra["image"] = backend.describe_image(method.image)  # its sources, vocabulary, weights
+        return Launched(result, started, extra)
 
 
 def finish_attempt(
@@ -130,6 +161,11 @@ def finish_attempt(
         if failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
             shutil.rmtree(stage, ignore_errors=True)
             raise DiskFullError(f"{run.key.id}: the disk is full ({failure}: {message})")
+        if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
+            damaged = verify_view(view.root)
+            if damaged:
+                shutil.rmtree(stage, ignore_errors=True)
+                raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
         values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
         if traj is not None and len(traj):
             write_tum(RunPaths.trajectory(stage), traj)

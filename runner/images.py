@@ -61,6 +61,7 @@ class BuildOptions:
     train_vocabulary: bool = True  # train a small vocabulary when neither the source nor the user has one
     build_args: dict[str, str] = field(default_factory=dict)
     log_dir: Path = DEFAULT_LOG_DIR
+    no_cache: bool = False  # rebuild every step (to measure a build from scratch)
 
 
 @dataclass
@@ -78,7 +79,7 @@ def buildable() -> dict[str, tuple[str, Path]]:
     """Registered methods with an image: name → (tag, Dockerfile)."""
     out = {}
     for name, cls in sorted(methods.REGISTRY.items()):
-        if cls.image:
+        if isinstance(cls.image, str):  # `external` names its image per spec (a property), not built here
             out[name] = (cls.image, ROOT / "docker" / name / "Dockerfile")
     return out
 
@@ -244,7 +245,7 @@ def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions,
             **opts.build_args,
         }
         note(f"build arguments: {json.dumps(args)}")
-        run_build(client, ctx, tag, args, labels, logf, log, log_path)
+        run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)
     seconds = time.monotonic() - t0
     size_mb = client.inspect_image(tag)["Size"] / 2**20
     record = BuildRecord(name, tag, round(seconds, 1), round(size_mb, 1), str(log_path), labels, time.time())
@@ -253,7 +254,7 @@ def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions,
     return record
 
 
-def run_build(client, ctx: Path, tag: str, args: dict, labels: dict, logf, log, log_path) -> None:
+def run_build(client, ctx: Path, tag: str, args: dict, labels: dict, logf, log, log_path, no_cache=False) -> None:
     """Stream a build; an error names the step that failed, the end of its output and the log."""
     step, tail, error = "(before the first step)", [], None
     try:
@@ -263,6 +264,7 @@ def run_build(client, ctx: Path, tag: str, args: dict, labels: dict, logf, log, 
             tag=tag,
             rm=True,
             forcerm=True,
+            nocache=no_cache,
             decode=True,
             buildargs=args,
             labels=labels,

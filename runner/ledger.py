@@ -102,8 +102,23 @@ class ResultsLock:
 
 
 class Ledger:
-    def __init__(self, path: Path):
+    def __init__(self, path: Path, read_only: bool = False):
+        """The ledger at `path`, created when missing; `read_only` opens an existing one without writing or
+        locking anything (for status while a campaign runs)."""
         self.path = Path(path)
+        self.read_only = read_only
+        self._lock = threading.Lock()
+        if read_only:
+            if not self.path.exists():
+                raise SlamRunError(f"{self.path}: no ledger; is this a results directory of `slamrun campaign`?")
+            # Without a -wal file no process writes it now: `immutable` then reads without creating the -shm
+            # and -wal files a read-only open of a WAL database would otherwise leave behind.
+            writer = Path(f"{self.path}-wal").exists()
+            mode = "mode=ro" if writer else "mode=ro&immutable=1"
+            self._db = sqlite3.connect(f"file:{self.path}?{mode}", uri=True, check_same_thread=False, timeout=30)
+            self._db.row_factory = sqlite3.Row
+            self._inode = os.stat(self.path).st_ino
+            return
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:
             self._db = sqlite3.connect(self.path, check_same_thread=False, timeout=30, isolation_level=None)
@@ -115,7 +130,6 @@ class Ledger:
                 "every finished run is imported from its folder under runs/, nothing is redone"
             ) from None
         self._db.row_factory = sqlite3.Row
-        self._lock = threading.Lock()
         cols = ", ".join(f"{c} {_coltype(c)}" for c in ALL_COLUMNS if c != "key")
         self._inode = os.stat(self.path).st_ino
         with self._lock:
@@ -132,7 +146,10 @@ class Ledger:
             self._db.execute("INSERT OR REPLACE INTO meta VALUES (?, ?)", (name, json.dumps(value)))
 
     def meta(self, name: str, default=None):
-        row = self._db.execute("SELECT value FROM meta WHERE name = ?", (name,)).fetchone()
+        try:
+            row = self._db.execute("SELECT value FROM meta WHERE name = ?", (name,)).fetchone()
+        except sqlite3.OperationalError:  # an empty ledger opened read-only has no tables yet
+            return default
         return json.loads(row[0]) if row else default
 
     def sync_plan(self, runs: Iterable[PlannedRun]) -> int:
@@ -236,7 +253,10 @@ class Ledger:
             args.append(state)
         if cond:
             sql += " WHERE " + " AND ".join(cond)
-        return [dict(r) for r in self._db.execute(sql + " ORDER BY key", args).fetchall()]
+        try:
+            return [dict(r) for r in self._db.execute(sql + " ORDER BY key", args).fetchall()]
+        except sqlite3.OperationalError:  # an empty ledger opened read-only has no tables yet
+            return []
 
     def get(self, key: str) -> dict | None:
         row = self._db.execute("SELECT * FROM runs WHERE key = ?", (key,)).fetchone()

@@ -69,14 +69,15 @@ def collect_leftovers(
     ledger: Ledger,
     runs: list[PlannedRun],
     methods_by_index: dict[int, Method],
-    views: dict[tuple, PreparedView],
+    view_of,
     groundtruths: dict[str, Trajectory | None],
     results: Path,
     log_cap_bytes: int,
 ) -> int:
     """Containers this campaign left behind (its runner killed, or the Docker daemon lost mid-run): one that
     exited by itself with a complete, accepted output is recorded as its run's attempt; every other one is
-    removed and its run stays pending. Returns how many were collected."""
+    removed and its run stays pending. `view_of(key)` gives a run's prepared view. Returns how many were
+    collected."""
     by_key = {r.key.id: r for r in runs}
     collected = 0
     for container in backend.leftovers(campaign):
@@ -89,7 +90,7 @@ def collect_leftovers(
             attempt = 0
         paths = RunPaths(results, run.key) if run else None
         if run and row and row["state"] == "pending" and attempt and paths.staging(attempt).is_dir():
-            view = views.get((str(run.sequence_dir), run.key.direction, run.profile))
+            view = view_of((str(run.sequence_dir), run.key.direction, run.profile))
             stage = paths.staging(attempt)
             result = backend.collect(container, RunPaths.log(stage), log_cap_bytes, view.n_frames) if view else None
             method = methods_by_index[run.method_index]

@@ -12,11 +12,12 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 from methods import get as get_method
 from runner.backends.base import Backend
-from runner.datasets.views import PreparedView, prepare, verify_view
+from runner.datasets.views import PreparedView
 from runner.errors import (
     DaemonUnreachable,
     DatasetError,
@@ -26,10 +27,11 @@ from runner.errors import (
     SlamRunError,
     is_disk_full,
 )
-from runner.execute import execute_run
+from runner.execute import Launched, RunOutcome, finish_attempt, launch_run
 from runner.ledger import Ledger
 from runner.paths import RunPaths, finished_record
 from runner.plan import PlannedRun
+from runner.preparer import ViewPreparer
 from runner.spec import CampaignSpec
 from runner.trajectory import Trajectory
 
@@ -58,7 +60,7 @@ class Scheduler:
         spec: CampaignSpec,
         ledger: Ledger,
         backend: Backend,
-        views: dict[tuple, PreparedView],
+        views: ViewPreparer,
         groundtruths: dict[str, Trajectory | None],
         on_event: Event | None = None,
     ):
@@ -71,8 +73,10 @@ class Scheduler:
         self.stop = threading.Event()  # no new runs
         self.cancel = threading.Event()  # stop runs in flight
         self._queue: list[PlannedRun] = []
-        self._qlock = threading.Lock()
-        self._view_lock = threading.Lock()
+        self._qcond = threading.Condition()
+        self._finishing = 0  # runs handed to the finishing threads and not recorded yet
+        self._finisher: ThreadPoolExecutor | None = None
+        self.started_at = self.ended_at = None
         self.fatal: str | None = None  # why the campaign stopped by itself (a full disk)
         self.fatal_error: SlamRunError | None = None  # the error that stopped it (full disk, ledger lost)
         self.methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
@@ -86,6 +90,8 @@ class Scheduler:
             threading.Thread(target=self._lane_loop, args=(lane,), name=f"lane-{lane.index}", daemon=True)
             for lane in lanes
         ]
+        self._finisher = None if exclusive else ThreadPoolExecutor(max_workers=len(lanes), thread_name_prefix="finish")
+        self.started_at = time.time()
         for t in threads:
             t.start()
         stop_seen_at = None
@@ -96,6 +102,9 @@ class Scheduler:
                 stop_seen_at = time.monotonic()
             if stop_seen_at is not None and time.monotonic() - stop_seen_at > self.spec.stop_grace_s:
                 self.cancel.set()
+        if self._finisher is not None:
+            self._finisher.shutdown(wait=True)  # the runs whose process ended are recorded before the end
+        self.ended_at = time.time()
 
     def request_stop(self, now: bool = False) -> None:
         self.stop.set()
@@ -103,8 +112,15 @@ class Scheduler:
             self.cancel.set()
 
     def _next(self) -> PlannedRun | None:
-        with self._qlock:
-            return self._queue.pop(0) if self._queue and not self.stop.is_set() else None
+        """The next run; None when there is none left, no finishing run may send one back, or on stop."""
+        with self._qcond:
+            while not self.stop.is_set():
+                if self._queue:
+                    return self._queue.pop(0)
+                if self._finishing == 0:
+                    return None
+                self._qcond.wait(0.2)
+            return None
 
     def _lane_loop(self, lane: Lane) -> None:
         while (run := self._next()) is not None:
@@ -141,27 +157,19 @@ class Scheduler:
 
     def _checked_view(self, run: PlannedRun, lane: Lane) -> PreparedView:
         """The run's prepared view, whole: one found missing or damaged (deleted cache, a method that wrote
-        into it) is prepared again first, so no run is charged for it. A view that cannot be rebuilt is an
-        infrastructure failure."""
-        k = (str(run.sequence_dir), run.key.direction, run.profile)
-        view = self.views[k]
-        problem = verify_view(view.root)
-        if problem is None:
-            return view
-        self.on_event("view", run, lane, {"message": f"{problem}; preparing it again"})
-        with self._view_lock:
-            if self.views[k].root == view.root:
-                try:
-                    self.views[k] = prepare(
-                        run.sequence_dir,
-                        run.key.direction,
-                        run.profile,
-                        self.spec.cache,
-                        frame_format=self.spec.frame_format,
-                    )
-                except DatasetError as exc:
-                    raise InfraError(f"{run.key.id}: its view is damaged and cannot be prepared again: {exc}") from None
-            return self.views[k]
+        into it) is prepared again first, so no run is charged for it. A view that cannot be prepared is an
+        infrastructure failure (a full disk stops the campaign)."""
+        try:
+            view, problem = self.views.checked((str(run.sequence_dir), run.key.direction, run.profile))
+        except DatasetError as exc:
+            raise InfraError(f"{run.key.id}: its view cannot be prepared: {exc}") from None
+        except OSError as exc:
+            if is_disk_full(exc):
+                raise DiskFullError(f"{run.key.id}: the disk is full while preparing its view ({exc})") from None
+            raise InfraError(f"{run.key.id}: its view cannot be prepared: {exc}") from None
+        if problem is not None:
+            self.on_event("view", run, lane, {"message": f"{problem}; prepared again"})
+        return view
 
     def _run_with_retries(self, run: PlannedRun, lane: Lane) -> None:
         method = self.methods[run.method_index]
@@ -176,7 +184,7 @@ class Scheduler:
             self.on_event("started", run, lane, {"attempt": attempt})
             try:
                 view = self._checked_view(run, lane)
-                outcome = execute_run(
+                launched = launch_run(
                     run,
                     method,
                     view,
@@ -187,7 +195,6 @@ class Scheduler:
                     cpus=lane.cpus,
                     memory_mb=self.spec.memory_limit_mb,
                     log_cap_bytes=int(self.spec.log_cap_mb * 2**20),
-                    groundtruth=self.groundtruths.get(str(run.sequence_dir)) if self.spec.evaluate else None,
                     campaign=self.spec.name,
                     on_start=lambda pid, t0: self.ledger.set_process(run.key.id, pid, t0),
                 )
@@ -210,10 +217,56 @@ class Scheduler:
                 self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": str(exc)})
                 self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": str(exc)})
                 return
-            if outcome.state == "cancelled":
+            if isinstance(launched, RunOutcome):  # cancelled
                 self.ledger.reset_to_pending(run.key.id)
                 self.on_event("requeued", run, lane, {})
                 return
+            job = (run, lane, method, view, paths, attempt, launched)
+            with self._qcond:
+                self._finishing += 1
+            if self._finisher is None:  # exclusive timing: nothing else may run beside the next run
+                self._finish(*job)
+            else:  # off the lane: the next run starts now
+                self._finisher.submit(self._finish, *job)
+            return
+
+    def _finish(self, run, lane, method, view, paths, attempt, launched: Launched) -> None:
+        try:
+            self._record(run, lane, method, view, paths, attempt, launched)
+        finally:
+            with self._qcond:
+                self._finishing -= 1
+                self._qcond.notify_all()
+
+    def _record(self, run, lane, method, view, paths, attempt, launched: Launched) -> None:
+        """Read, evaluate, record and rename a run whose process ended. An infrastructure fault found now
+        (the view vanished or was damaged under the run) sends the run back to the queue, up to `retries`."""
+        gt = self.groundtruths.get(str(run.sequence_dir)) if self.spec.evaluate else None
+        try:
+            outcome = finish_attempt(
+                run, method, view, paths, attempt, launched.result, launched.started, gt, launched.extra
+            )
             self.ledger.finish(run.key.id, outcome.state, outcome.values)
             self.on_event("finished", run, lane, {"state": outcome.state, **outcome.values})
-            return
+        except DiskFullError as exc:
+            self._stop_for_full_disk(run, lane, str(exc), requeue=True)
+        except LedgerLostError as exc:
+            self.fatal_error = self.fatal_error or exc
+            self.request_stop()
+        except InfraError as exc:
+            if attempt <= self.spec.retries and not self.stop.is_set():
+                self.ledger.reset_to_pending(run.key.id)
+                self.on_event("retry", run, lane, {"message": str(exc), "delay_s": 0.0})
+                with self._qcond:
+                    self._queue.insert(0, run)
+                    self._qcond.notify_all()
+                return
+            self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": str(exc)})
+            self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": str(exc)})
+        except Exception as exc:
+            if is_disk_full(exc):
+                self._stop_for_full_disk(run, lane, f"{run.key.id}: the disk is full ({exc})", requeue=False)
+                return
+            msg = traceback.format_exc()
+            self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": msg[-2000:]})
+            self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": msg})

@@ -305,7 +305,10 @@ def test_status_cli(tmp_path, tiny_dataset):
     proc = slamrun("status", str(tmp_path / "results"))
     out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 0
-    assert "crashy: success 0 %" in out and "external: success 100 %" in out
+    rows = [[c.strip() for c in line.strip("│ ").split("│")] for line in out.splitlines() if line.count("│") > 6]
+    rate = {(r[0], r[1]): r[-1] for r in rows}
+    assert rate[("crashy", "forward")] == "0" and rate[("external", "backward")] == "100"
+    assert "8/8" in out and "campaign not running" in out
 
 
 @pytest.fixture

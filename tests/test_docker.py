@@ -143,7 +143,7 @@ def test_unreachable_daemon_is_reported_before_runs(tmp_path, monkeypatch):
     from runner.backends.docker import DockerBackend
 
     monkeypatch.setenv("DOCKER_HOST", f"unix://{tmp_path}/no-daemon.sock")
-    with pytest.raises(InfraError, match="cannot reach the Docker daemon"):
+    with pytest.raises(InfraError, match="Docker daemon unreachable at"):
         DockerBackend().check()
 
 

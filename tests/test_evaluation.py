@@ -257,3 +257,40 @@ def test_a_segment_at_one_point_is_status_nan_without_warnings(which):
         warnings.simplefilter("error")
         res = tum_mono(Trajectory(gt.timestamps, gt_pos, gt.quaternions), estimate_from(gt, est_pos))
     assert res.status is EvalStatus.nan and np.isnan(res.e_t)
+
+
+def test_evaluation_on_every_core_gives_the_same_numbers_in_input_order(tmp_path):
+    """Many files (good, noisy, unreadable, NaN-holding, empty) through 1 and 3 worker processes."""
+    from runner.batch_eval import evaluate_files
+    from runner.trajectory import write_tum
+
+    gt = ground_truth()
+    rng = np.random.default_rng(5)
+    paths = []
+    for i in range(150):
+        path = tmp_path / f"t{i:03d}.txt"
+        kind = i % 10
+        if kind == 7:
+            path.write_text("1 2 3\n")
+        elif kind == 8:
+            pos = np.nan_to_num(gt.positions) * 1.5
+            rows = np.column_stack([gt.timestamps, pos, np.tile([0, 0, 0, 1.0], (len(gt), 1))])
+            rows[3, 2] = np.nan
+            np.savetxt(path, rows)
+        elif kind == 9:
+            path.write_text("")
+        else:
+            noisy = np.nan_to_num(gt.positions) * (1 + i) + rng.normal(scale=0.01 * kind, size=gt.positions.shape)
+            write_tum(path, estimate_from(gt, noisy))
+        paths.append(path)
+    one = list(evaluate_files(gt, paths, jobs=1))
+    many = list(evaluate_files(gt, paths, jobs=3))
+    assert [d["file"] for d in many] == [str(p) for p in paths]
+    assert json_equal(one, many)
+    assert {d["status"] for d in one} == {"ok", "unreadable", "nan", "empty"}
+
+
+def json_equal(a, b) -> bool:
+    import json
+
+    return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)

@@ -118,6 +118,21 @@ class DockerBackend:
         if problems:
             raise InfraError("Docker images:\n  " + "\n  ".join(problems))
 
+    def describe_image(self, tag: str) -> dict:
+        """The image a run used: its id and the slamrun.* labels its build recorded (sources and commits,
+        vocabulary, weights, target), for run.json. Cached per tag."""
+        cache = self.__dict__.setdefault("_image_info", {})
+        if tag not in cache:
+            try:
+                info = self.client.api.inspect_image(tag)
+            except Exception:  # noqa: BLE001 - the run itself reports a missing image
+                return {"tag": tag}
+            labels = (info.get("Config") or {}).get("Labels") or {}
+            cache[tag] = {"tag": tag, "id": info.get("Id")} | {
+                k.removeprefix("slamrun."): v for k, v in labels.items() if k.startswith("slamrun.")
+            }
+        return cache[tag]
+
     def leftovers(self, campaign: str) -> list:
         """Containers of this campaign that a killed runner or a lost daemon left behind."""
         return self.client.containers.list(all=True, filters={"label": f"{LABEL_CAMPAIGN}={campaign}"})

@@ -1,0 +1,172 @@
+"""What the CLI shows of a campaign: the live view while it runs, `slamrun status`, the end summary.
+
+Every number comes from runner.progress.figures over the ledger, so the live view, the status of a second
+terminal and the summary agree. Only the CLI uses this module.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from rich.console import Console, Group
+from rich.progress_bar import ProgressBar
+from rich.table import Table
+from rich.text import Text
+
+from runner.ledger import Ledger
+from runner.progress import Figures, duration, figures, one_line
+
+
+def read_figures(results: Path, now: float | None = None) -> Figures | None:
+    """The figures of a results folder's ledger, read without writing or locking anything; None when the
+    ledger does not exist yet."""
+    from runner.campaign import session_alive
+
+    path = Path(results) / "ledger.sqlite"
+    if not path.exists():
+        return None
+    ledger = Ledger(path, read_only=True)
+    try:
+        session = ledger.meta("session")
+        if session and not session.get("ended_at") and not session_alive(session):
+            session = {**session, "ended_at": session.get("last_seen") or session["started_at"], "crashed": True}
+        f = figures(ledger.rows(), session, now or time.time(), ledger.meta("campaign", Path(results).name))
+    finally:
+        ledger.close()
+    return f
+
+
+def headline(f: Figures, width: int = 40) -> Table:
+    """Bar, counts, failures by kind, elapsed and ETA on one line."""
+    grid = Table.grid(padding=(0, 1))
+    for _ in range(4):
+        grid.add_column()
+    kinds = ", ".join(f"{k} {n}" for k, n in f.failures.items())
+    counts = Text(f"{f.finished}/{f.total}", style="bold")
+    detail = f"done {f.done}  failed {f.failed}" + (f" ({kinds})" if kinds else "")
+    if f.infra:
+        detail += f"  infra {f.infra}"
+    timing = f"elapsed {duration(f.elapsed_s)}" if f.elapsed_s is not None else ""
+    if f.finished < f.total:
+        timing += f"  ETA {duration(f.eta_s)}" + (f" ({f.eta_basis})" if f.eta_basis not in ("measured", "-") else "")
+    if f.occupancy is not None:
+        timing += f"  lanes busy {100 * f.occupancy:.0f} %"
+    grid.add_row(ProgressBar(total=max(f.total, 1), completed=f.finished, width=width), counts, detail, timing)
+    return grid
+
+
+def group_table(f: Figures) -> Table:
+    t = Table(title=f"{f.campaign}: runs per method and direction")
+    for c in ("method", "direction", "pending", "running", "done", "failed", "infra", "success %"):
+        t.add_column(c, justify="left" if c in ("method", "direction") else "right")
+    for g in f.per_group:
+        rate = "-" if g["success_pct"] is None else f"{g['success_pct']:.0f}"
+        t.add_row(
+            g["method"],
+            g["direction"],
+            *(str(g[k]) for k in ("pending", "running", "done", "failed", "infra")),
+            rate,
+        )
+    return t
+
+
+def status_view(f: Figures) -> Group:
+    state = "running" if f.active else "not running"
+    return Group(group_table(f), headline(f), Text(f"campaign {state}, {f.lanes} lane(s)"))
+
+
+class LiveProgress:
+    """The campaign's live view: a headline over the whole plan and what each lane runs now, refreshed from
+    the ledger; plain lines (each finished run, and the headline every `every` runs) when not on a terminal."""
+
+    def __init__(self, results: Path, console: Console, tty: bool, every: int | None = None):
+        self.results = results
+        self.console = console
+        self.tty = tty
+        self.every = every
+        self.lanes: dict[int, tuple[str, str, float]] = {}  # lane -> (run key, what, started)
+        self._lock = threading.Lock()  # events come from the lanes and the finishing threads
+        self.finished_here = 0
+        self._figures: Figures | None = None
+        self._last_read = 0.0
+        self._live = None
+        if tty:
+            from rich.live import Live
+
+            self._live = Live(console=console, refresh_per_second=2, get_renderable=self.render, transient=False)
+            self._live.start()
+
+    def figures(self, force: bool = False) -> Figures | None:
+        now = time.monotonic()
+        if force or self._figures is None or now - self._last_read > 1.0:
+            try:
+                self._figures = read_figures(self.results) or self._figures
+            except Exception:  # noqa: BLE001 - the ledger is being created or replaced: keep the last figures
+                pass
+            self._last_read = now
+        return self._figures
+
+    def render(self):
+        f = self.figures()
+        if f is None:
+            return Text("preparing ...")
+        now = time.monotonic()
+        lanes = [
+            Text(f"  lane {i}: {what} ({duration(now - t0)})", style="dim")
+            for i, (what, t0) in sorted(self.lanes.items())
+        ]
+        return Group(Text(f.campaign, style="bold"), headline(f), *lanes)
+
+    def note(self, msg: str) -> None:
+        self.console.print(msg)
+
+    def event(self, kind: str, run, lane, info: dict) -> None:
+        with self._lock:
+            self._event(kind, run, lane, info)
+
+    def _event(self, kind: str, run, lane, info: dict) -> None:
+        if kind == "started":
+            self.lanes[lane.index] = (
+                f"{run.key.label} {run.key.sequence} {run.key.direction.value} {run.key.trial}",
+                time.monotonic(),
+            )
+        elif kind == "finished":
+            if self.lanes.get(lane.index, ("",))[0] == run.key.id:  # the lane may run the next one already
+                self.lanes.pop(lane.index, None)
+            self.finished_here += 1
+            f = self.figures(force=True)
+            if not self.tty:
+                what = info.get("failure") or "ok"
+                metric = info.get("e_align")
+                extra = f" e_align={metric:.4g}" if isinstance(metric, float) else ""
+                self.console.print(f"[lane {lane.index}] {run.key.id}: {info.get('state')} ({what}){extra}")
+                every = self.every or max(1, min(10, (f.total if f else 20) // 20))
+                if f is not None and self.finished_here % every == 0:
+                    self.console.print(f"progress: {one_line(f)}")
+        elif kind in ("retry", "requeued", "view"):
+            self.note(f"[lane {lane.index}] {run.key.id}: {kind} {info.get('message', '')}")
+
+    def close(self) -> None:
+        if self._live is not None:
+            self._live.stop()
+
+
+def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple[Table | None, int]:
+    """The failed runs (method failures and infrastructure), at most `limit`; returns the table and how many
+    more there are."""
+    failed = sorted((r for r in rows if r["state"] == "failed"), key=lambda r: r["key"])
+    if not failed:
+        return None, 0
+    t = Table(title=f"{campaign}: failed runs ({len(failed)})")
+    for c in ("method", "sequence", "direction", "trial", "kind", "log"):
+        t.add_column(c)
+    for r in failed[:limit]:
+        log = (
+            str(Path(r["run_dir"]) / "log.txt")
+            if r.get("run_dir") and r.get("failure") != "infra"
+            else (r.get("message") or "")[:80]
+        )
+        t.add_row(r["label"], r["sequence"], r["direction"], str(r["trial"]), r.get("failure") or "?", log)
+    return t, max(len(failed) - limit, 0)

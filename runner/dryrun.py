@@ -1,0 +1,127 @@
+"""`slamrun campaign SPEC --dry-run` / `slamrun plan SPEC`: what a campaign would do, doing nothing.
+
+Reads the spec, the sequences, the view cache and (read-only) the results folder's ledger; writes nothing,
+generates nothing, locks nothing.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from runner.datasets.tum_mono import open_sequence
+from runner.datasets.views import Profile, _latest_generation, verify_view, view_key
+from runner.errors import DatasetError
+from runner.ledger import Ledger
+from runner.paths import RunPaths, finished_record
+from runner.plan import plan
+from runner.progress import eta
+from runner.spec import CampaignSpec
+
+
+@dataclass
+class DryRun:
+    total: int
+    done: int
+    failed: int  # method failures: results, not run again
+    infra: int  # infrastructure failures: run again
+    to_run: int
+    lanes: int
+    groups: list[dict] = field(default_factory=list)
+    views_to_prepare: int = 0
+    view_bytes: int = 0
+    views_unknown: int = 0  # of synthetic sequences not generated yet
+    eta_s: float | None = None
+    eta_basis: str = "unknown"
+
+
+def dry_run(spec: CampaignSpec) -> DryRun:
+    runs = plan(spec)
+    rows: dict[str, dict] = {}
+    path = spec.results / "ledger.sqlite"
+    if path.exists() and path.stat().st_size:
+        ledger = Ledger(path, read_only=True)
+        try:
+            rows = {r["key"]: r for r in ledger.rows(active_only=False)}
+        finally:
+            ledger.close()
+    counts: dict[tuple[str, str], Counter] = defaultdict(Counter)
+    todo_by_method: Counter = Counter()
+    todo_views = set()
+    for run in runs:
+        row = rows.get(run.key.id)
+        if row is None:
+            rec = finished_record(RunPaths(spec.results, run.key).final, run.key.id)  # imported at the start
+            state = "new" if rec is None else rec["state"]
+        elif row["state"] == "failed" and row.get("failure") == "infra":
+            state = "infra"
+        elif row["state"] in ("pending", "running"):
+            state = "pending"
+        else:
+            state = row["state"]
+        counts[(run.key.label, run.key.direction.value)][state] += 1
+        if state in ("new", "pending", "infra"):
+            todo_by_method[run.key.label] += 1
+            todo_views.add((run.sequence_dir, run.key.direction, run.profile))
+    groups = []
+    for (label, direction), c in sorted(counts.items()):
+        groups.append(
+            {
+                "method": label,
+                "direction": direction,
+                "runs": sum(c.values()),
+                "new": c["new"],
+                "pending": c["pending"] + c["infra"],
+                "done": c["done"],
+                "failed": c["failed"],
+            }
+        )
+    total = Counter()
+    for c in counts.values():
+        total.update(c)
+    lanes = 1 if spec.measurement == "exclusive" else spec.lanes
+    out = DryRun(
+        total=len(runs),
+        done=total["done"],
+        failed=total["failed"],
+        infra=total["infra"],
+        to_run=sum(todo_by_method.values()),
+        lanes=lanes,
+        groups=groups,
+    )
+    for seq_dir, direction, profile in sorted(todo_views, key=str):
+        size = _view_bytes_if_missing(seq_dir, direction, profile, spec)
+        if size is None:
+            out.views_unknown += 1
+        elif size:
+            out.views_to_prepare += 1
+            out.view_bytes += size
+    walls: dict[str, list[float]] = defaultdict(list)
+    for r in rows.values():
+        if r["state"] in ("done", "failed") and r.get("failure") != "infra" and r.get("wall_s"):
+            walls[r["label"]].append(float(r["wall_s"]))
+    out.eta_s, out.eta_basis = eta(dict(todo_by_method), walls, lanes)
+    return out
+
+
+def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: CampaignSpec) -> int | None:
+    """0 when the view is prepared and whole, its estimated size when it must be prepared, None when the
+    sequence does not exist yet (synthetic, generated on first use)."""
+    if not (seq_dir / "times.txt").exists():
+        return None
+    try:
+        seq = open_sequence(seq_dir)
+    except DatasetError:
+        return None
+    found = _latest_generation(Path(spec.cache), view_key(seq, direction, profile, spec.frame_format))
+    if found is not None and verify_view(found) is None:
+        return 0
+    if profile is Profile.rectified:
+        per_pixel = 1.0 if spec.frame_format == "pgm" else 0.5  # PNG level 1 on camera images: about half
+        return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * per_pixel)
+    if seq.zip_path is not None:
+        with zipfile.ZipFile(seq.zip_path) as zf:
+            return sum(i.file_size for i in zf.infolist())
+    return sum(p.stat().st_size for p in (seq.root / "images").iterdir())

@@ -1,0 +1,240 @@
+"""What a researcher reads while a batch runs: the live view under a real pseudo-terminal, plain progress
+lines, the dry run, `status --watch` and `--json` from a second process, the failed-run list."""
+
+from __future__ import annotations
+
+import json
+import os
+import pty
+import re
+import select
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from runner.progress import eta, figures
+from tests.conftest import fake_method, write_spec
+from tests.test_campaign import ledger_rows
+
+ANSI = re.compile(r"\x1b\[[0-9;?]*[A-Za-z]|\x1b\][^\x07]*\x07|\r")
+
+
+def run_in_pty(args: list[str], timeout: float = 240) -> tuple[int, str]:
+    """Run the CLI with a pseudo-terminal as its stdout (rich sees a terminal); returns (code, text)."""
+    master, slave = pty.openpty()
+    env = {**os.environ, "COLUMNS": "200", "LINES": "50", "TERM": "xterm"}
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "runner.cli", *args], stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, env=env
+    )
+    os.close(slave)
+    chunks, deadline = [], time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        ready, _, _ = select.select([master], [], [], 0.5)
+        if ready:
+            try:
+                data = os.read(master, 65536)
+            except OSError:
+                break
+            if not data:
+                break
+            chunks.append(data)
+        elif proc.poll() is not None:
+            break
+    os.close(master)
+    return proc.wait(timeout=30), ANSI.sub("", b"".join(chunks).decode(errors="replace"))
+
+
+def snapshot(folder: Path) -> dict[str, tuple[int, int]]:
+    if not folder.exists():
+        return {}
+    return {str(p.relative_to(folder)): (p.stat().st_size, p.stat().st_mtime_ns) for p in folder.rglob("*")}
+
+
+# ------------------------------------------------------------ the figures
+
+
+def test_eta_is_the_median_wall_time_per_method_times_runs_left_over_lanes():
+    walls = {"a": [10.0, 12.0, 100.0], "b": [4.0]}
+    assert eta({"a": 3, "b": 5}, walls, lanes=2) == ((3 * 12.0 + 5 * 4.0) / 2, "measured")
+    seconds, basis = eta({"a": 1, "c": 2}, walls, lanes=1)  # c has no finished run: the median of all
+    assert basis == "partly estimated" and seconds == 12.0 + 2 * 11.0
+    assert eta({"a": 2}, {}, lanes=1) == (None, "unknown")
+    assert eta({"a": 0}, walls, lanes=1) == (0.0, "-")
+
+
+def test_figures_count_infra_apart_and_measure_lane_occupancy():
+    rows = [
+        {"label": "m", "direction": "forward", "state": "done", "failure": None, "wall_s": 10.0, "started_at": 100.0},
+        {"label": "m", "direction": "forward", "state": "failed", "failure": "lost", "wall_s": 6.0, "started_at": 111},
+        {"label": "m", "direction": "backward", "state": "failed", "failure": "infra", "wall_s": None, "started_at": 1},
+        {
+            "label": "m",
+            "direction": "backward",
+            "state": "pending",
+            "failure": None,
+            "wall_s": None,
+            "started_at": None,
+        },
+    ]
+    f = figures(rows, {"started_at": 100.0, "lanes": 2, "ended_at": None}, now=120.0, campaign="c")
+    assert (f.total, f.done, f.failed, f.infra, f.pending, f.finished) == (4, 1, 1, 1, 1, 3)
+    assert f.failures == {"lost": 1}
+    assert f.occupancy == pytest.approx(16.0 / (2 * 20.0))
+    assert f.eta_s == pytest.approx(2 * 8.0 / 2)  # pending + infra (retried), median of 10 and 6
+    backward = next(g for g in f.per_group if g["direction"] == "backward")
+    assert backward["infra"] == 1 and backward["success_pct"] is None
+
+
+# ------------------------------------------------------------ the live view on a terminal
+
+
+def test_live_view_total_eta_resume_and_failed_runs(tmp_path, tiny_dataset):
+    crash = fake_method("crash", label="crasher")
+    crash["trials"] = 1
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=1.0), crash], trials=2, lanes=1, report=False)
+    code, out = run_in_pty(["campaign", str(spec)])
+    assert code == 0, out[-3000:]
+    assert "0/12" in out  # the total is known before the first run ends
+    before_first = out[: out.index("1/12")]
+    assert "ETA ?" in before_first
+    after = out[out.index("1/12") :]
+    assert re.search(r"ETA \d+ (s|min)", after), after[:2000]
+    assert "lane 0:" in out  # what the lane runs now
+    assert "t: failed runs (4)" in out  # the failed-run list, titled with the campaign's name
+    assert out.count("log.txt") >= 4 and "crashed" in out
+    assert "t: per method" in out
+
+    # resume with more trials: the runs of the first session count as done from the start
+    raw = yaml.safe_load(spec.read_text())
+    raw["trials"] = 3
+    spec.write_text(yaml.safe_dump(raw))
+    code, out = run_in_pty(["campaign", str(spec)])
+    assert code == 0, out[-3000:]
+    assert "12/16" in out and "0/16" not in out
+
+
+def test_plain_lines_carry_the_same_figures(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], trials=2, lanes=1, report=False)
+    proc = subprocess.run(
+        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], capture_output=True, text=True, timeout=240
+    )
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("progress:")]
+    assert lines and "8/8 finished" in lines[-1] and "done 8" in lines[-1]
+    assert any("ETA" in ln for ln in lines[:-1])
+
+
+# ------------------------------------------------------------ the dry run
+
+
+def _dry(capsys, spec: Path, tmp_path: Path) -> str:
+    from runner.cli import main
+
+    before = snapshot(tmp_path)
+    assert main(["campaign", str(spec), "--dry-run"]) == 0
+    assert snapshot(tmp_path) == before  # nothing written, not even a lock, a ledger or a view
+    return capsys.readouterr().out
+
+
+def _counts(out: str) -> dict[tuple[str, str], list[int]]:
+    rows = {}
+    for line in out.splitlines():
+        cells = [c.strip() for c in line.strip("│ ").split("│")]
+        if len(cells) == 7 and cells[1] in ("forward", "backward"):
+            rows[(cells[0], cells[1])] = [int(c) for c in cells[2:]]
+    return rows
+
+
+def test_dry_run_counts_are_exact(tmp_path, tiny_dataset, capsys):
+    from runner.campaign import run_campaign
+    from runner.spec import load_spec
+
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(label="m")], trials=2, lanes=1, report=False)
+    out = _dry(capsys, spec, tmp_path)  # new
+    assert _counts(out) == {("m", "backward"): [4, 4, 0, 0, 0], ("m", "forward"): [4, 4, 0, 0, 0]}
+    assert "8 run(s) to run of 8" in out and "4 view(s) to prepare" in out and "unknown" in out
+
+    stop_after = []
+
+    def on_event(kind, run, lane, info):
+        if kind == "finished":
+            stop_after.append(run)
+            if len(stop_after) == 3:
+                sched_ref[0].request_stop()
+
+    sched_ref = []
+    run_campaign(load_spec(spec), on_event=on_event, scheduler_hook=sched_ref.append, log=lambda *a: None)
+    out = _dry(capsys, spec, tmp_path)  # half-finished (the run in flight at the stop finished too)
+    done = sum(r["state"] == "done" for r in ledger_rows(tmp_path / "results"))
+    assert 3 <= done < 8
+    counts = _counts(out)
+    assert sum(c[3] for c in counts.values()) == done and sum(c[1] for c in counts.values()) == 0
+    assert sum(c[2] for c in counts.values()) == 8 - done
+    assert f"{8 - done} run(s) to run of 8 ({done} done" in out
+    assert re.search(r"estimated duration: \d+ s on 1 lane", out)
+
+    run_campaign(load_spec(spec), log=lambda *a: None)
+    out = _dry(capsys, spec, tmp_path)  # finished
+    assert _counts(out) == {("m", "backward"): [4, 0, 0, 4, 0], ("m", "forward"): [4, 0, 0, 4, 0]}
+    assert "0 run(s) to run of 8 (8 done" in out and "every view it needs is prepared" in out
+
+
+# ------------------------------------------------------------ status from a second terminal
+
+
+def test_status_watch_and_json_while_a_campaign_runs(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=1.5)], trials=2, lanes=1, report=False)
+    results = tmp_path / "results"
+    campaign = subprocess.Popen(
+        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while not (results / "ledger.sqlite").exists() and time.monotonic() < deadline:
+            time.sleep(0.2)
+        seen = []
+        while time.monotonic() < deadline:
+            res = subprocess.run(
+                [sys.executable, "-m", "runner.cli", "status", str(results), "--json"], capture_output=True, text=True
+            )
+            assert res.returncode == 0, res.stderr
+            f = json.loads(res.stdout)
+            seen.append(f)
+            if f["finished"] >= 2:
+                break
+            time.sleep(0.5)
+        assert seen[-1]["active"] and seen[-1]["total"] == 8 and seen[-1]["eta_s"] is not None
+        assert seen[-1]["campaign"] == "t"
+        code, out = run_in_pty(["status", str(results), "--watch", "--interval", "0.5"], timeout=120)
+        assert code == 0
+        assert "8/8" in out and "the campaign is not running" in out  # refreshed until the end
+        assert re.search(r"[1-7]/8", out)  # and in between
+    finally:
+        campaign.wait(timeout=120)
+    assert campaign.returncode == 0, campaign.stderr.read()
+    final = json.loads(
+        subprocess.run(
+            [sys.executable, "-m", "runner.cli", "status", str(results), "--json"], capture_output=True, text=True
+        ).stdout
+    )
+    assert final["done"] == 8 and not final["active"] and final["occupancy"] > 0.5
+
+
+def test_every_argument_has_help_and_there_is_a_version():
+    from runner.cli import _parser
+
+    def check(parser, name: str) -> None:
+        for action in parser._actions:
+            if action.__class__.__name__ == "_SubParsersAction":
+                for sub_name, sub in action.choices.items():
+                    check(sub, f"{name} {sub_name}")
+            elif action.dest != "help":
+                assert action.help, f"{name}: {action.dest} has no help line"
+
+    check(_parser(), "slamrun")
+    res = subprocess.run([sys.executable, "-m", "runner.cli", "--version"], capture_output=True, text=True)
+    assert res.returncode == 0 and res.stdout.startswith("slamrun ")
