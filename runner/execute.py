@@ -51,26 +51,6 @@ class Launched:
     extra: dict
 
 
-def execute_run(
-    run: PlannedRun,
-    method: Method,
-    view: PreparedView,
-    backend: Backend,
-    paths: RunPaths,
-    attempt: int,
-    cancel: threading.Event,
-    groundtruth: Trajectory | None = None,
-    **kw,
-) -> RunOutcome:
-    """launch_run then finish_attempt, in this thread."""
-    launched = launch_run(run, method, view, backend, paths, attempt, cancel, **kw)
-    if isinstance(launched, RunOutcome):
-        return launched
-    return finish_attempt(
-        run, method, view, paths, attempt, launched.result, launched.started, groundtruth, launched.extra
-    )
-
-
 def launch_run(
     run: PlannedRun,
     method: Method,

@@ -100,9 +100,24 @@ def verify(
         if record is not None and record.tag == tag:
             row.build_min = round(record.seconds / 60, 1)
         _campaign(name, row, results, trials, frames, log)
-    (results / "verify.json").write_text(json.dumps([asdict(r) | {"passed": r.passed} for r in rows], indent=1))
-    (results / "verify.md").write_text(markdown_table(rows))
+    table = merged(results / "verify.json", rows)  # the rows of methods verified earlier stay
+    (results / "verify.json").write_text(json.dumps([asdict(r) | {"passed": r.passed} for r in table], indent=1))
+    (results / "verify.md").write_text(markdown_table(table))
     return rows
+
+
+def merged(path: Path, rows: list[VerifyRow]) -> list[VerifyRow]:
+    """Earlier rows from `path`, with the methods of `rows` replaced, in the registry's order."""
+    table: dict[str, VerifyRow] = {}
+    try:
+        for d in json.loads(path.read_text()):
+            d.pop("passed", None)
+            table[d["method"]] = VerifyRow(**d)
+    except (OSError, ValueError, TypeError, KeyError):
+        pass
+    table.update({r.method: r for r in rows})
+    order = list(buildable())
+    return sorted(table.values(), key=lambda r: order.index(r.method) if r.method in order else len(order))
 
 
 def _campaign(name: str, row: VerifyRow, results: Path, trials: int, frames: int, log) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from pathlib import Path
@@ -98,3 +99,37 @@ def unpack_upstream(name: str, dest: Path) -> Path:
     with tarfile.open(archive, "r:gz") as tar:
         tar.extractall(dest, filter="data")
     return dest / SOURCES[name].top
+
+
+@contextlib.contextmanager
+def loopback_server(routes: dict[str, Path | bytes]):
+    """An HTTP server on 127.0.0.1 serving `routes` (path -> file or bytes; other paths: 404). Yields its base
+    address and the list of paths requested."""
+    import http.server
+    import threading
+
+    hits: list[str] = []
+
+    class Handler(http.server.BaseHTTPRequestHandler):
+        def do_GET(self):  # noqa: N802
+            hits.append(self.path)
+            body = routes.get(self.path)
+            if body is None:
+                self.send_error(404)
+                return
+            data = body.read_bytes() if isinstance(body, Path) else body
+            self.send_response(200)
+            self.send_header("Content-Length", str(len(data)))
+            self.end_headers()
+            self.wfile.write(data)
+
+        def log_message(self, *a):
+            pass
+
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    try:
+        yield f"http://127.0.0.1:{httpd.server_address[1]}", hits
+    finally:
+        httpd.shutdown()
+        httpd.server_close()

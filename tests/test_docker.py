@@ -34,6 +34,20 @@ def _unavailable(reason: str):
     pytest.skip(reason)
 
 
+def engine_with_base():
+    """The Docker API client, when an engine answers and has the Debian base image; skips (fails under CI)
+    otherwise."""
+    from runner.backends.docker import DockerBackend
+
+    try:
+        api = DockerBackend().client.api
+    except InfraError as exc:
+        _unavailable(f"no Docker engine: {exc}")
+    if not api.images(name="debian:bookworm-slim"):
+        _unavailable("no debian:bookworm-slim base image (scripts/make-offline-base.sh builds it offline)")
+    return api
+
+
 @pytest.fixture(scope="module")
 def backend():
     from runner.backends.docker import DockerBackend

@@ -13,24 +13,16 @@ from runner.errors import InfraError, SlamRunError
 from runner.images import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
 from runner.sources import SOURCES
 from tests.conftest import UPSTREAM
-from tests.test_docker import _unavailable
+from tests.test_docker import engine_with_base
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def client():
-    from runner.backends.docker import DockerBackend
-
-    try:
-        api = DockerBackend().client.api
-    except InfraError as exc:
-        _unavailable(f"no Docker engine: {exc}")
-    if not api.images(name="debian:bookworm-slim"):
-        _unavailable("no debian:bookworm-slim base image (scripts/make-offline-base.sh builds it offline)")
     if not UPSTREAM.is_dir():
         pytest.skip(f"{UPSTREAM} not found")
-    return api
+    return engine_with_base()
 
 
 @pytest.fixture

@@ -15,26 +15,18 @@ import pytest
 
 from runner.campaign import run_campaign
 from runner.datasets.synth import generate
-from runner.errors import InfraError
 from runner.images import BuildOptions, build
 from runner.spec import load_spec
 from runner.verify_images import scene_extent
 from tests.conftest import UPSTREAM, write_spec
-from tests.test_docker import _unavailable
+from tests.test_docker import engine_with_base
 
 
 @pytest.fixture(scope="module")
 def dso_image():
-    from runner.backends.docker import DockerBackend
-
     if not UPSTREAM.is_dir():
         pytest.skip(f"{UPSTREAM} not found: the DSO image is built from the archives there")
-    try:
-        api = DockerBackend().client.api
-    except InfraError as exc:
-        _unavailable(f"no Docker engine: {exc}")
-    if not api.images(name="debian:bookworm-slim"):
-        _unavailable("no debian:bookworm-slim base image (scripts/make-offline-base.sh builds it offline)")
+    engine_with_base()
     build(["dso"], log=lambda m: None, opts=BuildOptions(sources_dir=UPSTREAM), only_missing=True)
     return "slamrun/dso:latest"
 

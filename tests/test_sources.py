@@ -5,18 +5,16 @@ Real archives (shared/upstream); the network path talks to a server on 127.0.0.1
 from __future__ import annotations
 
 import gzip
-import http.server
 import io
 import shutil
 import tarfile
-import threading
 from pathlib import Path
 
 import pytest
 
 from runner import sources as src
 from runner.sources import SOURCES, SourceError, check_archive, obtain
-from tests.conftest import SHARED
+from tests.conftest import SHARED, loopback_server
 
 UPSTREAM = SHARED / "upstream"
 
@@ -108,30 +106,9 @@ def test_a_missing_archive_names_what_to_fetch_and_from_where(tmp_path):
 @pytest.fixture
 def archive_server(upstream):
     """Serves shared/upstream at GitHub's archive addresses, on 127.0.0.1; counts the requests."""
-    by_path = {f"/{s.repo}/archive/{s.commit}.tar.gz": upstream / s.filename for s in SOURCES.values()}
-    hits = []
-
-    class Handler(http.server.BaseHTTPRequestHandler):
-        def do_GET(self):  # noqa: N802
-            hits.append(self.path)
-            path = by_path.get(self.path)
-            if path is None:
-                self.send_error(404)
-                return
-            data = path.read_bytes()
-            self.send_response(200)
-            self.send_header("Content-Length", str(len(data)))
-            self.end_headers()
-            self.wfile.write(data)
-
-        def log_message(self, *a):
-            pass
-
-    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-    threading.Thread(target=httpd.serve_forever, daemon=True).start()
-    yield f"http://127.0.0.1:{httpd.server_address[1]}", hits
-    httpd.shutdown()
-    httpd.server_close()
+    routes = {f"/{s.repo}/archive/{s.commit}.tar.gz": upstream / s.filename for s in SOURCES.values()}
+    with loopback_server(routes) as served:
+        yield served
 
 
 def test_download_into_the_cache_then_reuse(archive_server, tmp_path):

@@ -1,0 +1,41 @@
+"""The verification table's pieces: the scene's extent, rows merged across calls, the pass rule."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from runner.datasets.synth import generate
+from runner.verify_images import VerifyRow, markdown_table, merged, scene_extent
+
+
+def test_scene_extent_is_the_camera_paths_bounding_box_diagonal(tmp_path):
+    seq = generate(tmp_path / "room", frames=60, seed=0, size=(160, 120))
+    gt = np.loadtxt(seq / "groundtruth_full.txt")
+    expected = np.linalg.norm(gt[:, 1:4].max(axis=0) - gt[:, 1:4].min(axis=0))
+    assert scene_extent(seq) == pytest.approx(expected)
+    assert 5.5 < scene_extent(seq) < 6.5  # an ellipse of radii 2.3 and 1.9 m at about the same height
+    (seq / "groundtruth_full.txt").unlink()  # a real sequence: its groundtruthSync rows with numbers
+    sync = np.loadtxt(seq / "groundtruthSync.txt")
+    finite = sync[np.isfinite(sync[:, 1:4]).all(axis=1)]
+    assert scene_extent(seq) == pytest.approx(np.linalg.norm(finite[:, 1:4].max(0) - finite[:, 1:4].min(0)))
+
+
+def test_a_method_passes_only_with_every_run_ok_and_the_median_under_its_bound():
+    ok = VerifyRow("dso", built=True, runs=8, runs_ok=8, e_align_rel_median=0.001, e_align_rel_max=0.03, bound=0.02)
+    assert ok.passed
+    assert not VerifyRow("dso", True, runs=8, runs_ok=7, e_align_rel_median=0.001, bound=0.02).passed
+    assert not VerifyRow("dso", True, runs=8, runs_ok=8, e_align_rel_median=0.021, bound=0.02).passed
+    assert not VerifyRow("x", built=False, note="build failed: ...").passed
+
+
+def test_rows_of_earlier_calls_are_kept(tmp_path):
+    path = tmp_path / "verify.json"
+    first = [VerifyRow("ldso", True, runs=8, runs_ok=8, e_align_rel_median=0.001, e_align_rel_max=0.002)]
+    path.write_text(json.dumps([r.__dict__ | {"passed": True} for r in first]))
+    table = merged(path, [VerifyRow("dso", True, runs=8, runs_ok=8, e_align_rel_median=0.0006, e_align_rel_max=0.001)])
+    assert [r.method for r in table] == ["dso", "ldso"]  # registry order
+    text = markdown_table(table)
+    assert "| dso | yes |" in text and "| ldso | yes |" in text and "0.0006 (0.0010)" in text
