@@ -195,10 +195,14 @@ def cmd_campaign(args) -> int:
     finally:
         progress.close()
     _print_summary(spec.name, result.results, result.results_csv)
+    from runner.display import read_figures
+
+    figures = read_figures(result.results)
+    busy = f", lanes busy {100 * figures.occupancy:.0f} %" if figures and figures.occupancy is not None else ""
     console.print(
         f"{sum(result.counts.values())} runs: "
         + ", ".join(f"{k} {v}" for k, v in result.counts.items())
-        + f" ({time.monotonic() - t0:.0f} s)"
+        + f" ({time.monotonic() - t0:.0f} s{busy})"
     )
     if spec.report and not result.interrupted:
         from runner.analysis.report import write_report

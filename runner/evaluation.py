@@ -7,7 +7,7 @@ per segment, and the drift figures e_t, e_r, e_s, e_align, e_start, e_end, e_rms
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from enum import StrEnum
 
 import numpy as np
@@ -51,12 +51,11 @@ class TumMonoResult:
 
     def to_dict(self) -> dict:
         """JSON-ready: metrics are null unless ok."""
-        d = asdict(self)
-        d["status"] = self.status.value
         ok = self.status is EvalStatus.ok
+        d = {"status": self.status.value}
         for k in METRIC_NAMES:
-            d[k] = d[k] if ok else None
-        d["e_s_sym"] = self.e_s_sym if ok else None
+            d[k] = getattr(self, k) if ok else None
+        d.update(n_poses=self.n_poses, detail=self.detail, e_s_sym=self.e_s_sym if ok else None)
         return d
 
 

@@ -3,7 +3,7 @@
 - thirdparty/DBoW3/src/BowVector.h relies on <cstdint>, <cstddef>, <iostream>, <string> coming with other
   headers, which gcc 12's library no longer does.
 - src/frontend/FeatureMatcher.cc calls _mm_popcnt_u64 on a 32-bit value: it exists only with -mpopcnt
-  (-march=native on the authors' CPUs); __builtin_popcount is the same count on any target.
+  (a native build on the authors' CPUs); __builtin_popcount is the same count on any target.
 - examples/run_dso_tum_mono.cc saves the viewer's point cloud through a null viewer with nogui=1 (a
   segfault at exit after the results were written): only with a viewer.
 usage: patches.py LDSO_ROOT"""
