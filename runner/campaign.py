@@ -166,7 +166,11 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         added = ledger.sync_plan(runs)
         recovered["imported"] += import_finished(ledger, runs, results)
         backend = backend or make_backend(spec)
-        backend.check({m.run_label: methods.get(m.name)(m.params).image for m in spec.methods})
+        images = {m.run_label: methods.get(m.name)(m.params).image for m in spec.methods}
+        backend.check(images)
+        if hasattr(backend, "describe_image"):  # which image, from which sources, made these results
+            described = {label: backend.describe_image(tag) for label, tag in images.items() if tag}
+            (results / "images.json").write_text(json.dumps(described, indent=1))
         pending = set(ledger.pending_keys())
         removed = remove_damaged(spec.cache)
         if removed:

@@ -52,3 +52,5 @@ def test_real_dso_forward_and_backward_through_docker(dso_image, tmp_path):
     assert (df.n_poses > 20).all() and df.ram_peak_mb.notna().all() and (df.fps > 0).all()
     record = json.loads((Path(df.run_dir[0]) / "run.json").read_text())
     assert "JakobEngel/dso@7b0c99f01d238f801c625beaff90240bcb007198" in record["image"]["sources"]
+    images = json.loads((res.results / "images.json").read_text())  # beside the results too
+    assert images["dso"]["id"] == record["image"]["id"] and images["dso"]["march"] == "x86-64-v2"
