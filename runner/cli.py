@@ -113,9 +113,20 @@ def _parser() -> argparse.ArgumentParser:
     im.add_argument(
         "--vocabulary", action="append", default=[], metavar="[METHOD=]FILE", help="a vocabulary file for the build"
     )
-    im.add_argument("--weights", action="append", default=[], metavar="NAME=FILE", help="a weights file for the build")
+    im.add_argument(
+        "--weights",
+        action="append",
+        default=[],
+        metavar="NAME=FILE",
+        help="weights for the build: a file, or URL#sha256=HEX",
+    )
     im.add_argument(
         "--no-train-vocabulary", action="store_true", help="fail instead of training a vocabulary the source lacks"
+    )
+    im.add_argument(
+        "--standin-model",
+        action="store_true",
+        help="without --weights: an untrained stand-in network (CNN-DSO, CNN-SVO), for plumbing tests only",
     )
     im.add_argument("--build-arg", action="append", default=[], metavar="KEY=VALUE", help="extra Docker build argument")
     im.add_argument("--log-dir", type=Path, help="where build logs and records go (default .cache/images)")
@@ -464,6 +475,7 @@ def cmd_images(args) -> int:
         vocabulary=dict(_pair(v, "*") for v in args.vocabulary),
         weights=dict(_pair(w) for w in args.weights),
         train_vocabulary=not args.no_train_vocabulary,
+        standin_model=args.standin_model,
         build_args=dict(_pair(b) for b in args.build_arg),
         no_cache=args.no_cache,
     )

@@ -28,9 +28,8 @@ from runner.errors import InfraError, SlamRunError
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_LOG_DIR = ROOT / ".cache" / "images"
-# Base images the method images build FROM, with their folders: built first, when missing.
-BASES = {"slamrun/tensorflow-cc:1.6": ROOT / "docker" / "tensorflow_cc" / "Dockerfile"}
 SOURCE_RE = re.compile(r"\bsources/([A-Za-z0-9_.+-]+)\.tar\.gz\b")
+PYPI_RE = re.compile(r"\bpypi/([A-Za-z0-9_.+-]+\.whl)\b")
 LABEL = "slamrun"
 ANSI = re.compile(r"\x1b\[[0-9;]*m")  # the builder colours a step's stderr
 
@@ -49,6 +48,30 @@ VOCABULARIES = {
 }
 
 
+@dataclass(frozen=True)
+class Weights:
+    """A trained network an image needs (`--weights NAME=FILE`), where its authors publish it, and whether an
+    untrained stand-in with the same interface can replace it for plumbing tests (`--standin-model`)."""
+
+    name: str
+    published: str
+    standin: bool = False
+
+
+MONODEPTH = Weights(
+    "model_city2kitti.pb",
+    "a frozen MonoDepth graph: monodepth-cpp's model/README.md links the converted graph, freeze_graph/README.md "
+    "the VGG (city2kitti) and ResNet50 graphs; MonoDepth's site serves .zip checkpoints only, which "
+    "freeze_graph/freeze_graph.py (TensorFlow 1.x) turns into a .pb",
+    standin=True,
+)
+WEIGHTS = {
+    "cnn_dso": MONODEPTH,
+    "cnn_svo": MONODEPTH,
+    "dynaslam": Weights("mask_rcnn_coco.h5", "the matterport/Mask_RCNN GitHub release v2.0 (mask_rcnn_coco.h5)"),
+}
+
+
 @dataclass
 class BuildOptions:
     sources_dir: Path | None = None  # take source archives from here (no network)
@@ -59,6 +82,7 @@ class BuildOptions:
     vocabulary: dict[str, Path] = field(default_factory=dict)  # method (or "*") -> file
     weights: dict[str, Path] = field(default_factory=dict)  # weight name -> file
     train_vocabulary: bool = True  # train a small vocabulary when neither the source nor the user has one
+    standin_model: bool = False  # an untrained stand-in network when no weights are given (plumbing only)
     build_args: dict[str, str] = field(default_factory=dict)
     log_dir: Path = DEFAULT_LOG_DIR
     no_cache: bool = False  # rebuild every step (to measure a build from scratch)
@@ -84,10 +108,30 @@ def buildable() -> dict[str, tuple[str, Path]]:
     return out
 
 
-def bases_of(dockerfile: Path) -> list[str]:
-    """The project's own base images a Dockerfile builds FROM."""
-    froms = [line.split()[1] for line in dockerfile.read_text().splitlines() if line.upper().startswith("FROM ")]
-    return [f for f in froms if f in BASES]
+def pypi_files_of(dockerfile: Path) -> list[str]:
+    """The PyPI files a Dockerfile copies from the build context (`pypi/<file>.whl`)."""
+    names = []
+    for line in dockerfile.read_text().splitlines():
+        if line.strip().upper().startswith(("COPY", "ADD")):
+            names += [n for n in PYPI_RE.findall(line) if n not in names]
+    return names
+
+
+def model_choice(name: str, opts: BuildOptions) -> tuple[str, str]:
+    """How the image of `name` gets its network: (given | standin | none, what it is); an error naming the
+    file and where it is published when there is none."""
+    w = WEIGHTS.get(name)
+    if w is None:
+        return "none", ""
+    if w.name in opts.weights:
+        return "given", w.name
+    if w.standin and opts.standin_model:
+        return "standin", f"untrained stand-in with {w.name}'s interface: plumbing only, NOT the trained network"
+    how = " (or --standin-model for an untrained stand-in that tests the plumbing only)" if w.standin else ""
+    raise SlamRunError(
+        f"{name} needs {w.name}, which cannot be downloaded here: give it with --weights {w.name}=FILE "
+        f"(or =URL#sha256=HEX){how}. It is published in {w.published}"
+    )
 
 
 def sources_of(dockerfile: Path) -> list[str]:
@@ -158,17 +202,40 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
             shutil.copyfile(given, inputs / "vocabulary" / VOCABULARIES[name].path.rsplit("/", 1)[-1])
         elif kind == "trained":
             training_frames(inputs / "train-frames")
+    wheels = pypi_files_of(dockerfile)
+    if wheels:
+        (ctx / "pypi").mkdir()
+        for filename in wheels:
+            path = src.obtain_pypi(filename, opts.sources_dir, opts.source_cache)
+            _link_or_copy(path, ctx / "pypi" / filename)
+            log(f"PyPI file {filename} ({path})")
+        labels[f"{LABEL}.pypi"] = json.dumps({f: src.PYPI_FILES[f].sha256 for f in wheels})
+    weights = {}
+    model, detail = model_choice(name, opts)
     if opts.weights:
         (inputs / "weights").mkdir()
-        for wname, path in opts.weights.items():
-            if not Path(path).is_file():
-                raise SlamRunError(f"{path}: weights file {wname} not found")
+        for wname, given in opts.weights.items():
+            path = _weights_file(wname, str(given), opts)
             shutil.copyfile(path, inputs / "weights" / wname)
-        labels[f"{LABEL}.weights"] = json.dumps(
-            {w: f"{Path(p).name} sha256 {src.file_sha256(Path(p))}" for w, p in opts.weights.items()}
-        )
-    labels[f"{LABEL}.build-args"] = json.dumps({"VOCABULARY": kind, **opts.build_args})
+            weights[wname] = f"{path.name} sha256 {src.file_sha256(path)}"
+    if model == "standin":
+        weights[WEIGHTS[name].name] = detail
+    if weights:
+        labels[f"{LABEL}.weights"] = json.dumps(weights)
+        log(f"weights of {name}: {json.dumps(weights)}")
+    args = {"VOCABULARY": kind} | ({"MONODEPTH_MODEL": model} if model != "none" and WEIGHTS[name].standin else {})
+    labels[f"{LABEL}.build-args"] = json.dumps(args | opts.build_args)
     return labels
+
+
+def _weights_file(name: str, given: str, opts: BuildOptions) -> Path:
+    """A weights file given by path, or by address as URL#sha256=HEX (downloaded on this host, checked)."""
+    if re.match(r"https?://", given):
+        url, _, digest = given.partition("#sha256=")
+        return src.obtain_url(url, digest.lower(), opts.source_cache)
+    if not Path(given).is_file():
+        raise SlamRunError(f"{given}: weights file {name} not found")
+    return Path(given)
 
 
 def training_frames(dest: Path, sequences: int = 3, frames: int = 120) -> None:
@@ -215,9 +282,6 @@ def build(
             raise SlamRunError(f"{dockerfile}: missing; every method with an image needs its docker/<name>/ folder")
         if only_missing and client.images(name=tag):
             continue
-        for base in bases_of(dockerfile):
-            if not client.images(name=base):
-                records.append(build_one(client, base.split("/")[-1].split(":")[0], base, BASES[base], opts, log))
         records.append(build_one(client, name, tag, dockerfile, opts, log))
     return records
 
@@ -238,12 +302,7 @@ def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions,
         ctx = Path(tmp)
         labels = assemble_context(name, dockerfile, opts, ctx, note)
         shutil.copyfile(dockerfile, ctx / "Dockerfile.slamrun")
-        args = {
-            "MARCH": opts.march,
-            "JOBS": str(opts.jobs),
-            "VOCABULARY": json.loads(labels[f"{LABEL}.build-args"])["VOCABULARY"],
-            **opts.build_args,
-        }
+        args = {"MARCH": opts.march, "JOBS": str(opts.jobs), **json.loads(labels[f"{LABEL}.build-args"])}
         note(f"build arguments: {json.dumps(args)}")
         run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)
     seconds = time.monotonic() - t0

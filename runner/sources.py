@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 import shutil
 import tarfile
 import tempfile
 import urllib.error
+import urllib.parse
 import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +24,7 @@ from pathlib import Path
 from runner.errors import SlamRunError
 
 GITHUB = "https://github.com"
+PYPI = "https://pypi.org"
 
 
 class SourceError(SlamRunError):
@@ -285,19 +288,118 @@ def obtain(
         check_archive(source, path)
         return path
     url = source.url(base_url or os.environ.get("SLAMRUN_SOURCES_URL") or GITHUB)
-    cache.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=cache, prefix=source.filename, suffix=".part")
+    try:
+        _download(url, path, f"{source.repo} @ {source.commit}")
+    except SourceError as exc:
+        raise SourceError(
+            f"{exc}; put {source.filename} into a folder and pass it with --sources DIR (make images SOURCES=DIR)"
+        ) from None
+    try:
+        check_archive(source, path)
+    except SourceError:
+        path.unlink()
+        raise
+    return path
+
+
+@dataclass(frozen=True)
+class PypiFile:
+    """A file published on PyPI that an image build uses (the build context's pypi/<filename>)."""
+
+    filename: str
+    project: str
+    version: str
+    sha256: str
+
+    def url(self, base: str = PYPI) -> str:
+        return f"{base.rstrip('/')}/pypi/{self.project}/{self.version}/json"
+
+
+PYPI_FILES: dict[str, PypiFile] = {
+    f.filename: f
+    for f in (
+        # TensorFlow 2 C++ (libtensorflow_cc.so.2, libtensorflow_framework.so.2, headers) for CNN-DSO and CNN-SVO
+        PypiFile(
+            "tensorflow_cpu-2.21.0-cp311-cp311-manylinux_2_27_x86_64.whl",
+            "tensorflow-cpu",
+            "2.21.0",
+            "2b847d217b02ee7731ed91431daf3250daa0196c3c94614d23be27232e6e5b6c",
+        ),
+    )
+}
+
+
+def obtain_pypi(
+    file: str | PypiFile, sources_dir: Path | None = None, cache: Path | None = None, index_url: str | None = None
+) -> Path:
+    """The checked PyPI file: from `sources_dir` when it holds it, else the download cache, else PyPI (its JSON
+    API names the file's address; `index_url` or $SLAMRUN_PYPI_URL for a mirror)."""
+    if isinstance(file, PypiFile):
+        f = file
+    elif file in PYPI_FILES:
+        f = PYPI_FILES[file]
+    else:
+        raise SourceError(f"unknown PyPI file {file!r} (known: {', '.join(sorted(PYPI_FILES))})")
+    filename = f.filename
+
+    def checked(path: Path) -> Path:
+        actual = file_sha256(path)
+        if actual != f.sha256:
+            raise SourceError(f"{path}: sha256 {actual}, expected {f.sha256} ({f.project} {f.version}); replace it")
+        return path
+
+    if sources_dir is not None and (Path(sources_dir) / filename).is_file():
+        return checked(Path(sources_dir) / filename)
+    cache = Path(cache or default_cache())
+    path = cache / filename
+    if path.is_file():
+        return checked(path)
+    index = f.url(index_url or os.environ.get("SLAMRUN_PYPI_URL") or PYPI)
+    try:
+        import json
+
+        with urllib.request.urlopen(index, timeout=60) as resp:
+            release = json.load(resp)
+        entry = next((u for u in release.get("urls", []) if u.get("filename") == filename), None)
+        if entry is None:
+            raise SourceError(f"{index} does not list {filename}")
+        url = entry["url"]
+    except (urllib.error.URLError, OSError, ValueError) as exc:
+        raise SourceError(
+            f"cannot reach {index} ({getattr(exc, 'reason', exc)}): {filename} is needed; download it from PyPI "
+            f"({f.project}=={f.version}) and pass its folder with --sources DIR"
+        ) from None
+    _download(url, path, f"{filename} ({f.project}=={f.version})")
+    try:
+        return checked(path)
+    except SourceError:
+        path.unlink()
+        raise
+
+
+def _download(url: str, dest: Path, what: str, timeout_s: float = 60.0) -> None:
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=dest.parent, prefix=dest.name, suffix=".part")
     try:
         with os.fdopen(fd, "wb") as out, urllib.request.urlopen(url, timeout=timeout_s) as resp:
-            shutil.copyfileobj(resp, out)
-        check_archive(source, Path(tmp))
-        os.replace(tmp, path)
+            shutil.copyfileobj(resp, out, 1 << 20)
+        os.replace(tmp, dest)
     except (urllib.error.URLError, OSError) as exc:
-        raise SourceError(
-            f"cannot download {url} ({getattr(exc, 'reason', exc)}): {source.repo} @ {source.commit} is needed; "
-            f"put {source.filename} into a folder and pass it with --sources DIR (make images SOURCES=DIR)"
-        ) from None
+        raise SourceError(f"cannot download {url} ({getattr(exc, 'reason', exc)}): {what} is needed") from None
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def obtain_url(url: str, sha256: str, cache: Path | None = None) -> Path:
+    """A file given by address and SHA-256 (weights a user publishes), downloaded once into the cache."""
+    if not re.fullmatch(r"[0-9a-f]{64}", sha256 or ""):
+        raise SourceError(f"{url}: a file by address needs its sha256 (URL#sha256=<64 hex digits>)")
+    path = Path(cache or default_cache()) / "files" / f"{sha256[:16]}-{Path(urllib.parse.urlparse(url).path).name}"
+    if not path.is_file():
+        _download(url, path, "a weights file")
+    actual = file_sha256(path)
+    if actual != sha256:
+        path.unlink()
+        raise SourceError(f"{url}: sha256 {actual}, expected {sha256}: refusing it")
     return path

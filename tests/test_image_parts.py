@@ -55,24 +55,46 @@ def test_orb_slam2_patches(tmp_path):
     assert res.returncode != 0 and "src/LoopClosing.cc" in res.stderr and "found 0 times" in res.stderr
 
 
-def test_dynaslam_patches(tmp_path):
-    cmake = (
-        "add_executable(mono_tum Examples/Monocular/mono_tum.cc)\ntarget_link_libraries(mono_tum ${PROJECT_NAME})\n"
-        "add_executable(mono_carla\nExamples/Monocular/mono_carla.cc)\ntarget_link_libraries(mono_carla ${PROJECT_NAME})\n"
-    )
-    root = tree(
-        tmp_path / "dyna",
-        {
-            **ORB_FILES,
-            "CMakeLists.txt": cmake,
-            "Examples/Monocular/mono_tum.cc": "ORB_SLAM2::System SLAM(argv[1],argv[2],"
-            "ORB_SLAM2::System::MONOCULAR,true);\n",
-        },
-    )
+def test_dynaslam_patches_on_the_real_tree(tmp_path):
+    root = unpack_upstream("dynaslam", tmp_path)
     res = run(DOCKER / "dynaslam" / "patches.py", root)
     assert res.returncode == 0, res.stderr
-    text = (root / "CMakeLists.txt").read_text()
-    assert "mono_carla" not in text and "add_executable(mono_tum" in text
+    cmake = (root / "CMakeLists.txt").read_text()
+    assert "mono_carla" not in cmake and "add_executable(mono_tum" in cmake
+    mono = (root / "Examples/Monocular/mono_tum.cc").read_text()
+    assert "MONOCULAR,false);" in mono and 'replace(0,4,"")' not in mono  # masks cached under the frame's name
+    assert 'getenv("ORB_SLAM2_NO_LOOP")' in (root / "src/LoopClosing.cc").read_text()
+
+
+def test_cnn_dso_and_monodepth_patches_on_the_real_trees(tmp_path):
+    cnn = unpack_upstream("cnn_dso", tmp_path)
+    res = run(DOCKER / "cnn_dso" / "patches.py", cnn)
+    assert res.returncode == 0, res.stderr
+    cmake = (cnn / "CMakeLists.txt").read_text()
+    for gone in ("/abosolute", "/path/to", "/home/"):
+        assert gone not in cmake
+    assert "${TENSORFLOW_ROOT}/libtensorflow_cc.so.2" in cmake and "-std=c++14" in cmake
+    assert "tensorflow/" not in (cnn / "src/FullSystem/ImmaturePoint.cpp").read_text()  # DSO stays C++14
+    assert "boost::placeholders" in (cnn / "src/util/IndexThreadReduce.h").read_text()  # DSO's own fixes too
+    md = unpack_upstream("monodepth-cpp", tmp_path)
+    res = run(DOCKER / "monodepth" / "patches.py", md)
+    assert res.returncode == 0, res.stderr
+    mcm = (md / "CMakeLists.txt").read_text()
+    assert "-std=c++17" in mcm and "FIND_PACKAGE(TensorFlow REQUIRED)" not in mcm
+    assert "Status::OK()" not in (md / "src/monodepth.cpp").read_text()
+
+
+def test_cnn_svo_patches_on_the_real_trees(tmp_path):
+    cnn = unpack_upstream("cnn_svo", tmp_path)
+    sophus = unpack_upstream("sophus", tmp_path)
+    fast = unpack_upstream("fast", tmp_path)
+    res = run(DOCKER / "cnn_svo" / "patches.py", cnn, sophus, fast)
+    assert res.returncode == 0, res.stderr
+    cm = (cnn / "rpg_svo/svo/CMakeLists.txt").read_text()
+    assert "SET(USE_ROS FALSE)" in cm and "${HOME}" not in cm and "ADD_EXECUTABLE(cnn_svo_offline" in cm
+    assert "SET(USE_ROS FALSE)" in (cnn / "rpg_vikit/vikit_common/CMakeLists.txt").read_text()
+    assert "std::complex<double>(1, 0)" in (sophus / "sophus/so2.cpp").read_text()
+    assert "-std=c++11" in (fast / "CMakeLists.txt").read_text()
 
 
 def test_df_orb_slam_optical_flow_fix(tmp_path):
@@ -233,13 +255,14 @@ def test_fetch_checks_the_checksum(tmp_path, weights_server):
     assert missing.returncode != 0 and "cannot download" in missing.stderr
 
 
-def test_image_bases_are_built_first():
-    from runner.images import BASES, bases_of, buildable
+def test_images_and_what_their_builds_take():
+    from runner.images import buildable, pypi_files_of, sources_of
 
-    assert bases_of(DOCKER / "cnn_dso" / "Dockerfile") == ["slamrun/tensorflow-cc:1.6"]
-    assert bases_of(DOCKER / "cnn_svo" / "Dockerfile") == ["slamrun/tensorflow-cc:1.6"]
-    assert bases_of(DOCKER / "dso" / "Dockerfile") == []
-    assert all(p.exists() for p in BASES.values())
+    wheel = "tensorflow_cpu-2.21.0-cp311-cp311-manylinux_2_27_x86_64.whl"
+    assert pypi_files_of(DOCKER / "cnn_dso" / "Dockerfile") == [wheel]
+    assert pypi_files_of(DOCKER / "cnn_svo" / "Dockerfile") == [wheel]
+    assert pypi_files_of(DOCKER / "dso" / "Dockerfile") == []
+    assert sources_of(DOCKER / "cnn_dso" / "Dockerfile") == ["pangolin-0.6", "monodepth-cpp", "cnn_dso"]
     assert set(buildable()) == {
         "orb_slam2",
         "df_orb_slam",

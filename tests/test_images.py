@@ -119,3 +119,19 @@ def _run(client, tag: str, cmd: str) -> str:
         return client.logs(container).decode().strip()
     finally:
         client.remove_container(container, force=True)
+
+
+def test_the_network_an_image_holds_is_given_a_stand_in_or_a_clear_error(tmp_path):
+    from runner.images import model_choice
+
+    assert model_choice("dso", BuildOptions()) == ("none", "")
+    with pytest.raises(SlamRunError) as err:
+        model_choice("cnn_dso", BuildOptions())
+    msg = str(err.value)
+    assert "model_city2kitti.pb" in msg and "--weights model_city2kitti.pb=FILE" in msg and "monodepth-cpp" in msg
+    kind, detail = model_choice("cnn_svo", BuildOptions(standin_model=True))
+    assert kind == "standin" and "NOT the trained network" in detail
+    given = BuildOptions(weights={"model_city2kitti.pb": tmp_path / "m.pb"})
+    assert model_choice("cnn_dso", given)[0] == "given"
+    with pytest.raises(SlamRunError, match="mask_rcnn_coco.h5.*matterport"):
+        model_choice("dynaslam", BuildOptions(standin_model=True))  # no stand-in for Mask R-CNN

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gzip
 import io
+import json
 import shutil
 import tarfile
 from pathlib import Path
@@ -127,3 +128,45 @@ def test_an_unreachable_server_names_the_address_and_the_folder_option(archive_s
         obtain("dso", cache=tmp_path, base_url=url + "/missing")
     assert "/missing/JakobEngel/dso/archive/" in str(err.value) and "--sources DIR" in str(err.value)
     assert not list(tmp_path.iterdir())  # no partial download left behind
+
+
+def test_a_pypi_file_from_a_folder_the_cache_or_the_index(tmp_path):
+    from runner.sources import PypiFile, obtain_pypi
+
+    data = b"not really a wheel " * 5000
+    sha = src.hashlib.sha256(data).hexdigest()
+    f = PypiFile("demo-1.0-py3-none-any.whl", "demo", "1.0", sha)
+    index = {"urls": [{"filename": f.filename, "url": "PLACEHOLDER"}]}
+    routes = {"/files/demo.whl": data}
+    with loopback_server(routes) as (url, hits):
+        index["urls"][0]["url"] = f"{url}/files/demo.whl"
+        routes["/pypi/demo/1.0/json"] = json.dumps(index).encode()
+        cache = tmp_path / "cache"
+        path = obtain_pypi(f, cache=cache, index_url=url)
+        assert path.read_bytes() == data and hits == ["/pypi/demo/1.0/json", "/files/demo.whl"]
+        assert obtain_pypi(f, cache=cache, index_url=url) == path and len(hits) == 2  # cached
+        folder = tmp_path / "given"
+        folder.mkdir()
+        (folder / f.filename).write_bytes(data + b"x")  # a folder's file is checked too
+        with pytest.raises(SourceError, match="expected " + sha):
+            obtain_pypi(f, sources_dir=folder, cache=cache, index_url=url)
+        bad = PypiFile(f.filename, "demo", "1.0", "0" * 64)
+        with pytest.raises(SourceError, match="sha256"):
+            obtain_pypi(bad, cache=tmp_path / "other", index_url=url)
+        assert not list((tmp_path / "other").glob("*.whl"))  # a wrong download is not kept
+    with pytest.raises(SourceError, match="pass its folder with --sources DIR"):
+        obtain_pypi(f, cache=tmp_path / "third", index_url=url)  # the server is gone
+
+
+def test_weights_by_address_need_and_get_their_checksum(tmp_path):
+    from runner.sources import obtain_url
+
+    data = b"weights" * 1000
+    sha = src.hashlib.sha256(data).hexdigest()
+    with loopback_server({"/w/model.pb": data}) as (url, _):
+        path = obtain_url(f"{url}/w/model.pb", sha, cache=tmp_path)
+        assert path.read_bytes() == data and path.name.endswith("model.pb")
+        with pytest.raises(SourceError, match="expected " + "1" * 64):
+            obtain_url(f"{url}/w/model.pb", "1" * 64, cache=tmp_path / "b")
+        with pytest.raises(SourceError, match="needs its sha256"):
+            obtain_url(f"{url}/w/model.pb", "", cache=tmp_path / "c")

@@ -13,10 +13,10 @@ for opt in PYTHON FFMPEG LIBDC1394 V4L LIBREALSENSE LIBREALSENSE2 OPENNI OPENNI2
            DEPTHSENSE TELICAM PLEORA LIBPNG LIBJPEG LIBTIFF LIBOPENEXR ZSTD LZ4 TOON; do
   off="$off -DBUILD_PANGOLIN_$opt=OFF"
 done
-cmake -S /opt/Pangolin -B /opt/Pangolin/build -DCMAKE_BUILD_TYPE=Release -DBUILD_EXAMPLES=OFF -DBUILD_TESTS=OFF \
+mkdir -p /opt/Pangolin/build && cd /opt/Pangolin/build && cmake .. -DCMAKE_BUILD_TYPE=Release -DBUILD_EXAMPLES=OFF -DBUILD_TESTS=OFF \
   -DBUILD_TOOLS=OFF -DBUILD_PYPANGOLIN_MODULE=OFF $off -DCMAKE_CXX_FLAGS="-include cstdint -include limits"
 make -C /opt/Pangolin/build -j"$3"
 make -C /opt/Pangolin/build install
 ldconfig
-rm -rf /opt/Pangolin
+cd / && rm -rf /opt/Pangolin
 echo "build-pangolin: installed $(ls /usr/local/lib | grep -c pangolin) Pangolin librar(ies) into /usr/local/lib"
