@@ -80,7 +80,8 @@ class OrbSlam2(UpstreamMethod):
     output_file = "KeyFrameTrajectory.txt"
     settings_file = "settings.yaml"
     not_initialized_pattern = None  # an empty KeyFrameTrajectory.txt says it
-    lost_pattern = r"Track lost soon after initialisation"
+    # a reset soon after initialisation is lost only when no new map follows (ORB-SLAM2 re-initialises)
+    lost_pattern = r"Track lost soon after initialisation(?![\s\S]*New Map created)"
 
     def configure(self, view: PreparedView, workdir: Path) -> dict[str, str]:
         return {self.settings_file: orb_settings_yaml(view, self.params)}

@@ -45,6 +45,8 @@ class Vocabulary:
 
 VOCABULARIES = {
     "ldso": Vocabulary("ldso", "vocab/orbvoc.dbow3", "dbow3"),
+    "orb_slam2": Vocabulary("orb_slam2", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
+    "df_orb_slam": Vocabulary("df_orb_slam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
 }
 
 

@@ -408,3 +408,16 @@ def test_pure_modules_import_in_one_direction():
             )
             for n in names:
                 assert not n.startswith(banned), f"{rel} imports {n}"
+
+
+def test_df_orb_slam_monocular_pose_switch_and_orb_slam2_recoverable_reset():
+    env = instance("df_orb_slam").environment()
+    assert env["DF_ORB_SLAM_MONO_POSE"] == "orb" and env["ORB_SLAM2_NO_LOOP"] == "1"
+    assert "DF_ORB_SLAM_MONO_POSE" not in instance("df_orb_slam", mono_pose="em").environment()
+    orb = instance("orb_slam2")
+    reset_then_new_map = (
+        "New Map created with 120 points\nTrack lost soon after initialisation, reseting...\n"
+        "System Reseting\nNew Map created with 98 points\nmedian tracking time: 0.02\n"
+    )
+    assert orb.failure_from_log(reset_then_new_map) is None  # re-initialised: not lost
+    assert orb.failure_from_log("New Map created with 120 points\nTrack lost soon after initialisation, reseting...\n")

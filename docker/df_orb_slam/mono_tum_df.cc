@@ -1,8 +1,13 @@
-// slamrun's offline monocular driver for DF-ORB-SLAM (upstream has monocular only as a ROS node fed at
-// real time with a queue of one). Same interface as ORB-SLAM2's mono_tum:
-//   mono_tum_df VOCABULARY SETTINGS SEQUENCE_DIR   (reads SEQUENCE_DIR/rgb.txt, writes KeyFrameTrajectory.txt)
-// Frames are fed one after the other without dropping any; an empty image is skipped with a message
-// instead of being tracked (the empty-image fix).
+// slamrun's offline monocular driver for DF-ORB-SLAM (upstream has monocular only as a ROS node fed at real
+// time with a queue of one, which drops frames when slower). Same interface and behaviour as ORB-SLAM2's
+// mono_tum, so the two methods are driven alike:
+//   mono_tum_df VOCABULARY SETTINGS SEQUENCE_DIR
+// reads SEQUENCE_DIR/rgb.txt (three header lines, then "timestamp relative/path" per frame), feeds every frame
+// in order, paced like mono_tum (it waits out the timestamp difference when tracking was faster; decreasing
+// timestamps never wait), and writes KeyFrameTrajectory.txt (TUM, keyframes, camera-to-world) in the working
+// directory. No viewer, no point-cloud mapping. An unreadable frame stops the run (exit 1), as in mono_tum.
+#include <algorithm>
+#include <chrono>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -11,7 +16,7 @@
 #include <unistd.h>
 
 #include <opencv2/core/core.hpp>
-#include <opencv2/highgui/highgui.hpp>
+#include <opencv2/imgcodecs.hpp>
 
 #include "System.h"
 
@@ -23,10 +28,10 @@ static bool LoadImages(const std::string &dir, std::vector<std::string> &files, 
     for (int i = 0; i < 3 && std::getline(f, line); ++i) {}  // three header lines
     while (std::getline(f, line))
     {
-        if (line.empty()) continue;
         std::stringstream ss(line);
-        double t; std::string name;
-        ss >> t >> name;
+        double t;
+        std::string name;
+        if (!(ss >> t >> name)) continue;
         times.push_back(t);
         files.push_back(dir + "/" + name);
     }
@@ -47,21 +52,47 @@ int main(int argc, char **argv)
         std::cerr << "mono_tum_df: no frames in " << argv[3] << "/rgb.txt" << std::endl;
         return 1;
     }
+    const size_t n = files.size();
+    std::cout << "mono_tum_df: " << n << " frames" << std::endl;
+
+    // monocular, no viewer, no point-cloud mapping (bMapping keeps its default, false)
     ORB_SLAM2::System SLAM(argv[1], argv[2], ORB_SLAM2::System::MONOCULAR, false);
-    int skipped = 0;
-    for (size_t i = 0; i < files.size(); ++i)
+
+    std::vector<double> track_s;
+    track_s.reserve(n);
+    for (size_t i = 0; i < n; ++i)
     {
-        cv::Mat im = cv::imread(files[i], CV_LOAD_IMAGE_UNCHANGED);
+        cv::Mat im = cv::imread(files[i], cv::IMREAD_UNCHANGED);
         if (im.empty())
         {
-            std::cerr << "mono_tum_df: empty image " << files[i] << ", skipped" << std::endl;
-            ++skipped;
-            continue;
+            std::cerr << "mono_tum_df: failed to load image " << files[i] << std::endl;
+            return 1;
         }
+        auto t1 = std::chrono::steady_clock::now();
         SLAM.TrackMonocular(im, times[i]);
+        auto t2 = std::chrono::steady_clock::now();
+        double ttrack = std::chrono::duration<double>(t2 - t1).count();
+        track_s.push_back(ttrack);
+
+        double T = 0;  // pace like mono_tum: wait for the next frame's time
+        if (i + 1 < n)
+            T = times[i + 1] - times[i];
+        else if (i > 0)
+            T = times[i] - times[i - 1];
+        if (ttrack < T)
+            usleep(static_cast<useconds_t>((T - ttrack) * 1e6));
     }
+
     SLAM.Shutdown();
+
+    std::vector<double> sorted(track_s);
+    std::sort(sorted.begin(), sorted.end());
+    double total = 0;
+    for (double s : track_s) total += s;
+    std::cout << "-------" << std::endl
+              << "median tracking time: " << sorted[sorted.size() / 2] << std::endl
+              << "mean tracking time: " << total / track_s.size() << std::endl;
+
     SLAM.SaveKeyFrameTrajectoryTUM("KeyFrameTrajectory.txt");
-    std::cout << "mono_tum_df: " << files.size() - skipped << " frames fed, " << skipped << " skipped" << std::endl;
     return 0;
 }
