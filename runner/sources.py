@@ -314,6 +314,13 @@ class PypiFile:
     def url(self, base: str = PYPI) -> str:
         return f"{base.rstrip('/')}/pypi/{self.project}/{self.version}/json"
 
+    def project_url(self, base: str = PYPI) -> str:
+        return f"{base.rstrip('/')}/pypi/{self.project}/json"
+
+    def entries(self, index: dict) -> list[dict]:
+        """This release's files in a version index (`urls`) or a project index (`releases[version]`)."""
+        return list(index.get("urls") or []) + list((index.get("releases") or {}).get(self.version) or [])
+
 
 PYPI_FILES: dict[str, PypiFile] = {
     f.filename: f
@@ -354,27 +361,37 @@ def obtain_pypi(
     path = cache / filename
     if path.is_file():
         return checked(path)
-    index = f.url(index_url or os.environ.get("SLAMRUN_PYPI_URL") or PYPI)
-    try:
-        import json
-
-        with urllib.request.urlopen(index, timeout=60) as resp:
-            release = json.load(resp)
-        entry = next((u for u in release.get("urls", []) if u.get("filename") == filename), None)
-        if entry is None:
-            raise SourceError(f"{index} does not list {filename}")
-        url = entry["url"]
-    except (urllib.error.URLError, OSError, ValueError) as exc:
-        raise SourceError(
-            f"cannot reach {index} ({getattr(exc, 'reason', exc)}): {filename} is needed; download it from PyPI "
-            f"({f.project}=={f.version}) and pass its folder with --sources DIR"
-        ) from None
+    base = index_url or os.environ.get("SLAMRUN_PYPI_URL") or PYPI
+    url = _pypi_file_url(f, base)
     _download(url, path, f"{filename} ({f.project}=={f.version})")
     try:
         return checked(path)
     except SourceError:
         path.unlink()
         raise
+
+
+def _pypi_file_url(f: PypiFile, base: str) -> str:
+    """The address of `f` by PyPI's JSON API: the release's index, else the project's (mirrors may serve only that
+    one, with addresses relative to it)."""
+    import json
+
+    index, problem = f.url(base), ""
+    for index in (f.url(base), f.project_url(base)):
+        try:
+            with urllib.request.urlopen(index, timeout=60) as resp:
+                listing = json.load(resp)
+        except (urllib.error.URLError, OSError, ValueError) as exc:
+            problem = str(getattr(exc, "reason", exc))
+            continue
+        entry = next((u for u in f.entries(listing) if u.get("filename") == f.filename), None)
+        if entry is not None:
+            return urllib.parse.urljoin(index, entry["url"])
+        problem = f"it does not list {f.filename}"
+    raise SourceError(
+        f"cannot find {f.filename} at {index} ({problem}): it is needed; download it from PyPI "
+        f"({f.project}=={f.version}) and pass its folder with --sources DIR"
+    )
 
 
 def _download(url: str, dest: Path, what: str, timeout_s: float = 60.0) -> None:

@@ -170,3 +170,21 @@ def test_weights_by_address_need_and_get_their_checksum(tmp_path):
             obtain_url(f"{url}/w/model.pb", "1" * 64, cache=tmp_path / "b")
         with pytest.raises(SourceError, match="needs its sha256"):
             obtain_url(f"{url}/w/model.pb", "", cache=tmp_path / "c")
+
+
+def test_a_pypi_file_from_a_mirror_with_only_the_project_index_and_relative_addresses(tmp_path):
+    """A PyPI mirror (as the registry this project is tested behind) may serve /pypi/<project>/json only, with file
+    addresses relative to it: the file is still found there."""
+    from runner.sources import PypiFile, obtain_pypi
+
+    data = b"a wheel from a mirror " * 3000
+    f = PypiFile("demo-1.0-py3-none-any.whl", "demo", "1.0", src.hashlib.sha256(data).hexdigest())
+    project = {
+        "info": {"version": "2.0"},
+        "urls": [],
+        "releases": {"1.0": [{"filename": f.filename, "url": "../../packages/ab/demo-1.0-py3-none-any.whl"}]},
+    }
+    routes = {"/pypi/demo/json": json.dumps(project).encode(), "/packages/ab/demo-1.0-py3-none-any.whl": data}
+    with loopback_server(routes) as (url, hits):
+        path = obtain_pypi(f, cache=tmp_path / "cache", index_url=url)
+    assert path.read_bytes() == data and hits[-1] == "/packages/ab/demo-1.0-py3-none-any.whl"
