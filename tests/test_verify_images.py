@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from runner.datasets.synth import generate
-from runner.verify_images import VerifyRow, markdown_table, merged, scene_extent
+from runner.verify_images import VerifyRow, holds_standin_network, markdown_table, merged, scene_extent
 
 
 def test_scene_extent_is_the_camera_paths_bounding_box_diagonal(tmp_path):
@@ -39,3 +39,16 @@ def test_rows_of_earlier_calls_are_kept(tmp_path):
     assert [r.method for r in table] == ["dso", "ldso"]  # registry order
     text = markdown_table(table)
     assert "| dso | yes |" in text and "| ldso | yes |" in text and "0.0006 (0.0010)" in text
+
+
+def test_an_image_with_a_standin_network_is_judged_on_its_plumbing_only():
+    """An untrained stand-in graph says nothing of accuracy: such an image passes when every run ends done and
+    evaluated, whatever its e_align, and the table says the bound was not applied."""
+    far = dict(built=True, runs=8, runs_ok=8, e_align_rel_median=0.4, e_align_rel_max=0.9)
+    assert not VerifyRow("cnn_dso", **far).passed
+    assert VerifyRow("cnn_dso", **far, plumbing_only=True).passed
+    assert not VerifyRow("cnn_dso", True, runs=8, runs_ok=7, e_align_rel_median=0.4, plumbing_only=True).passed
+    assert "| plumbing only (stand-in network) |" in markdown_table([VerifyRow("cnn_dso", **far, plumbing_only=True)])
+    labels = {"slamrun.weights": '{"model_city2kitti.pb": "untrained stand-in with ...: plumbing only"}'}
+    assert holds_standin_network(labels) and not holds_standin_network({"slamrun.weights": '{"a.pb": "a.pb sha256 0"}'})
+    assert not holds_standin_network({})
