@@ -175,9 +175,18 @@ def _campaign(name: str, row: VerifyRow, results: Path, trials: int, frames: int
     ram = [r["ram_peak_mb"] for r in ok if r["ram_peak_mb"]]
     row.fps = round(statistics.median(fps), 1) if fps else None
     row.ram_mb = round(statistics.median(ram)) if ram else None
-    failed = [f"{r['sequence']}/{r['direction']}/{r['trial']}: {r['failure']}" for r in done if r not in ok]
+    failed = [f"{r['sequence']}/{r['direction']}/{r['trial']}: {_why_not_ok(r)}" for r in done if r not in ok]
     if failed:
         row.note = "not ok: " + "; ".join(failed[:4]) + (f" (+{len(failed) - 4})" if len(failed) > 4 else "")
+
+
+def _why_not_ok(row) -> str:
+    """A run's failure kind, or why a run that ended done has no e_align."""
+    if row["failure"]:
+        return row["failure"]
+    if row["state"] == "done":
+        return f"not evaluated ({row['eval_status'] or 'no metrics'})"
+    return row["state"]
 
 
 def _fmt(v, spec: str = "", none: str = "-") -> str:

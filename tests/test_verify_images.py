@@ -52,3 +52,10 @@ def test_an_image_with_a_standin_network_is_judged_on_its_plumbing_only():
     labels = {"slamrun.weights": '{"model_city2kitti.pb": "untrained stand-in with ...: plumbing only"}'}
     assert holds_standin_network(labels) and not holds_standin_network({"slamrun.weights": '{"a.pb": "a.pb sha256 0"}'})
     assert not holds_standin_network({})
+
+
+def test_a_run_that_ended_done_without_metrics_says_why():
+    from runner.verify_images import _why_not_ok
+
+    assert _why_not_ok({"failure": None, "state": "done", "eval_status": "incomplete"}) == "not evaluated (incomplete)"
+    assert _why_not_ok({"failure": "lost", "state": "failed", "eval_status": "incomplete"}) == "lost"
