@@ -384,7 +384,7 @@ def cmd_list_methods(args) -> int:
         t.add_row(
             name,
             str(prof),
-            cls.image or "-",
+            cls.image if isinstance(cls.image, str) else "-" if cls.image is None else "from the spec",
             "optional" if cls.gpu_capable else "no",
             "yes" if cls.native else "no",
             cls.loop_closure_switch or "-",

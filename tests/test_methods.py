@@ -123,20 +123,29 @@ def test_dso_family_commands(views):
 
 
 def test_svo_family_parameters_parse_back(views):
+    # SVO: the native view's camera.txt (FOV = vikit's ATAN camera) and images.txt, read by svo_offline
+    v = views[Profile.native].at("/data")
+    m = instance("svo", max_fts=150)
+    params = yaml.safe_load(m.configure(v, Path("/work"))["svo_params.yaml"])
+    assert params["svo/cam_model"] == "ATAN" and params["svo/camera_file"] == "/data/camera.txt"
+    assert params["svo/dataset_directory"] == "/data" and params["svo/output_file"] == "/work/traj_estimate.txt"
+    assert params["svo/trace_dir"] == "/work" and params["svo/max_fts"] == 150
+    assert params["svo/init_min_disparity"] == 10.0  # lower than SVO's 50 px: see methods/svo.py
+    assert m.command(v, Path("/work")) == ["/opt/svo/bin/svo_offline", "/work/svo_params.yaml"]
+    assert m.accepts_exit(3, Path("/work")) and not m.accepts_exit(1, Path("/work"))  # 3: no pose written
+    assert m.failure_from_log("slamrun: never initialised\n") == "not_initialized"
+    # CNN-SVO: the rectified view's pinhole, a folder of frames and a one-column times file, vo_kitti defaults
     v = views[Profile.rectified].at("/data")
-    for name in ("svo", "cnn_svo"):
-        m = instance(name, max_fts=150)
-        files = m.configure(v, Path("/work"))
-        params = yaml.safe_load(files["svo_params.yaml"])
-        assert params["svo/cam_model"] == "Pinhole" and params["svo/cam_fx"] == 320.0
-        assert params["svo/cam_width"] == 640 and params["svo/dataset_directory"] == "/data"
-        assert params["svo/trace_dir"] == "/work" and params["svo/max_fts"] == 150
-        assert m.command(v, Path("/work")) == [m.binary, "/work/svo_params.yaml"]
-    cnn = instance("cnn_svo").for_backend("docker")
-    files = cnn.configure(v, Path("/work"))
-    params = yaml.safe_load(files["svo_params.yaml"])
-    assert params["svo/times_file"] == "/data/times_single.txt" and params["svo/image_folder"] == "/work/frames"
-    assert "results/CNN_VO/.keep" in files and cnn.environment()["HOME"] == "/work"
+    cnn = instance("cnn_svo", max_fts=150).for_backend("docker")
+    params = yaml.safe_load(cnn.configure(v, Path("/work"))["svo_params.yaml"])
+    assert params["svo/cam_model"] == "Pinhole" and params["svo/cam_fx"] == 320.0 and params["svo/cam_width"] == 640
+    assert params["svo/image_folder"] == "/data/images" and params["svo/times_file"] == "/data/times_single.txt"
+    assert params["svo/output_file"] == "/work/traj_estimate_ATE.txt" and params["svo/frame_delay_ms"] == 50
+    assert params["svo/cnn_model"].endswith("model_city2kitti.pb") and params["svo/max_fts"] == 150
+    assert params["svo/quality_max_drop_fts"] == 150 and params["svo/use_motion_model"] is True  # vo_kitti.yaml
+    assert instance("cnn_svo").params.max_fts == 200 and instance("cnn_svo").params.max_n_kfs == 0
+    assert cnn.command(v, Path("/work")) == ["/opt/CNN-SVO/rpg_svo/svo/bin/cnn_svo_offline", "/work/svo_params.yaml"]
+    assert cnn.environment() == {"CUDA_VISIBLE_DEVICES": ""} and cnn.accepts_exit(3, Path("/work"))
 
 
 def test_dsm_files_parse_back(tmp_path, views):
@@ -421,3 +430,19 @@ def test_df_orb_slam_monocular_pose_switch_and_orb_slam2_recoverable_reset():
     )
     assert orb.failure_from_log(reset_then_new_map) is None  # re-initialised: not lost
     assert orb.failure_from_log("New Map created with 120 points\nTrack lost soon after initialisation, reseting...\n")
+
+
+def test_list_methods_names_every_method():
+    """`slamrun list-methods` prints every registered method, the external one (whose image comes from the
+    spec) included."""
+    import subprocess
+    import sys
+
+    import methods
+
+    out = subprocess.run(
+        [sys.executable, "-m", "runner.cli", "list-methods"], capture_output=True, text=True, env={"COLUMNS": "200"}
+    )
+    assert out.returncode == 0, out.stderr
+    for name in methods.REGISTRY:
+        assert name in out.stdout
