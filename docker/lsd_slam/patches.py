@@ -1,42 +1,47 @@
-"""LSD-SLAM patches: write every frame's final pose with its frame index after finalize() (upstream writes
-no trajectory file: poses only reach ROS topics with fake timestamps), and OpenCV 3+ constant names."""
+"""LSD-SLAM (tum-vision/lsd_slam @ d1e6f0e) without ROS on Debian 12: its core sources are compiled by the
+project's CMakeLists.txt (docker/lsd_slam, replacing the rosbuild one) with a headless ImageDisplay and the
+offline driver lsd_slam_offline.cpp; these patches make the upstream sources build with gcc 12, OpenCV 4.6,
+Boost 1.74 and Eigen 3.4.
+
+- OpenCV 4 constants (CV_GRAY2RGB, CV_LOAD_IMAGE_*, ...) below lsd_slam_core/src, and the C API's cvPoint()
+  (util/globalFuncs.cpp) as cv::Point.
+- Boost >= 1.73 no longer puts bind's _1.._3 in the global namespace: util/IndexThreadReduce.h (included by
+  DepthMap.cpp, whose boost::bind calls use them) brings boost::placeholders in, as DSO's patch does.
+- gcc >= 9's libstdc++ requires a container's allocator to allocate its value_type: the keyed containers' pairs
+  get their `Key const` (Frame.h's trackingFailed, SlamSystem.cpp's candidateToFrame_initialEstimateMap) and
+  KeyFrameGraph.h's newEdgeBuffer of KFConstraintStruct* gets an allocator of KFConstraintStruct* (upstream:
+  of FramePoseStruct*). Same layout, same behaviour.
+usage: patches.py LSD_SLAM_ROOT
+"""
 import os
-import re
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import include_once, patch  # noqa: E402
+from patchlib import opencv4, patch, sub  # noqa: E402
 
-root = sys.argv[1]
-main = "lsd_slam_core/src/main_on_images.cpp"
-patch(root, main, "after", "\tsystem->finalize();\n", """
-	// slamrun: all frame poses (camera-to-world) with their frame index, to $SLAMRUN_POSES
-	if (getenv("SLAMRUN_POSES"))
-	{
-		std::ofstream out(getenv("SLAMRUN_POSES"));
-		out << std::setprecision(12);
-		std::vector<FramePoseStruct*, Eigen::aligned_allocator<FramePoseStruct*> > poses = system->getAllPoses();
-		for (unsigned int i = 0; i < poses.size(); i++)
-		{
-			if (!poses[i]->isInGraph && !poses[i]->trackingParent) continue;
-			Sim3 camToWorld = poses[i]->getCamToWorld();
-			Eigen::Vector3d t = camToWorld.translation();
-			Eigen::Quaterniond q(camToWorld.rxso3().quaternion().normalized());
-			out << poses[i]->frameID << " " << t.x() << " " << t.y() << " " << t.z() << " "
-			    << q.x() << " " << q.y() << " " << q.z() << " " << q.w() << "\\n";
-		}
-		printf("slamrun: wrote %d poses\\n", (int)poses.size());
-	}
-""")
-include_once(root, main, "iomanip")
-include_once(root, main, "cstdlib")
-include_once(root, main, "fstream")
+CORE = "lsd_slam_core"
 
-# the debug windows: off by default (the wrapper also runs under a virtual display)
-settings = os.path.join(root, "lsd_slam_core", "src", "util", "settings.cpp")
-with open(settings) as f:
-    text = f.read()
-text, n = re.subn(r"(bool\s+displayDepthMap\s*=\s*)true", r"\1false", text)
-with open(settings, "w") as f:
-    f.write(text)
-print("patch: settings.cpp: displayDepthMap off (%d)" % n)
+
+def lsd_slam(root):
+    src = os.path.join(CORE, "src")
+    opencv4(root, [src])
+    sub(root, os.path.join(src, "util/globalFuncs.cpp"), r"\bcvPoint\(", "cv::Point(", min_count=2)
+    patch(root, os.path.join(src, "util/IndexThreadReduce.h"), "after", '#include "boost/thread.hpp"\n',
+          "#include <boost/bind/bind.hpp>\nusing namespace boost::placeholders;  // slamrun: Boost >= 1.73\n")
+    patch(root, os.path.join(src, "DataStructures/Frame.h"), "replace",
+          "Eigen::aligned_allocator< std::pair<const Frame*,Sim3> > > trackingFailed;",
+          "Eigen::aligned_allocator< std::pair<Frame* const,Sim3> > > trackingFailed;  // slamrun: gcc >= 9")
+    patch(root, os.path.join(src, "SlamSystem.cpp"), "replace",
+          "Eigen::aligned_allocator<std::pair<Frame*, Sim3> > > candidateToFrame_initialEstimateMap;",
+          "Eigen::aligned_allocator<std::pair<Frame* const, Sim3> > > candidateToFrame_initialEstimateMap;"
+          "  // slamrun: gcc >= 9")
+    patch(root, os.path.join(src, "GlobalMapping/KeyFrameGraph.h"), "replace",
+          "std::vector< KFConstraintStruct*, Eigen::aligned_allocator<FramePoseStruct*> > newEdgeBuffer;",
+          "std::vector< KFConstraintStruct*, Eigen::aligned_allocator<KFConstraintStruct*> > newEdgeBuffer;"
+          "  // slamrun: gcc >= 9")
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: patches.py LSD_SLAM_ROOT")
+    lsd_slam(sys.argv[1])

@@ -1,26 +1,91 @@
-"""SVO patches: Sophus @ a621ff's one-line fix for gcc >= 5, and a restart of a stalled initialisation in
-the benchmark node (upstream stays paused forever after an initialisation failure)."""
+"""SVO (uzh-rpg/rpg_svo @ d616106, with rpg_vikit, fast and Sophus @ a621ff) without ROS on Debian 12: the svo
+library and vikit_common built with their own USE_ROS switches off, SVO's parameters read from a flat file as
+the ROS node reads them (-DSLAMRUN_PARAMS, a ROS-free vikit/params_helper.h in docker/svo/include), and
+slamrun's offline driver (svo_offline.cpp) instead of the ROS benchmark node.
+
+- Sophus @ a621ff, sophus/so2.cpp: `unit_complex_.real() = 1.;` assigns to an rvalue since C++11 (gcc >= 5):
+  the complex number is set whole.
+- fast, CMakeLists.txt: no test program (BUILD_TEST TRUE builds fast_test against OpenCV's highgui); -std=c++11
+  (gcc 12 defaults to C++17, where fast's `register` variables are errors under its -Werror).
+- rpg_vikit/vikit_common: USE_ROS off; OpenCV 4 constants; the debug windows of img_align.cpp dropped (never
+  shown headless, and they would link OpenCV's GUI); ATAN (FOV) camera: the distortion factors at the image
+  centre are the model's limits (upstream returns 1 below a radius of 0.01 / 0.001, a jump of
+  s / (2 tan(s/2)) - 1, -6 % for s = 0.8, within a few pixels of the principal point).
+- rpg_svo/svo: USE_ROS off, our include folder first and SLAMRUN_PARAMS (config.cpp reads its parameters through
+  vk::getParam, with the ROS node's defaults, instead of the compiled-in non-ROS ones); Boost >= 1.73 bind
+  placeholders in global.h; the debug window of sparse_img_align.cpp dropped (its only OpenCV C constant); the driver
+  target svo_offline; the tests are not configured (they need data that is not in the tree).
+usage: patches.py SVO_ROOT VIKIT_ROOT FAST_ROOT SOPHUS_ROOT
+"""
 import os
-import re
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import patch  # noqa: E402
+from patchlib import append_line, opencv4, patch, sub  # noqa: E402
 
-sophus, svo = sys.argv[1], sys.argv[2]
-patch(sophus, "sophus/so2.cpp", "replace", "unit_complex_.real() = 1.;\n  unit_complex_.imag() = 0.;",
-      "unit_complex_ = std::complex<double>(1, 0);")
+DEBUG_WINDOW = r"\n(\s*)cv::namedWindow\(\"residuals\", CV_WINDOW_AUTOSIZE\);\n\s*cv::imshow\([^;]*;\n\s*cv::waitKey\(0\);"
+NO_WINDOW = r"\n\1// slamrun: no debug window (headless build without OpenCV's GUI)"
 
-bench = os.path.join(svo, "svo_ros", "src", "benchmark_node.cpp")
-with open(bench) as f:
-    text = f.read()
-# after every addImage call, a stage stuck in 'paused' (initialisation failed) is restarted
-new, n = re.subn(r"(\n(\s*)(vo_->addImage\([^;]*\);))",
-                 r"\1\n\2if (vo_->stage() == svo::FrameHandlerMono::STAGE_PAUSED) {  // slamrun: restart init\n"
-                 r"\2  printf(\"slamrun: initialisation stalled, restarting\\n\");\n\2  vo_->start();\n\2}",
-                 text)
-if n == 0:
-    sys.exit("patch: benchmark_node.cpp: no 'vo_->addImage(...)' call found")
-with open(bench, "w") as f:
-    f.write(new)
-print("patch: benchmark_node.cpp: %d restart(s) added" % n)
+
+def sophus(root):
+    patch(root, "sophus/so2.cpp", "replace", "unit_complex_.real() = 1.;\n  unit_complex_.imag() = 0.;",
+          "unit_complex_ = std::complex<double>(1, 0);  // slamrun: C++11")
+
+
+def fast(root):
+    patch(root, "CMakeLists.txt", "replace", "SET(BUILD_TEST TRUE)", "SET(BUILD_TEST FALSE)  # slamrun")
+    patch(root, "CMakeLists.txt", "replace", 'SET(CMAKE_CXX_FLAGS "-Wall -Werror ',
+          'SET(CMAKE_CXX_FLAGS "-std=c++11 -Wall -Werror ')
+
+
+def vikit(root):
+    patch(root, "vikit_common/CMakeLists.txt", "replace", "SET(USE_ROS TRUE)", "SET(USE_ROS FALSE)  # slamrun")
+    sub(root, "vikit_common/src/img_align.cpp", DEBUG_WINDOW, NO_WINDOW, min_count=2)
+    opencv4(root, ["vikit_common/src"])
+    sub(root, "vikit_common/src/homography.cpp", r"\bCV_RANSAC\b", "cv::RANSAC")
+    # the FOV model's factors at r -> 0 (atan(r t)/(s r) -> t/s, tan(r s)/(t r) -> s/t, t = 2 tan(s/2))
+    header = "vikit_common/include/vikit/atan_camera.h"
+    patch(root, header, "replace",
+          "    if(r < 0.001 || s_ == 0.0)\n      return 1.0;\n",
+          "    if(s_ == 0.0)\n      return 1.0;\n"
+          "    if(r < 0.001)  // slamrun: the limit, not 1\n      return s_inv_ * tans_;\n")
+    patch(root, "vikit_common/src/atan_camera.cpp", "replace",
+          "  else\n    d_factor = 1.0;\n",
+          "  else  // slamrun: the limit at the centre, not 1\n    d_factor = (s_ == 0.0) ? 1.0 : s_ * tans_inv_;\n")
+
+
+def svo(root):
+    cm = "svo/CMakeLists.txt"
+    patch(root, cm, "replace", "SET(USE_ROS TRUE)", "SET(USE_ROS FALSE)  # slamrun")
+    patch(root, cm, "replace", "ELSE()\n  INCLUDE_DIRECTORIES(${vikit_common_INCLUDE_DIRS})\n",
+          "ELSE()\n"
+          "  # slamrun: a ROS-free vikit/params_helper.h, before anything else\n"
+          "  INCLUDE_DIRECTORIES(BEFORE ${SLAMRUN_INCLUDE_DIR})\n"
+          "  ADD_DEFINITIONS(-DSLAMRUN_PARAMS)\n"
+          "  INCLUDE_DIRECTORIES(${vikit_common_INCLUDE_DIRS})\n")
+    # the tests need data that is not in the tree; the driver replaces them
+    full = os.path.join(root, cm)
+    with open(full) as f:
+        text = f.read()
+    tests = text.index("################################################################################\n# TESTS")
+    with open(full, "w") as f:
+        f.write(text[:tests])
+    print("patch: %s (tests dropped)" % cm)
+    append_line(root, cm, "# slamrun: the ROS-free offline driver (docker/svo/svo_offline.cpp)\n"
+                "ADD_EXECUTABLE(svo_offline ${SLAMRUN_SVO_DRIVER})\n"
+                "TARGET_LINK_LIBRARIES(svo_offline svo ${LINK_LIBS})")
+    sub(root, "svo/src/config.cpp", r"#ifdef SVO_USE_ROS\b", "#if defined(SVO_USE_ROS) || defined(SLAMRUN_PARAMS)",
+        min_count=2)
+    patch(root, "svo/include/svo/global.h", "after", "#include <boost/shared_ptr.hpp>\n",
+          "#include <boost/bind/bind.hpp>\nusing namespace boost::placeholders;  // slamrun: Boost >= 1.73\n")
+    sub(root, "svo/src/sparse_img_align.cpp", DEBUG_WINDOW, NO_WINDOW)  # its only OpenCV C constant
+
+
+if __name__ == "__main__":
+    if len(sys.argv) != 5:
+        sys.exit("usage: patches.py SVO_ROOT VIKIT_ROOT FAST_ROOT SOPHUS_ROOT")
+    svo_root, vikit_root, fast_root, sophus_root = sys.argv[1:]
+    sophus(sophus_root)
+    fast(fast_root)
+    vikit(vikit_root)
+    svo(svo_root)
