@@ -34,6 +34,7 @@ class ExternalParams(BaseModel):
     format: OutputFormat = Field(OutputFormat.tum, description="Format of the output file.")
     profile: Profile = Field(Profile.native, description="Prepared view the executable consumes.")
     cwd: str | None = Field(None, description="Working directory (default: the run's work directory).")
+    env: dict[str, str] = Field(default_factory=dict, description="Environment variables set for the process.")
     image: str | None = Field(
         None, description="Docker image to run argv in with backend: docker (paths then are /data and /work)."
     )
@@ -95,6 +96,9 @@ class External(Method):
             "workdir": str(workdir),
             "out": str(workdir / self.params.output),
         }
+
+    def environment(self) -> dict[str, str]:
+        return dict(self.params.env)
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         values = self.placeholders(view, workdir)

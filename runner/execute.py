@@ -100,6 +100,7 @@ def launch_run(
             log_cap_bytes=log_cap_bytes,
             image=method.image,
             needs_gpu=method.needs_gpu,
+            env=method.environment(),
             labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id, "slamrun.attempt": str(attempt)},
             token=paths.token(attempt),
         )

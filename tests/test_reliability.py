@@ -304,3 +304,21 @@ def test_campaign_and_backends_import_in_one_direction():
         tree = ast.parse(path.read_text())
         imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
         assert "runner.campaign" not in imported, f"{path.name} imports runner.campaign"
+
+
+# ------------------------------------------------------------ a method's environment reaches its process
+
+
+def test_a_methods_environment_reaches_its_process(tmp_path, tiny_dataset):
+    """Method.environment() (ORB-SLAM2's loop-closure switch, DF-ORB-SLAM's pose switch, the CPU settings of the
+    CNN methods) is set in the process a run starts; `external` takes it from its `env` parameter."""
+    fake = fake_method()
+    fake["params"]["argv"] = ["sh", "-c", 'printf %s "$SLAMRUN_TEST_VALUE" > env.txt; exec "$@"', "sh"] + fake[
+        "params"
+    ]["argv"]
+    fake["params"]["env"] = {"SLAMRUN_TEST_VALUE": "loop-off"}
+    spec = write_spec(tmp_path, tiny_dataset, [fake], datasets=one_sequence(tiny_dataset), directions=["forward"])
+    res = campaign(spec)
+    assert res.counts["done"] == 1
+    (seen,) = list((res.results / "runs").rglob("raw/env.txt"))
+    assert seen.read_text() == "loop-off"
