@@ -6,8 +6,12 @@
 // in order, paced like mono_tum (it waits out the timestamp difference when tracking was faster; decreasing
 // timestamps never wait), and writes KeyFrameTrajectory.txt (TUM, keyframes, camera-to-world) in the working
 // directory. No viewer, no point-cloud mapping. An unreadable frame stops the run (exit 1), as in mono_tum.
+// Settings entries `Slamrun.env.NAME: "value"` set the environment variable NAME (the image's switches, read
+// with getenv: ORB_SLAM2_NO_LOOP, DF_ORB_SLAM_MONO_POSE) before the system starts, unless NAME is already
+// set: the adapter writes its environment there too, so its switches hold however the process is started.
 #include <algorithm>
 #include <chrono>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <sstream>
@@ -38,6 +42,25 @@ static bool LoadImages(const std::string &dir, std::vector<std::string> &files, 
     return !files.empty();
 }
 
+static void ApplySettingsEnvironment(const std::string &settings)
+{
+    cv::FileStorage fs(settings, cv::FileStorage::READ);
+    if (!fs.isOpened()) return;  // the system reports an unreadable settings file
+    const std::string prefix = "Slamrun.env.";
+    cv::FileNode root = fs.root();
+    for (cv::FileNodeIterator it = root.begin(); it != root.end(); ++it)
+    {
+        const cv::FileNode node = *it;
+        const std::string key = node.name();
+        if (key.compare(0, prefix.size(), prefix) != 0 || !node.isString()) continue;
+        const std::string name = key.substr(prefix.size()), value = node.string();
+        const char *given = getenv(name.c_str());
+        if (!given) setenv(name.c_str(), value.c_str(), 0);
+        std::cout << "mono_tum_df: " << name << "=" << (given ? given : value.c_str())
+                  << (given ? " (environment)" : " (settings)") << std::endl;
+    }
+}
+
 int main(int argc, char **argv)
 {
     if (argc != 4)
@@ -55,6 +78,7 @@ int main(int argc, char **argv)
     const size_t n = files.size();
     std::cout << "mono_tum_df: " << n << " frames" << std::endl;
 
+    ApplySettingsEnvironment(argv[2]);  // before the system's threads start
     // monocular, no viewer, no point-cloud mapping (bMapping keeps its default, false)
     ORB_SLAM2::System SLAM(argv[1], argv[2], ORB_SLAM2::System::MONOCULAR, false);
 

@@ -65,6 +65,7 @@ patch(root, "src/ORBmatcher.cc", "before",
 # every keypoint, so every weight is negative (z > 0) and the pose is pushed away from the data: the map is
 # lost a few frames after each initialisation. Upstream behaviour stays the default; with the environment
 # variable DF_ORB_SLAM_MONO_POSE=orb a frame without any depth uses ORB-SLAM2's PoseOptimization (same file).
+# (The driver mono_tum_df also sets it from the settings file: `Slamrun.env.DF_ORB_SLAM_MONO_POSE: "orb"`.)
 patch(root, "src/Optimizer.cc", "after", "int Optimizer::PoseOptimizationEM(Frame *pFrame)\n{\n",
       "    // slamrun: opt-in switch for frames without depth (monocular), where the EM weights are negative\n"
       "    static const bool bMonoPoseOrb = getenv(\"DF_ORB_SLAM_MONO_POSE\") &&\n"
