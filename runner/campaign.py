@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -177,7 +178,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             log(f"removed {removed} damaged view(s) from {spec.cache}")
         # views are prepared in the background, in the order the runs start; a lane waits only for its own
         order = [(str(r.sequence_dir), r.key.direction, r.profile) for r in runs if r.key.id in pending]
-        views = ViewPreparer(order, spec.cache, spec.frame_format).start()
+        views = ViewPreparer(order, spec.cache, spec.frame_format, head=min(spec.lanes, os.cpu_count() or 1)).start()
         gts = load_groundtruths(runs) if spec.evaluate else {}
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
         if hasattr(backend, "leftovers"):  # containers left by a killed runner or a lost daemon

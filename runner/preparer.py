@@ -1,9 +1,11 @@
 """Prepared views made ahead of the runs that need them, in a background thread, in the order the runs
-will start; a lane waits only for its own run's view. A view found damaged before a run is prepared again
-(a new generation beside it, see views.prepare)."""
+will start; a lane waits only for its own run's view. The first `head` views (one per lane: the lanes are idle
+until theirs is ready) are prepared at the same time, the rest one at a time (the lanes need the cores then).
+A view found damaged before a run is prepared again (a new generation beside it, see views.prepare)."""
 
 from __future__ import annotations
 
+import contextlib
 import threading
 from pathlib import Path
 
@@ -14,15 +16,19 @@ ViewKey = tuple[str, Direction, Profile]  # (sequence folder, direction, profile
 
 
 class ViewPreparer:
-    def __init__(self, order: list[ViewKey], cache: Path, frame_format: str = "png", on_ready=None):
+    def __init__(
+        self, order: list[ViewKey], cache: Path, frame_format: str = "png", on_ready=None, head: int = 1
+    ) -> None:
         self.cache = Path(cache)
+        self.head = max(1, head)
         self.frame_format = frame_format
         self.on_ready = on_ready or (lambda key, view: None)
         self._order = list(dict.fromkeys(order))
         self._views: dict[ViewKey, PreparedView] = {}
         self._errors: dict[ViewKey, BaseException] = {}
+        self._inflight: set[ViewKey] = set()
         self._cond = threading.Condition()
-        self._lock = threading.Lock()  # one preparation at a time (2 cores: the lanes need the rest)
+        self._lock = threading.Lock()  # one preparation at a time after the head (the lanes need the cores)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="view-preparer", daemon=True)
 
@@ -35,27 +41,39 @@ class ViewPreparer:
         self._thread.join(timeout=60)
 
     def _loop(self) -> None:
-        for key in self._order:
+        head = self._order[: self.head] if self.head > 1 else []
+        together = [threading.Thread(target=self._prepare, args=(k, False), daemon=True) for k in head]
+        for thread in together:
+            thread.start()
+        for thread in together:
+            thread.join()
+        for key in self._order[len(head) :]:
             if self._stop.is_set():
                 return
             self._prepare(key)
 
-    def _prepare(self, key: ViewKey) -> None:
-        with self._lock:
-            with self._cond:
-                if key in self._views or key in self._errors:
-                    return
-            try:
-                view = prepare(Path(key[0]), key[1], key[2], self.cache, frame_format=self.frame_format)
-            except Exception as exc:  # noqa: BLE001 - a full disk, an undecodable frame: the runs say it
-                with self._cond:
-                    self._errors[key] = exc
-                    self._cond.notify_all()
-                return
+    def _prepare(self, key: ViewKey, serial: bool = True) -> None:
         with self._cond:
-            self._views[key] = view
-            self._cond.notify_all()
-        self.on_ready(key, view)
+            while key in self._inflight:  # another thread prepares it: its result serves
+                self._cond.wait(0.5)
+            if key in self._views or key in self._errors:
+                return
+            self._inflight.add(key)
+        view = None
+        try:
+            with self._lock if serial else contextlib.nullcontext():
+                view = prepare(Path(key[0]), key[1], key[2], self.cache, frame_format=self.frame_format)
+        except Exception as exc:  # noqa: BLE001 - a full disk, an undecodable frame: the runs say it
+            with self._cond:
+                self._errors[key] = exc
+        finally:
+            with self._cond:
+                if view is not None:
+                    self._views[key] = view
+                self._inflight.discard(key)
+                self._cond.notify_all()
+        if view is not None:
+            self.on_ready(key, view)
 
     def get(self, key: ViewKey) -> PreparedView:
         """The view, once prepared (preparing it now if the background thread has not reached it)."""
