@@ -1,5 +1,5 @@
-// slamrun: a ROS-free stand-in for rpg_vikit's vikit_ros/include/vikit/params_helper.h, so SVO's svo library
-// (config.cpp) builds and reads its parameters without ROS (the same file as docker/cnn_svo/include/vikit/).
+// slamrun: a ROS-free stand-in for rpg_vikit's vikit_ros/include/vikit/params_helper.h, so the svo library of
+// SVO and of CNN-SVO (config.cpp; CNN-SVO's frame handlers too) builds and reads its parameters without ROS.
 // vk::getParam(name[, default]) looks `name` up in a flat "key: value" file (rosparam YAML as slamrun writes it:
 // `svo/max_fts: 120`, `svo/cam_model: "Pinhole"`); a key `svo/x` also matches a bare `x` (the authors' param/*.yaml).
 // The file is named by the environment variable SVO_PARAMS (the driver sets it from its argument).
