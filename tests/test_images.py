@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 @pytest.fixture(scope="module")
 def client():
     if not UPSTREAM.is_dir():
-        pytest.skip(f"{UPSTREAM} not found")
+        pytest.skip(f"{UPSTREAM} not found: image builds take upstream archives from shared/upstream beside the repo")
     return engine_with_base()
 
 

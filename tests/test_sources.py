@@ -23,7 +23,10 @@ UPSTREAM = SHARED / "upstream"
 @pytest.fixture(scope="module")
 def upstream() -> Path:
     if not UPSTREAM.is_dir():
-        pytest.skip(f"{UPSTREAM} not found: the upstream archives live in shared/upstream beside the repo")
+        pytest.skip(
+            f"{UPSTREAM} not found: these tests check the real upstream archives, kept in shared/upstream beside the "
+            "repo (set SLAMRUN_SHARED to use another folder)"
+        )
     return UPSTREAM
 
 
