@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,7 +12,6 @@ import yaml
 import methods
 from runner.backends import make_backend
 from runner.backends.base import Backend
-from runner.datasets import synth
 from runner.datasets.tum_mono import open_sequence
 from runner.datasets.views import prepare, remove_damaged
 from runner.errors import DaemonUnreachable, DatasetError, DiskFullError, LedgerLostError, is_disk_full
@@ -21,7 +19,6 @@ from runner.ledger import Ledger, ResultsLock
 from runner.plan import PlannedRun, plan
 from runner.preparer import ViewPreparer
 from runner.recovery import collect_leftovers, import_finished, recover
-from runner.results import export
 from runner.scheduler import Event, Scheduler
 from runner.spec import CampaignSpec
 
@@ -39,6 +36,7 @@ class CampaignResult:
 
 def ensure_datasets(spec: CampaignSpec, log=print) -> None:
     """Generate the synthetic sequences a spec asks for and that are not on disk yet."""
+    from runner.datasets import synth  # scipy: imported only when a sequence is generated
     for ds in spec.datasets:
         if ds.synthetic is None:
             continue
@@ -178,7 +176,8 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             log(f"removed {removed} damaged view(s) from {spec.cache}")
         # views are prepared in the background, in the order the runs start; a lane waits only for its own
         order = [(str(r.sequence_dir), r.key.direction, r.profile) for r in runs if r.key.id in pending]
-        views = ViewPreparer(order, spec.cache, spec.frame_format, head=min(spec.lanes, os.cpu_count() or 1)).start()
+        lanes = 1 if spec.measurement == "exclusive" else spec.lanes
+        views = ViewPreparer(order, spec.cache, spec.frame_format, head=lanes).start()  # the idle lanes' first views
         gts = load_groundtruths(runs) if spec.evaluate else {}
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
         if hasattr(backend, "leftovers"):  # containers left by a killed runner or a lost daemon
@@ -209,6 +208,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             except Exception:  # noqa: BLE001 - a lost ledger or a full disk: status then sees the process gone
                 pass
         remove_damaged(spec.cache)  # no run in flight any more
+        from runner.results import export  # pandas: imported after the runs, not before the first one starts
         if isinstance(sched.fatal_error, LedgerLostError):
             ledger.close()
             raise sched.fatal_error

@@ -1,11 +1,13 @@
-"""Prepared views made ahead of the runs that need them, in a background thread, in the order the runs
-will start; a lane waits only for its own run's view. The first `head` views (one per lane: the lanes are idle
-until theirs is ready) are prepared at the same time, the rest one at a time (the lanes need the cores then).
-A view found damaged before a run is prepared again (a new generation beside it, see views.prepare)."""
+"""Prepared views made ahead of the runs that need them, in a background thread, one at a time, in the order
+the runs will start; a lane waits only for its own run's view. The first `head` views (one per lane: the
+lanes are idle until theirs is ready) are prepared with every core, one after another, so the first lane
+starts after one view's preparation rather than all of theirs (and a view whose other direction is ready
+links its frames: views.prepare); the rest with `workers` threads (the lanes need the cores then). A view
+found damaged before a run is prepared again (a new generation beside it, see views.prepare)."""
 
 from __future__ import annotations
 
-import contextlib
+import os
 import threading
 from pathlib import Path
 
@@ -17,10 +19,18 @@ ViewKey = tuple[str, Direction, Profile]  # (sequence folder, direction, profile
 
 class ViewPreparer:
     def __init__(
-        self, order: list[ViewKey], cache: Path, frame_format: str = "png", on_ready=None, head: int = 1
+        self,
+        order: list[ViewKey],
+        cache: Path,
+        frame_format: str = "png",
+        on_ready=None,
+        head: int = 1,
+        workers: int = 2,
     ) -> None:
         self.cache = Path(cache)
         self.head = max(1, head)
+        self.workers = max(1, workers)
+        self.head_workers = max(self.workers, len(os.sched_getaffinity(0)))
         self.frame_format = frame_format
         self.on_ready = on_ready or (lambda key, view: None)
         self._order = list(dict.fromkeys(order))
@@ -28,7 +38,7 @@ class ViewPreparer:
         self._errors: dict[ViewKey, BaseException] = {}
         self._inflight: set[ViewKey] = set()
         self._cond = threading.Condition()
-        self._lock = threading.Lock()  # one preparation at a time after the head (the lanes need the cores)
+        self._lock = threading.Lock()  # one preparation at a time (each uses several cores)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, name="view-preparer", daemon=True)
 
@@ -41,18 +51,12 @@ class ViewPreparer:
         self._thread.join(timeout=60)
 
     def _loop(self) -> None:
-        head = self._order[: self.head] if self.head > 1 else []
-        together = [threading.Thread(target=self._prepare, args=(k, False), daemon=True) for k in head]
-        for thread in together:
-            thread.start()
-        for thread in together:
-            thread.join()
-        for key in self._order[len(head) :]:
+        for i, key in enumerate(self._order):
             if self._stop.is_set():
                 return
-            self._prepare(key)
+            self._prepare(key, self.head_workers if i < self.head else self.workers)
 
-    def _prepare(self, key: ViewKey, serial: bool = True) -> None:
+    def _prepare(self, key: ViewKey, workers: int | None = None) -> None:
         with self._cond:
             while key in self._inflight:  # another thread prepares it: its result serves
                 self._cond.wait(0.5)
@@ -61,8 +65,10 @@ class ViewPreparer:
             self._inflight.add(key)
         view = None
         try:
-            with self._lock if serial else contextlib.nullcontext():
-                view = prepare(Path(key[0]), key[1], key[2], self.cache, frame_format=self.frame_format)
+            with self._lock:
+                view = prepare(
+                    Path(key[0]), key[1], key[2], self.cache, workers or self.workers, frame_format=self.frame_format
+                )
         except Exception as exc:  # noqa: BLE001 - a full disk, an undecodable frame: the runs say it
             with self._cond:
                 self._errors[key] = exc
@@ -101,7 +107,9 @@ class ViewPreparer:
                 current = self._views[key]
             if current.root == view.root:  # not rebuilt by another lane meanwhile
                 try:
-                    current = prepare(Path(key[0]), key[1], key[2], self.cache, frame_format=self.frame_format)
+                    current = prepare(
+                        Path(key[0]), key[1], key[2], self.cache, self.head_workers, frame_format=self.frame_format
+                    )
                 except DatasetError as exc:
                     raise InfraError(f"{key[0]}: its view is damaged and cannot be prepared again: {exc}") from None
                 with self._cond:

@@ -123,6 +123,40 @@ def test_backward_view_round_trips_timestamps_exactly(tmp_path, seq):
         assert first.read_bytes() == zf.read(sorted(zf.namelist())[-1])
 
 
+def _frames(view: PreparedView) -> list[bytes]:
+    return [p.read_bytes() for p in sorted(view.path(view.images_dir).iterdir())]
+
+
+@pytest.mark.parametrize("profile", list(Profile))
+@pytest.mark.parametrize("first", list(Direction))
+def test_a_view_whose_mirror_is_prepared_links_its_frames_and_equals_a_decoded_one(tmp_path, seq, profile, first):
+    """The other direction's view holds the same frames in reverse order: they are hard-linked, not decoded
+    again, and the result is the view a fresh cache decodes, byte for byte."""
+    second = Direction.backward if first is Direction.forward else Direction.forward
+    mirror = prepare(seq, first, profile, tmp_path / "cache")
+    linked = prepare(seq, second, profile, tmp_path / "cache")
+    decoded = prepare(seq, second, profile, tmp_path / "fresh")
+    assert _frames(linked) == _frames(decoded) == _frames(mirror)[::-1]
+    mirror_frames = sorted(mirror.path(mirror.images_dir).iterdir())
+    for i, p in enumerate(sorted(linked.path(linked.images_dir).iterdir())):
+        assert p.stat().st_ino == mirror_frames[-1 - i].stat().st_ino
+    assert sorted(q.name for q in linked.root.iterdir()) == sorted(q.name for q in decoded.root.iterdir())
+    for name in ("times.txt", "rgb.txt", "camera.txt"):
+        assert linked.path(name).read_text() == decoded.path(name).read_text()
+
+
+def test_a_damaged_mirror_is_not_linked(tmp_path, seq):
+    mirror = prepare(seq, Direction.forward, Profile.rectified, tmp_path / "cache")
+    frame = sorted(mirror.path(mirror.images_dir).iterdir())[5]
+    frame.chmod(0o644)
+    frame.write_bytes(b"not the frame")
+    view = prepare(seq, Direction.backward, Profile.rectified, tmp_path / "cache")
+    decoded = prepare(seq, Direction.backward, Profile.rectified, tmp_path / "fresh")
+    assert _frames(view) == _frames(decoded)
+    inodes = {p.stat().st_ino for p in mirror.path(mirror.images_dir).iterdir()}
+    assert not inodes & {p.stat().st_ino for p in view.path(view.images_dir).iterdir()}
+
+
 def test_concurrent_prepare_builds_once(tmp_path, seq):
     views, errors = [], []
 

@@ -3,6 +3,7 @@ only; real preparation is tested in test_datasets.py and through every campaign 
 
 from __future__ import annotations
 
+import os
 import threading
 import time
 from pathlib import Path
@@ -12,35 +13,34 @@ from runner.datasets.views import Direction, Profile
 from runner.preparer import ViewPreparer
 
 
-def test_the_first_views_of_idle_lanes_are_prepared_together_then_one_at_a_time(tmp_path, monkeypatch):
-    active, peak, done = [0], [], []
+def test_views_are_prepared_one_at_a_time_the_idle_lanes_first_views_with_every_core(tmp_path, monkeypatch):
+    active, peak, calls = [0], [0], []
     lock = threading.Lock()
 
-    def fake_prepare(seq, direction, profile, cache, frame_format="png"):
+    def fake_prepare(seq, direction, profile, cache, workers=2, frame_format="png"):
         with lock:
             active[0] += 1
-            peak.append((seq.name, active[0]))
-        time.sleep(0.3)
+            peak[0] = max(peak[0], active[0])
+            calls.append((seq.name, workers))
+        time.sleep(0.1)
         with lock:
             active[0] -= 1
-            done.append(seq.name)
         return seq.name
 
     monkeypatch.setattr(preparer_module, "prepare", fake_prepare)
     order = [(str(tmp_path / n), Direction.forward, Profile.native) for n in ("a", "b", "c", "d")]
-    views = ViewPreparer(order, tmp_path, head=2).start()
+    views = ViewPreparer(order, tmp_path, head=2, workers=1).start()
     assert [views.get(k) for k in order] == ["a", "b", "c", "d"]
     views.close()
-    seen = dict(peak)
-    assert max(seen["a"], seen["b"]) == 2  # the two lanes' first views at the same time
-    assert seen["c"] == 1 and seen["d"] == 1  # later ones alone: the lanes need the cores
-    assert sorted(done) == ["a", "b", "c", "d"] and len(done) == 4  # each prepared once
+    cores = len(os.sched_getaffinity(0))
+    assert peak[0] == 1  # one at a time: the first lane starts after one preparation, not two
+    assert calls == [("a", cores), ("b", cores), ("c", 1), ("d", 1)]  # each once, the lanes' first with every core
 
 
 def test_a_view_asked_for_while_it_is_being_prepared_is_prepared_once(tmp_path, monkeypatch):
     calls = []
 
-    def slow_prepare(seq, direction, profile, cache, frame_format="png"):
+    def slow_prepare(seq, direction, profile, cache, workers=2, frame_format="png"):
         calls.append(seq.name)
         time.sleep(0.3)
         return seq.name

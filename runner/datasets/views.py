@@ -174,13 +174,46 @@ def prepare(
             _remove(tmp)
         tmp.mkdir()
         try:
-            _build(seq, direction, profile, tmp, workers, frame_format)
+            _build(
+                seq,
+                direction,
+                profile,
+                tmp,
+                workers,
+                frame_format,
+                _whole_mirror(cache_dir, seq, direction, profile, frame_format),
+            )
             _seal(tmp)
             os.rename(tmp, final)
         except BaseException:
             _remove(tmp)
             raise
     return PreparedView.load(final)
+
+
+def _whole_mirror(
+    cache_dir: Path, seq: Sequence, direction: Direction, profile: Profile, frame_format: str
+) -> Path | None:
+    """The whole view of the same sequence and profile in the other direction, if the cache holds one: its
+    frames are this view's in reverse order."""
+    other = Direction.backward if direction is Direction.forward else Direction.forward
+    root = _latest_generation(cache_dir, view_key(seq, other, profile, frame_format))
+    return root if root is not None and verify_view(root) is None else None
+
+
+def _link_reversed(mirror: Path, images: Path, names: list[str]) -> bool:
+    """Hard-link the mirror view's frames into `images` in reverse order (no decoding, no disk); False when
+    the mirror's frames are not named alike or the file system refuses links (the caller decodes then)."""
+    source = mirror / PreparedView.images_dir
+    n = len(names)
+    try:
+        for i, name in enumerate(names):
+            os.link(source / names[n - 1 - i], images / name)
+    except OSError:
+        for name in os.listdir(images):
+            os.unlink(images / name)
+        return False
+    return True
 
 
 def _generation(name: str, key: str) -> int:
@@ -270,7 +303,17 @@ def remove_damaged(cache_dir: Path) -> int:
     return removed
 
 
-def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, workers: int, frame_format: str) -> None:
+def _build(
+    seq: Sequence,
+    direction: Direction,
+    profile: Profile,
+    out: Path,
+    workers: int,
+    frame_format: str,
+    mirror: Path | None = None,
+) -> None:
+    """Write the view into `out`; its frames are hard links to `mirror`'s (the other direction's view), in
+    reverse order, when one is given and links work, else decoded (and rectified) from the sequence."""
     n = seq.n_frames
     order = np.arange(n) if direction is Direction.forward else np.arange(n)[::-1]
     t_orig = seq.timestamps
@@ -285,8 +328,9 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
         ext = Path(seq.frame_names[0]).suffix.lower()
         names = [f"{i:06d}{ext}" for i in range(n)]
         inverse = {orig: i for i, orig in enumerate(order)}
-        for j, (_, data) in enumerate(seq.read_bytes()):
-            (images / names[inverse[j]]).write_bytes(data)
+        if mirror is None or not _link_reversed(mirror, images, names):
+            for j, (_, data) in enumerate(seq.read_bytes()):
+                (images / names[inverse[j]]).write_bytes(data)
         shutil.copyfile(seq.root / "camera.txt", out / PreparedView.camera)
         for opt in ("pcalib.txt", "vignette.png"):
             if (seq.root / opt).exists():
@@ -297,7 +341,6 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
         dst = rectified_pinhole(cam.camera, mode, cam.out_width, cam.out_height)
         map_x, map_y = rectification_maps(cam.camera, dst)
         names = [f"{i:06d}.{frame_format}" for i in range(n)]
-        frames = list(enumerate(seq.read_bytes()))
         inverse = {orig: i for i, orig in enumerate(order)}
 
         def work(item: tuple[int, tuple[str, bytes]]) -> None:
@@ -309,8 +352,9 @@ def _build(seq: Sequence, direction: Direction, profile: Profile, out: Path, wor
             params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if frame_format == "png" else []
             cv2.imwrite(str(images / names[inverse[j]]), rect, params)
 
-        with ThreadPoolExecutor(max(1, workers)) as pool:
-            list(pool.map(work, frames))
+        if mirror is None or not _link_reversed(mirror, images, names):
+            with ThreadPoolExecutor(max(1, workers)) as pool:
+                list(pool.map(work, enumerate(seq.read_bytes())))
         (out / PreparedView.camera).write_text(dst.camera_txt())
         width, height, pinhole = dst.width, dst.height, (dst.fx, dst.fy, dst.cx, dst.cy)
         (out / "camera_pinhole.json").write_text(
