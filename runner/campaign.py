@@ -37,6 +37,7 @@ class CampaignResult:
 def ensure_datasets(spec: CampaignSpec, log=print) -> None:
     """Generate the synthetic sequences a spec asks for and that are not on disk yet."""
     from runner.datasets import synth  # scipy: imported only when a sequence is generated
+
     for ds in spec.datasets:
         if ds.synthetic is None:
             continue
@@ -209,6 +210,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
                 pass
         remove_damaged(spec.cache)  # no run in flight any more
         from runner.results import export  # pandas: imported after the runs, not before the first one starts
+
         if isinstance(sched.fatal_error, LedgerLostError):
             ledger.close()
             raise sched.fatal_error

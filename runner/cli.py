@@ -423,9 +423,9 @@ def cmd_prepare(args) -> int:
     ensure_datasets(spec)
     runs = plan(spec)
     views = prepare_views(spec, runs, {r.key.id for r in runs})
-    total = 0
+    total, seen = 0, set()
     for v in views.values():
-        size = disk_usage(v.root)
+        size = disk_usage(v.root, seen)  # frames shared with the other direction's view count once
         total += size
         console.print(f"{v.root} ({v.n_frames} frames, {size / 2**20:.1f} MiB)")
     console.print(f"{len(views)} views, {total / 2**20:.1f} MiB in {spec.cache}")

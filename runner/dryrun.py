@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from runner.datasets.tum_mono import open_sequence
-from runner.datasets.views import Profile, _latest_generation, verify_view, view_key
+from runner.datasets.views import Profile, whole_mirror, whole_view
 from runner.errors import DatasetError
 from runner.ledger import Ledger
 from runner.paths import RunPaths, finished_record
@@ -91,13 +91,15 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         lanes=lanes,
         groups=groups,
     )
+    frames_counted: set[tuple[Path, Profile]] = set()  # a view's other direction links the same frames
     for seq_dir, direction, profile in sorted(todo_views, key=str):
         size = _view_bytes_if_missing(seq_dir, direction, profile, spec)
         if size is None:
             out.views_unknown += 1
         elif size:
             out.views_to_prepare += 1
-            out.view_bytes += size
+            out.view_bytes += 0 if (seq_dir, profile) in frames_counted else size
+            frames_counted.add((seq_dir, profile))
     walls: dict[str, list[float]] = defaultdict(list)
     for r in rows.values():
         if r["state"] in ("done", "failed") and r.get("failure") != "infra" and r.get("wall_s"):
@@ -107,17 +109,19 @@ def dry_run(spec: CampaignSpec) -> DryRun:
 
 
 def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: CampaignSpec) -> int | None:
-    """0 when the view is prepared and whole, its estimated size when it must be prepared, None when the
-    sequence does not exist yet (synthetic, generated on first use)."""
+    """0 when the view is prepared and whole, its estimated size when it must be prepared (1 when its frames
+    will be links to its other direction's, prepared already), None when the sequence does not exist yet
+    (synthetic, generated on first use)."""
     if not (seq_dir / "times.txt").exists():
         return None
     try:
         seq = open_sequence(seq_dir)
     except DatasetError:
         return None
-    found = _latest_generation(Path(spec.cache), view_key(seq, direction, profile, spec.frame_format))
-    if found is not None and verify_view(found) is None:
+    if whole_view(spec.cache, seq, direction, profile, spec.frame_format) is not None:
         return 0
+    if whole_mirror(spec.cache, seq, direction, profile, spec.frame_format) is not None:
+        return 1  # its frames are links to the other direction's: a few small files
     if profile is Profile.rectified:
         per_pixel = 1.0 if spec.frame_format == "pgm" else 0.5  # PNG level 1 on camera images: about half
         return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * per_pixel)

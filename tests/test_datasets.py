@@ -206,3 +206,31 @@ def test_synthetic_frames_have_strong_gradients(tiny_dataset):
     img = next(s.frames()).astype(np.float32)
     grad = np.hypot(cv2.Sobel(img, cv2.CV_32F, 1, 0), cv2.Sobel(img, cv2.CV_32F, 0, 1))
     assert img.std() > 20 and np.median(grad) > 20
+
+
+def test_disk_use_and_the_dry_runs_estimate_count_linked_frames_once(tmp_path, seq):
+    from runner.datasets.views import disk_usage
+    from runner.dryrun import dry_run
+    from runner.spec import CampaignSpec
+
+    spec = CampaignSpec.model_validate(
+        {
+            "name": "t",
+            "results": str(tmp_path / "results"),
+            "cache": str(tmp_path / "cache"),
+            "datasets": [{"name": "d", "path": str(seq.parent), "sequences": [seq.name]}],
+            "methods": [{"name": "reference_vo"}],
+            "directions": ["forward", "backward"],
+        }
+    )
+    both = dry_run(spec)
+    assert both.views_to_prepare == 2
+    forward = prepare(seq, Direction.forward, Profile.rectified, tmp_path / "cache")
+    one = dry_run(spec)
+    assert one.views_to_prepare == 1 and one.view_bytes < 10_000  # the backward view: links and small files
+    frames = disk_usage(forward.path(forward.images_dir))
+    assert abs(both.view_bytes - frames) < 0.6 * frames  # one direction's frames, not two (the PNG estimate)
+    backward = prepare(seq, Direction.backward, Profile.rectified, tmp_path / "cache")
+    seen: set = set()
+    assert disk_usage(forward.root, seen) > frames and disk_usage(backward.root, seen) < 10_000
+    assert disk_usage(backward.root) > frames  # alone, its frames count

@@ -181,7 +181,7 @@ def prepare(
                 tmp,
                 workers,
                 frame_format,
-                _whole_mirror(cache_dir, seq, direction, profile, frame_format),
+                whole_mirror(cache_dir, seq, direction, profile, frame_format),
             )
             _seal(tmp)
             os.rename(tmp, final)
@@ -191,14 +191,21 @@ def prepare(
     return PreparedView.load(final)
 
 
-def _whole_mirror(
+def whole_view(
+    cache_dir: Path, seq: Sequence, direction: Direction, profile: Profile, frame_format: str
+) -> Path | None:
+    """The folder of the view if the cache holds it prepared and whole, else None."""
+    root = _latest_generation(Path(cache_dir), view_key(seq, direction, profile, frame_format))
+    return root if root is not None and verify_view(root) is None else None
+
+
+def whole_mirror(
     cache_dir: Path, seq: Sequence, direction: Direction, profile: Profile, frame_format: str
 ) -> Path | None:
     """The whole view of the same sequence and profile in the other direction, if the cache holds one: its
     frames are this view's in reverse order."""
     other = Direction.backward if direction is Direction.forward else Direction.forward
-    root = _latest_generation(cache_dir, view_key(seq, other, profile, frame_format))
-    return root if root is not None and verify_view(root) is None else None
+    return whole_view(cache_dir, seq, other, profile, frame_format)
 
 
 def _link_reversed(mirror: Path, images: Path, names: list[str]) -> bool:
@@ -404,5 +411,14 @@ def _build(
     (out / "view.json").write_text(json.dumps(meta, indent=1))
 
 
-def disk_usage(path: Path) -> int:
-    return sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file())
+def disk_usage(path: Path, seen: set[tuple[int, int]] | None = None) -> int:
+    """Bytes of the files under `path`, each file counted once however many links it has, also across the
+    calls that share `seen` (a view's frames are links to its other direction's)."""
+    seen = set() if seen is None else seen
+    total = 0
+    for f in Path(path).rglob("*"):
+        st = f.stat()
+        if f.is_file() and (st.st_dev, st.st_ino) not in seen:
+            seen.add((st.st_dev, st.st_ino))
+            total += st.st_size
+    return total
