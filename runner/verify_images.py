@@ -2,7 +2,9 @@
 
 Per method: build the image when it is missing, run a short campaign with `backend: docker` on synthetic
 sequences (two scenes, forward and backward, two trials), and report one row: built, build time, image
-size, runs ok, e_align relative to the scene's extent (median and worst), fps and RAM. A method passes
+size, runs ok, e_align relative to the scene's extent (median and worst), the segment alignment errors in the
+order the method met them (a start-up transient shows as a first segment far worse than the last, whatever
+the direction), fps and RAM. A method passes
 when every run ended done and evaluated and the median e_align stays under its bound; an image built with an
 untrained stand-in network (`--standin-model`) is judged on that plumbing alone, its accuracy is not.
 """
@@ -40,6 +42,8 @@ class VerifyRow:
     runs: int = 0
     e_align_rel_median: float | None = None
     e_align_rel_max: float | None = None
+    seg_first_rel: float | None = None  # median segment RMSE / extent, the segment the method processed first
+    seg_last_rel: float | None = None  # ... and last (forward: start, end; backward: end, start)
     bound: float = DEFAULT_BOUND
     fps: float | None = None
     ram_mb: float | None = None
@@ -62,6 +66,20 @@ def holds_standin_network(labels: dict[str, str]) -> bool:
     except ValueError:
         return False
     return any("stand-in" in str(v) for v in weights.values())
+
+
+def processed_segments(runs: list[dict], extents: dict[str, float]) -> tuple[float | None, float | None]:
+    """Medians of the segment alignment RMSE over the scene's extent, for the segment each run processed first
+    and the one it processed last (a backward run meets the end segment first)."""
+    first, last = [], []
+    for r in runs:
+        seg = (r["e_start"], r["e_end"]) if r["direction"] == "forward" else (r["e_end"], r["e_start"])
+        if None not in seg:
+            first.append(seg[0] / extents[r["sequence"]])
+            last.append(seg[1] / extents[r["sequence"]])
+    if not first:
+        return None, None
+    return statistics.median(first), statistics.median(last)
 
 
 def scene_extent(sequence: Path) -> float:
@@ -171,6 +189,7 @@ def _campaign(name: str, row: VerifyRow, results: Path, trials: int, frames: int
     if rel:
         row.e_align_rel_median = statistics.median(rel)
         row.e_align_rel_max = max(rel)
+    row.seg_first_rel, row.seg_last_rel = processed_segments(ok, extents)
     fps = [r["fps"] for r in ok if r["fps"]]
     ram = [r["ram_peak_mb"] for r in ok if r["ram_peak_mb"]]
     row.fps = round(statistics.median(fps), 1) if fps else None
@@ -193,6 +212,10 @@ def _fmt(v, spec: str = "", none: str = "-") -> str:
     return none if v is None else format(v, spec)
 
 
+def _segments(r: VerifyRow) -> str:
+    return "-" if r.seg_first_rel is None else f"{r.seg_first_rel:.4f} / {r.seg_last_rel:.4f}"
+
+
 def _bound(r: VerifyRow) -> str:
     return PLUMBING if r.plumbing_only else f"{r.bound:.2f}"
 
@@ -202,8 +225,9 @@ PLUMBING = "plumbing only (stand-in network)"
 
 def markdown_table(rows: list[VerifyRow]) -> str:
     head = (
-        "| method | built | build (min) | image (MB) | runs ok | e_align / extent, median (max) | bound | fps | "
-        "RAM (MB) | verified |\n|---|---|---|---|---|---|---|---|---|---|\n"
+        "| method | built | build (min) | image (MB) | runs ok | e_align / extent, median (max) | "
+        "segment RMSE / extent, first / last processed | bound | fps | RAM (MB) | verified |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n"
     )
     lines = []
     for r in rows:
@@ -211,7 +235,8 @@ def markdown_table(rows: list[VerifyRow]) -> str:
         verdict = "yes" if r.passed else f"no: {r.note}" if r.note else "no"
         lines.append(
             f"| {r.method} | {'yes' if r.built else 'no'} | {_fmt(r.build_min)} | {_fmt(r.size_mb, '.0f')} | "
-            f"{r.runs_ok}/{r.runs} | {e} | {_bound(r)} | {_fmt(r.fps)} | {_fmt(r.ram_mb)} | {verdict} |"
+            f"{r.runs_ok}/{r.runs} | {e} | {_segments(r)} | {_bound(r)} | {_fmt(r.fps)} | {_fmt(r.ram_mb)} | "
+            f"{verdict} |"
         )
     return head + "\n".join(lines) + "\n"
 
@@ -220,7 +245,8 @@ def print_table(rows: list[VerifyRow], console) -> None:
     from rich.table import Table
 
     table = Table(title="method images, verified on synthetic sequences (backend: docker)")
-    for col in ("method", "built", "build min", "MB", "runs ok", "e_align/extent med (max)", "bound", "fps", "RAM MB"):
+    columns = ("method", "built", "build min", "MB", "runs ok", "e_align/extent med (max)", "segments first/last")
+    for col in (*columns, "bound", "fps", "RAM MB"):
         table.add_column(col)
     table.add_column("verified")
     for r in rows:
@@ -232,6 +258,7 @@ def print_table(rows: list[VerifyRow], console) -> None:
             _fmt(r.size_mb, ".0f"),
             f"{r.runs_ok}/{r.runs}",
             e,
+            _segments(r),
             _bound(r),
             _fmt(r.fps),
             _fmt(r.ram_mb),

@@ -59,3 +59,22 @@ def test_a_run_that_ended_done_without_metrics_says_why():
 
     assert _why_not_ok({"failure": None, "state": "done", "eval_status": "incomplete"}) == "not evaluated (incomplete)"
     assert _why_not_ok({"failure": "lost", "state": "failed", "eval_status": "incomplete"}) == "lost"
+
+
+def test_segment_errors_are_taken_in_the_order_the_method_processed_them():
+    """A backward run meets the end segment first: its first-processed segment is e_end, its last e_start. The
+    medians are relative to each sequence's extent, so a start-up transient shows whatever the direction."""
+    from runner.verify_images import processed_segments
+
+    extents = {"a": 2.0, "b": 4.0}
+    runs = [
+        {"sequence": "a", "direction": "forward", "e_start": 0.2, "e_end": 0.002},
+        {"sequence": "b", "direction": "backward", "e_start": 0.004, "e_end": 0.4},
+        {"sequence": "a", "direction": "backward", "e_start": None, "e_end": 0.2},
+    ]
+    first, last = processed_segments(runs, extents)
+    assert first == pytest.approx(0.1) and last == pytest.approx(0.001)
+    assert processed_segments([], extents) == (None, None)
+    row = VerifyRow("lsd_slam", True, runs=8, runs_ok=8, e_align_rel_median=0.12, e_align_rel_max=0.14)
+    row.seg_first_rel, row.seg_last_rel = first, last
+    assert "| 0.1000 / 0.0010 |" in markdown_table([row])
