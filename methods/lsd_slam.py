@@ -3,10 +3,11 @@
 The image builds LSD-SLAM's core and slamrun's offline driver `lsd_slam_offline LIST CALIB OUT LOOP`
 (docker/lsd_slam/lsd_slam_offline.cpp) in place of `rosrun lsd_slam_core dataset_slam _files:=LIST _hz:=0
 _calib:=CALIB`: the images of LIST in order, sequential tracking and mapping (`_hz:=0`: tracking waits for
-mapping), the ROS node's effective settings, no display. LOOP 0 (the default: the study turned loop closure off)
-is `_doSLAM:=false`. Upstream writes no trajectory file (poses only reach ROS topics, with fake timestamps): the
-driver writes every frame's final pose at the end, `list_index tx ty tz qx qy qz qw` (camera-to-world), frame 0
-included (the world's origin); the index maps to the view's frame time.
+mapping), the ROS node's effective settings, no display. LOOP 0 is `_doSLAM:=false`: slamrun's default, as for
+every method with a loop-closure switch, so drift is measured alike; the study left LSD-SLAM at its own default
+(LOOP 1, global mapping on), which configs/paper.yaml asks for. Upstream writes no trajectory file (poses only
+reach ROS topics, with fake timestamps): the driver writes every frame's final pose at the end, `list_index tx ty
+tz qx qy qz qw` (camera-to-world), frame 0 included (the world's origin); the index maps to the view's frame time.
 
 On the verification's synthetic rooms (300 frames, `slamrun images --verify`) LSD-SLAM runs through every
 sequence but its e_align is 9-14 % of the scene's extent: LSD-SLAM starts from a random depth map, and its
