@@ -396,23 +396,28 @@ def test_paper_spec_is_the_full_study():
     assert timing.datasets[0].sequences == ["sequence_01"]
 
 
+# the study's loop-closure settings (shared/docs/study.md), for the methods that have a switch
+STUDY_LOOP_CLOSURE = {
+    "orb_slam2": False,
+    "df_orb_slam": False,
+    "dynaslam": False,
+    "ldso": False,
+    "dsm": False,
+    "lsd_slam": True,
+}
+
+
 def test_paper_spec_turns_loop_closure_off_where_the_study_did():
     """The study disabled loop closure in ORB-SLAM2, DF-ORB-SLAM, DynaSLAM, LDSO and DSM only (shared/docs/
     study.md); LSD-SLAM ran with its own default, global mapping on (`_doSLAM` true), so the paper spec asks
     for it. slamrun's own default stays off for every method that has a switch."""
     from runner.spec import load_spec
 
-    spec = load_spec(ROOT / "configs" / "paper.yaml", check_files=False)
-    built = [methods.get(m.name)(m.params) for m in spec.methods]
-    closing = {m.name: m.params.loop_closure for m in built if m.loop_closure_switch}
-    assert closing == {
-        "orb_slam2": False,
-        "df_orb_slam": False,
-        "dynaslam": False,
-        "ldso": False,
-        "dsm": False,
-        "lsd_slam": True,
-    }
+    for name in ("paper.yaml", "paper-timing.yaml"):
+        spec = load_spec(ROOT / "configs" / name, check_files=False)
+        built = [methods.get(m.name)(m.params) for m in spec.methods]
+        closing = {m.name: m.params.loop_closure for m in built if m.loop_closure_switch}
+        assert closing == STUDY_LOOP_CLOSURE, name
     assert not methods.get("lsd_slam")({}).params.loop_closure
 
 
