@@ -213,7 +213,7 @@ def _fmt(v, spec: str = "", none: str = "-") -> str:
 
 
 def _segments(r: VerifyRow) -> str:
-    return "-" if r.seg_first_rel is None else f"{r.seg_first_rel:.4f} / {r.seg_last_rel:.4f}"
+    return "-" if r.seg_first_rel is None else f"{r.seg_first_rel:.5f} / {r.seg_last_rel:.5f}"
 
 
 def _bound(r: VerifyRow) -> str:

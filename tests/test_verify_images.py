@@ -77,4 +77,4 @@ def test_segment_errors_are_taken_in_the_order_the_method_processed_them():
     assert processed_segments([], extents) == (None, None)
     row = VerifyRow("lsd_slam", True, runs=8, runs_ok=8, e_align_rel_median=0.12, e_align_rel_max=0.14)
     row.seg_first_rel, row.seg_last_rel = first, last
-    assert "| 0.1000 / 0.0010 |" in markdown_table([row])
+    assert "| 0.10000 / 0.00100 |" in markdown_table([row])
