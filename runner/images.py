@@ -99,6 +99,7 @@ class BuildRecord:
     log: str
     labels: dict[str, str]
     finished: float
+    image_id: str = ""  # the image the build made (a rebuild with every step cached makes the same one)
 
 
 def buildable() -> dict[str, tuple[str, Path]]:
@@ -308,8 +309,16 @@ def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions,
         note(f"build arguments: {json.dumps(args)}")
         run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)
     seconds = time.monotonic() - t0
-    size_mb = client.inspect_image(tag)["Size"] / 2**20
-    record = BuildRecord(name, tag, round(seconds, 1), round(size_mb, 1), str(log_path), labels, time.time())
+    info = client.inspect_image(tag)
+    size_mb = info["Size"] / 2**20
+    previous = last_record(name, opts.log_dir)
+    if previous is not None and previous.tag == tag and previous.image_id == info["Id"]:
+        # every step cached: the image is the one the previous build made, whose time the record keeps
+        log(f"built {tag}: unchanged, every step cached (made in {previous.seconds / 60:.1f} min), {size_mb:.0f} MB")
+        return previous
+    record = BuildRecord(
+        name, tag, round(seconds, 1), round(size_mb, 1), str(log_path), labels, time.time(), info["Id"]
+    )
     (opts.log_dir / f"{name}.json").write_text(json.dumps(asdict(record), indent=1))
     log(f"built {tag} in {seconds / 60:.1f} min, {size_mb:.0f} MB")
     return record

@@ -60,6 +60,24 @@ def test_build_arguments_sources_and_labels_reach_the_image(client, opts, tmp_pa
         client.remove_image(tag, force=True)
 
 
+def test_a_cached_rebuild_keeps_the_record_of_the_build_that_made_the_image(client, opts, tmp_path):
+    """Building again with every step cached makes no new image: its record (the build time the verification
+    table shows) stays the one of the build that made the image, not the seconds of the cache look-up."""
+    dockerfile = tmp_path / "Dockerfile"
+    dockerfile.write_text(f"FROM debian:bookworm-slim\nRUN sleep 3 && echo {tmp_path.name} > /made\n")
+    tag = "slamrun-test/cached:latest"
+    try:
+        first = build_one(client, "cached-test", tag, dockerfile, opts, log=lambda m: None)
+        lines = []
+        again = build_one(client, "cached-test", tag, dockerfile, opts, log=lines.append)
+        assert first.seconds >= 3 and again == first
+        saved = json.loads((opts.log_dir / "cached-test.json").read_text())
+        assert saved["seconds"] == first.seconds and saved["image_id"] == client.inspect_image(tag)["Id"]
+        assert any("unchanged" in line for line in lines), lines
+    finally:
+        client.remove_image(tag, force=True)
+
+
 def test_a_patch_whose_anchor_is_missing_fails_the_build_naming_step_and_file(client, opts, tmp_path):
     """The real DSO archive and patch script, with the anchor's line changed as an upstream edit would."""
     if not client.images(name="slamrun/reference_vo:latest"):
