@@ -86,6 +86,16 @@ def write_spec(tmp_path: Path, dataset: Path, methods: list[dict], **kw) -> Path
 UPSTREAM = SHARED / "upstream"
 
 
+def require_upstream(path: Path = UPSTREAM) -> Path:
+    """`path` (shared/upstream or an archive in it), or a skip saying why and how to provide it."""
+    if not path.exists():
+        pytest.skip(
+            reason=f"{path} not found: these tests use the real upstream archives of shared/upstream, beside the "
+            "repository (SLAMRUN_SHARED names another shared/ folder)"
+        )
+    return path
+
+
 def unpack_upstream(name: str, dest: Path) -> Path:
     """The real upstream tree of source `name` (runner/sources.py), unpacked from shared/upstream into `dest`;
     skips when shared/upstream is absent."""
@@ -93,9 +103,7 @@ def unpack_upstream(name: str, dest: Path) -> Path:
 
     from runner.sources import SOURCES
 
-    archive = UPSTREAM / SOURCES[name].filename
-    if not archive.is_file():
-        pytest.skip(f"{archive} not found: the upstream archives live in shared/upstream beside the repo")
+    archive = require_upstream(UPSTREAM / SOURCES[name].filename)
     with tarfile.open(archive, "r:gz") as tar:
         tar.extractall(dest, filter="data")
     return dest / SOURCES[name].top

@@ -31,7 +31,7 @@ IN_CI = os.environ.get("CI") == "true"
 def _unavailable(reason: str):
     if IN_CI:
         pytest.fail(f"CI must run the Docker tests: {reason}")
-    pytest.skip(reason)
+    pytest.skip(reason=reason)
 
 
 def engine_with_base():

@@ -12,7 +12,7 @@ import pytest
 from runner.errors import InfraError, SlamRunError
 from runner.images import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
 from runner.sources import SOURCES
-from tests.conftest import UPSTREAM
+from tests.conftest import UPSTREAM, require_upstream
 from tests.test_docker import engine_with_base
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,8 +20,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(scope="module")
 def client():
-    if not UPSTREAM.is_dir():
-        pytest.skip(f"{UPSTREAM} not found: image builds take upstream archives from shared/upstream beside the repo")
+    require_upstream()
     return engine_with_base()
 
 
@@ -112,9 +111,7 @@ def test_a_build_refuses_a_damaged_source_before_docker_runs(client, opts, tmp_p
 
 
 def test_vocabulary_choice(tmp_path):
-    archives = {"ldso": UPSTREAM / SOURCES["ldso"].filename}
-    if not archives["ldso"].is_file():
-        pytest.skip("no shared/upstream")
+    archives = {"ldso": require_upstream(UPSTREAM / SOURCES["ldso"].filename)}
     assert vocabulary_choice("dso", archives, BuildOptions()) == ("none", "")
     kind, detail = vocabulary_choice("ldso", archives, BuildOptions())
     assert kind == "trained" and "not the study's" in detail  # the archive here lacks vocab/orbvoc.dbow3

@@ -18,14 +18,13 @@ from runner.datasets.synth import generate
 from runner.images import BuildOptions, build
 from runner.spec import load_spec
 from runner.verify_images import scene_extent
-from tests.conftest import UPSTREAM, write_spec
+from tests.conftest import UPSTREAM, require_upstream, write_spec
 from tests.test_docker import engine_with_base
 
 
 @pytest.fixture(scope="module")
 def dso_image():
-    if not UPSTREAM.is_dir():
-        pytest.skip(f"{UPSTREAM} not found: the DSO image is built from the archives there")
+    require_upstream()
     engine_with_base()
     build(["dso"], log=lambda m: None, opts=BuildOptions(sources_dir=UPSTREAM), only_missing=True)
     return "slamrun/dso:latest"

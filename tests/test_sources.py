@@ -15,19 +15,12 @@ import pytest
 
 from runner import sources as src
 from runner.sources import SOURCES, SourceError, check_archive, obtain
-from tests.conftest import SHARED, loopback_server
-
-UPSTREAM = SHARED / "upstream"
+from tests.conftest import loopback_server, require_upstream
 
 
 @pytest.fixture(scope="module")
 def upstream() -> Path:
-    if not UPSTREAM.is_dir():
-        pytest.skip(
-            f"{UPSTREAM} not found: these tests check the real upstream archives, kept in shared/upstream beside the "
-            "repo (set SLAMRUN_SHARED to use another folder)"
-        )
-    return UPSTREAM
+    return require_upstream()
 
 
 def repack(archive: Path, out: Path, edit=None, add: dict[str, bytes] | None = None, level: int = 1) -> Path:
