@@ -3,10 +3,10 @@
 Per method: build the image when it is missing, run a short campaign with `backend: docker` on synthetic
 sequences (two scenes, forward and backward, two trials), and report one row: built, build time, image
 size, runs ok, e_align relative to the scene's extent (median and worst), the segment alignment errors in the
-order the method met them (a start-up transient shows as a first segment far worse than the last, whatever
-the direction), fps and RAM. A method passes
-when every run ended done and evaluated and the median e_align stays under its bound; an image built with an
-untrained stand-in network (`--standin-model`) is judged on that plumbing alone, its accuracy is not.
+order the method met them (a start-up transient shows as a first segment far worse than the last, whatever the
+direction), fps and RAM. A method passes when every run ended done and evaluated and the median e_align stays
+under its bound; an image built with an untrained stand-in network (`--standin-model`) is judged on that
+plumbing alone, its accuracy is not.
 """
 
 from __future__ import annotations
@@ -212,32 +212,47 @@ def _fmt(v, spec: str = "", none: str = "-") -> str:
     return none if v is None else format(v, spec)
 
 
-def _segments(r: VerifyRow) -> str:
-    return "-" if r.seg_first_rel is None else f"{r.seg_first_rel:.5f} / {r.seg_last_rel:.5f}"
-
-
-def _bound(r: VerifyRow) -> str:
-    return PLUMBING if r.plumbing_only else f"{r.bound:.2f}"
-
-
 PLUMBING = "plumbing only (stand-in network)"
+# (markdown heading, terminal heading) of every column but the verdict
+COLUMNS = (
+    ("method", "method"),
+    ("built", "built"),
+    ("build (min)", "build min"),
+    ("image (MB)", "MB"),
+    ("runs ok", "runs ok"),
+    ("e_align / extent, median (max)", "e_align/extent med (max)"),
+    ("segment RMSE / extent, first / last processed", "segments first/last"),
+    ("bound", "bound"),
+    ("fps", "fps"),
+    ("RAM (MB)", "RAM MB"),
+)
+
+
+def _cells(r: VerifyRow) -> list[str]:
+    """A row's cells, in COLUMNS' order."""
+    e = "-" if r.e_align_rel_median is None else f"{r.e_align_rel_median:.4f} ({r.e_align_rel_max:.4f})"
+    segments = "-" if r.seg_first_rel is None else f"{r.seg_first_rel:.5f} / {r.seg_last_rel:.5f}"
+    bound = PLUMBING if r.plumbing_only else f"{r.bound:.2f}"
+    return [
+        r.method,
+        "yes" if r.built else "no",
+        _fmt(r.build_min),
+        _fmt(r.size_mb, ".0f"),
+        f"{r.runs_ok}/{r.runs}",
+        e,
+        segments,
+        bound,
+        _fmt(r.fps),
+        _fmt(r.ram_mb),
+    ]
 
 
 def markdown_table(rows: list[VerifyRow]) -> str:
-    head = (
-        "| method | built | build (min) | image (MB) | runs ok | e_align / extent, median (max) | "
-        "segment RMSE / extent, first / last processed | bound | fps | RAM (MB) | verified |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|\n"
-    )
+    head = "| " + " | ".join(md for md, _ in COLUMNS) + " | verified |\n" + "|---" * (len(COLUMNS) + 1) + "|\n"
     lines = []
     for r in rows:
-        e = "-" if r.e_align_rel_median is None else f"{r.e_align_rel_median:.4f} ({r.e_align_rel_max:.4f})"
         verdict = "yes" if r.passed else f"no: {r.note}" if r.note else "no"
-        lines.append(
-            f"| {r.method} | {'yes' if r.built else 'no'} | {_fmt(r.build_min)} | {_fmt(r.size_mb, '.0f')} | "
-            f"{r.runs_ok}/{r.runs} | {e} | {_segments(r)} | {_bound(r)} | {_fmt(r.fps)} | {_fmt(r.ram_mb)} | "
-            f"{verdict} |"
-        )
+        lines.append("| " + " | ".join([*_cells(r), verdict]) + " |")
     return head + "\n".join(lines) + "\n"
 
 
@@ -245,23 +260,9 @@ def print_table(rows: list[VerifyRow], console) -> None:
     from rich.table import Table
 
     table = Table(title="method images, verified on synthetic sequences (backend: docker)")
-    columns = ("method", "built", "build min", "MB", "runs ok", "e_align/extent med (max)", "segments first/last")
-    for col in (*columns, "bound", "fps", "RAM MB"):
+    for _, col in COLUMNS:
         table.add_column(col)
     table.add_column("verified")
     for r in rows:
-        e = "-" if r.e_align_rel_median is None else f"{r.e_align_rel_median:.4f} ({r.e_align_rel_max:.4f})"
-        table.add_row(
-            r.method,
-            "yes" if r.built else "no",
-            _fmt(r.build_min),
-            _fmt(r.size_mb, ".0f"),
-            f"{r.runs_ok}/{r.runs}",
-            e,
-            _segments(r),
-            _bound(r),
-            _fmt(r.fps),
-            _fmt(r.ram_mb),
-            "yes" if r.passed else f"no {r.note}".strip(),
-        )
+        table.add_row(*_cells(r), "yes" if r.passed else f"no {r.note}".strip())
     console.print(table)
