@@ -290,32 +290,40 @@ def build(
 
 
 def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions, log) -> BuildRecord:
-    """One `docker build` in an assembled context, logged to `<log_dir>/<name>.log`."""
+    """One `docker build` in an assembled context, logged to `<log_dir>/<name>.log` (a failed build's log too;
+    a rebuild with every step cached leaves the log and record of the build that made the image)."""
     opts.log_dir.mkdir(parents=True, exist_ok=True)
     log_path = opts.log_dir / f"{name}.log"
+    building = opts.log_dir / f"{name}.building.log"  # becomes log_path unless the image is unchanged
     log(f"building {tag} from {dockerfile} (log: {log_path})")
     t0 = time.monotonic()
-    with tempfile.TemporaryDirectory(prefix=f"slamrun-build-{name}-") as tmp, open(log_path, "w") as logf:
+    try:
+        with tempfile.TemporaryDirectory(prefix=f"slamrun-build-{name}-") as tmp, open(building, "w") as logf:
 
-        def note(line: str) -> None:
-            logf.write(line + "\n")
-            logf.flush()
-            log(line)
+            def note(line: str) -> None:
+                logf.write(line + "\n")
+                logf.flush()
+                log(line)
 
-        ctx = Path(tmp)
-        labels = assemble_context(name, dockerfile, opts, ctx, note)
-        shutil.copyfile(dockerfile, ctx / "Dockerfile.slamrun")
-        args = {"MARCH": opts.march, "JOBS": str(opts.jobs), **json.loads(labels[f"{LABEL}.build-args"])}
-        note(f"build arguments: {json.dumps(args)}")
-        run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)
+            ctx = Path(tmp)
+            labels = assemble_context(name, dockerfile, opts, ctx, note)
+            shutil.copyfile(dockerfile, ctx / "Dockerfile.slamrun")
+            args = {"MARCH": opts.march, "JOBS": str(opts.jobs), **json.loads(labels[f"{LABEL}.build-args"])}
+            note(f"build arguments: {json.dumps(args)}")
+            run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)
+    except BaseException:
+        building.replace(log_path)
+        raise
     seconds = time.monotonic() - t0
     info = client.inspect_image(tag)
     size_mb = info["Size"] / 2**20
     previous = last_record(name, opts.log_dir)
     if previous is not None and previous.tag == tag and previous.image_id == info["Id"]:
-        # every step cached: the image is the one the previous build made, whose time the record keeps
+        # every step cached: the image is the one the previous build made, whose log and time the record keeps
+        building.unlink()
         log(f"built {tag}: unchanged, every step cached (made in {previous.seconds / 60:.1f} min), {size_mb:.0f} MB")
         return previous
+    building.replace(log_path)
     record = BuildRecord(
         name, tag, round(seconds, 1), round(size_mb, 1), str(log_path), labels, time.time(), info["Id"]
     )

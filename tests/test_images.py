@@ -61,7 +61,7 @@ def test_build_arguments_sources_and_labels_reach_the_image(client, opts, tmp_pa
 
 def test_a_cached_rebuild_keeps_the_record_of_the_build_that_made_the_image(client, opts, tmp_path):
     """Building again with every step cached makes no new image: its record (the build time the verification
-    table shows) stays the one of the build that made the image, not the seconds of the cache look-up."""
+    table shows) and its log stay the ones of the build that made the image, not the cache look-up's."""
     dockerfile = tmp_path / "Dockerfile"
     dockerfile.write_text(f"FROM debian:bookworm-slim\nRUN sleep 3 && echo {tmp_path.name} > /made\n")
     tag = "slamrun-test/cached:latest"
@@ -73,6 +73,7 @@ def test_a_cached_rebuild_keeps_the_record_of_the_build_that_made_the_image(clie
         saved = json.loads((opts.log_dir / "cached-test.json").read_text())
         assert saved["seconds"] == first.seconds and saved["image_id"] == client.inspect_image(tag)["Id"]
         assert any("unchanged" in line for line in lines), lines
+        assert "Using cache" not in Path(again.log).read_text()  # the log is still the one of the real build
     finally:
         client.remove_image(tag, force=True)
 
