@@ -7,18 +7,13 @@ headers: ImmaturePoint.cpp includes three it never uses (and TF 2.21's headers n
 DSO stays C++14. OpenCV 4: CV_GRAY2BGR in FullSystem.cpp. Then DSO's own fixes (dso_family).
 usage: patches.py CNN_DSO_ROOT
 """
-import importlib.util
 import os
 import sys
 
 here = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(here, "..", "common"))
+from families import dso_family  # noqa: E402
 from patchlib import opencv4, patch  # noqa: E402
-
-_spec = importlib.util.spec_from_file_location("dso_patches", os.path.join(here, "..", "dso", "patches.py"))
-_dso = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_dso)
-dso_family = _dso.dso_family
 
 TF_BLOCK = """#TensorFlow and monodepth (slamrun: monodepth-cpp built against the tensorflow-cpu wheel)
 foreach(v MONODEPTH_ROOT TENSORFLOW_ROOT)

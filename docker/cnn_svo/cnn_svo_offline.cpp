@@ -8,7 +8,7 @@
 // initialisation that left the system paused is restarted (upstream stays paused to the end).
 //
 // usage: cnn_svo_offline PARAMS.yaml
-//   PARAMS is a flat rosparam-style file (see docker/svo/include/vikit/params_helper.h); besides SVO's own parameters:
+//   PARAMS is a flat rosparam-style file (see docker/common/svo-include/vikit/params_helper.h); besides SVO's own parameters:
 //   svo/cam_model Pinhole|ATAN, svo/cam_width, svo/cam_height, svo/cam_fx, svo/cam_fy, svo/cam_cx, svo/cam_cy,
 //   svo/cam_d0..cam_d3 (Pinhole distortion; ATAN: cam_d0 = omega), svo/image_folder, svo/times_file,
 //   svo/cnn_model (frozen MonoDepth graph), svo/output_file (TUM, keyframes), svo/frame_delay_ms (default 50),

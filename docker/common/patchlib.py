@@ -108,24 +108,3 @@ def opencv4(root, subdirs=("src",), exts=(".cpp", ".cc", ".h", ".hpp"), min_coun
 def cxx_standard(root, path, old, new="-std=c++14"):
     """Raise the C++ standard a CMakeLists asks for (gcc 12 + Boost 1.74/Eigen 3.4 need at least C++14)."""
     return sub(root, path, re.escape(old), new)
-
-
-LOOP_SWITCH = """
-    if (getenv("ORB_SLAM2_NO_LOOP"))  // slamrun: loop closure switch
-    {
-        unique_lock<mutex> lock(mMutexLoopQueue);
-        mpCurrentKF = mlpLoopKeyFrameQueue.front();
-        mlpLoopKeyFrameQueue.pop_front();
-        mpKeyFrameDB->add(mpCurrentKF);
-        return false;
-    }
-"""
-
-
-def orb_slam2_family(root, extra_sources=()):
-    """The patches every ORB-SLAM2-based method needs: the loop-closure switch (ORB_SLAM2_NO_LOOP=1 leaves
-    keyframes in the database but searches no loop) and usleep's header for gcc >= 7."""
-    patch(root, "src/LoopClosing.cc", "after", "bool LoopClosing::DetectLoop()\n{", LOOP_SWITCH)
-    include_once(root, "src/LoopClosing.cc", "cstdlib")
-    for f in ("src/System.cc", "src/Tracking.cc", "src/LocalMapping.cc", "src/LoopClosing.cc") + tuple(extra_sources):
-        include_once(root, f, "unistd.h")

@@ -2,19 +2,14 @@
 monocular and headless: our offline driver mono_tum_df, the monocular optical-flow fix, the loop-closure switch
 (ORB_SLAM2_NO_LOOP=1), the modern-toolchain fixes, and a core library without catkin/ROS, PCL, glog or libtiff.
 Every edit is anchored: an upstream change fails the build naming the file and the anchor."""
-import importlib.util
 import os
 import shutil
 import sys
 
 here = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(here, "..", "common"))
-from patchlib import append_line, orb_slam2_family, patch  # noqa: E402
-
-_spec = importlib.util.spec_from_file_location("orb_patches", os.path.join(here, "..", "orb_slam2", "patches.py"))
-_orb = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_orb)
-orb_slam2_toolchain = _orb.orb_slam2_toolchain
+from families import orb_slam2_family, orb_slam2_toolchain  # noqa: E402
+from patchlib import append_line, patch  # noqa: E402
 
 root = sys.argv[1]
 

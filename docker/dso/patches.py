@@ -5,16 +5,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import cxx_standard, opencv4, patch  # noqa: E402
-
-
-def dso_family(root):
-    """What DSO and its forks (CNN-DSO) need on Debian 12."""
-    patch(root, "src/util/IndexThreadReduce.h", "after", '#include "boost/thread.hpp"\n',
-          "#include <boost/bind/bind.hpp>\nusing namespace boost::placeholders;  // slamrun: Boost >= 1.73\n")
-    opencv4(root, ["src/IOWrapper"])
-    cxx_standard(root, "CMakeLists.txt", "-std=c++0x")
-
+from families import dso_family  # noqa: E402
 
 if __name__ == "__main__":
     dso_family(sys.argv[1])

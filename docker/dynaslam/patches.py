@@ -15,7 +15,8 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import orb_slam2_family, patch  # noqa: E402
+from families import orb_slam2_family  # noqa: E402
+from patchlib import patch  # noqa: E402
 
 
 def dynaslam(root):

@@ -1,6 +1,6 @@
 """SVO (uzh-rpg/rpg_svo @ d616106, with rpg_vikit, fast and Sophus @ a621ff) without ROS on Debian 12: the svo
 library and vikit_common built with their own USE_ROS switches off, SVO's parameters read from a flat file as
-the ROS node reads them (-DSLAMRUN_PARAMS, a ROS-free vikit/params_helper.h in docker/svo/include), and
+the ROS node reads them (-DSLAMRUN_PARAMS, a ROS-free vikit/params_helper.h in docker/common/svo-include), and
 slamrun's offline driver (svo_offline.cpp) instead of the ROS benchmark node.
 
 - Sophus @ a621ff, sophus/so2.cpp: `unit_complex_.real() = 1.;` assigns to an rvalue since C++11 (gcc >= 5):
@@ -21,28 +21,16 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
-from patchlib import append_line, opencv4, patch, sub  # noqa: E402
+from families import drop_after, fast_cxx11, sophus_cxx11, svo_without_ros, vikit_common_without_ros  # noqa: E402
+from patchlib import patch, sub  # noqa: E402
 
 DEBUG_WINDOW = r"\n(\s*)cv::namedWindow\(\"residuals\", CV_WINDOW_AUTOSIZE\);\n\s*cv::imshow\([^;]*;\n\s*cv::waitKey\(0\);"
 NO_WINDOW = r"\n\1// slamrun: no debug window (headless build without OpenCV's GUI)"
 
 
-def sophus(root):
-    patch(root, "sophus/so2.cpp", "replace", "unit_complex_.real() = 1.;\n  unit_complex_.imag() = 0.;",
-          "unit_complex_ = std::complex<double>(1, 0);  // slamrun: C++11")
-
-
-def fast(root):
-    patch(root, "CMakeLists.txt", "replace", "SET(BUILD_TEST TRUE)", "SET(BUILD_TEST FALSE)  # slamrun")
-    patch(root, "CMakeLists.txt", "replace", 'SET(CMAKE_CXX_FLAGS "-Wall -Werror ',
-          'SET(CMAKE_CXX_FLAGS "-std=c++11 -Wall -Werror ')
-
-
 def vikit(root):
-    patch(root, "vikit_common/CMakeLists.txt", "replace", "SET(USE_ROS TRUE)", "SET(USE_ROS FALSE)  # slamrun")
     sub(root, "vikit_common/src/img_align.cpp", DEBUG_WINDOW, NO_WINDOW, min_count=2)
-    opencv4(root, ["vikit_common/src"])
-    sub(root, "vikit_common/src/homography.cpp", r"\bCV_RANSAC\b", "cv::RANSAC")
+    vikit_common_without_ros(root)
     # the FOV model's factors at r -> 0 (atan(r t)/(s r) -> t/s, tan(r s)/(t r) -> s/t, t = 2 tan(s/2))
     header = "vikit_common/include/vikit/atan_camera.h"
     patch(root, header, "replace",
@@ -55,29 +43,10 @@ def vikit(root):
 
 
 def svo(root):
-    cm = "svo/CMakeLists.txt"
-    patch(root, cm, "replace", "SET(USE_ROS TRUE)", "SET(USE_ROS FALSE)  # slamrun")
-    patch(root, cm, "replace", "ELSE()\n  INCLUDE_DIRECTORIES(${vikit_common_INCLUDE_DIRS})\n",
-          "ELSE()\n"
-          "  # slamrun: a ROS-free vikit/params_helper.h, before anything else\n"
-          "  INCLUDE_DIRECTORIES(BEFORE ${SLAMRUN_INCLUDE_DIR})\n"
-          "  ADD_DEFINITIONS(-DSLAMRUN_PARAMS)\n"
-          "  INCLUDE_DIRECTORIES(${vikit_common_INCLUDE_DIRS})\n")
     # the tests need data that is not in the tree; the driver replaces them
-    full = os.path.join(root, cm)
-    with open(full) as f:
-        text = f.read()
-    tests = text.index("################################################################################\n# TESTS")
-    with open(full, "w") as f:
-        f.write(text[:tests])
-    print("patch: %s (tests dropped)" % cm)
-    append_line(root, cm, "# slamrun: the ROS-free offline driver (docker/svo/svo_offline.cpp)\n"
-                "ADD_EXECUTABLE(svo_offline ${SLAMRUN_SVO_DRIVER})\n"
-                "TARGET_LINK_LIBRARIES(svo_offline svo ${LINK_LIBS})")
-    sub(root, "svo/src/config.cpp", r"#ifdef SVO_USE_ROS\b", "#if defined(SVO_USE_ROS) || defined(SLAMRUN_PARAMS)",
-        min_count=2)
-    patch(root, "svo/include/svo/global.h", "after", "#include <boost/shared_ptr.hpp>\n",
-          "#include <boost/bind/bind.hpp>\nusing namespace boost::placeholders;  // slamrun: Boost >= 1.73\n")
+    drop_after(root, "svo/CMakeLists.txt",
+               "################################################################################\n# TESTS")
+    svo_without_ros(root, "svo", "svo_offline")
     sub(root, "svo/src/sparse_img_align.cpp", DEBUG_WINDOW, NO_WINDOW)  # its only OpenCV C constant
 
 
@@ -85,7 +54,7 @@ if __name__ == "__main__":
     if len(sys.argv) != 5:
         sys.exit("usage: patches.py SVO_ROOT VIKIT_ROOT FAST_ROOT SOPHUS_ROOT")
     svo_root, vikit_root, fast_root, sophus_root = sys.argv[1:]
-    sophus(sophus_root)
-    fast(fast_root)
+    sophus_cxx11(sophus_root)
+    fast_cxx11(fast_root)
     vikit(vikit_root)
     svo(svo_root)
