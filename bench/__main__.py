@@ -34,8 +34,8 @@ def one_core() -> None:
 def bench_evaluator(tmp: Path) -> None:
     from scipy.spatial.transform import Rotation
 
-    from runner.evaluation import tum_mono
-    from runner.trajectory import Trajectory, read_tum, read_tum_many
+    from runner.core.evaluation import tum_mono
+    from runner.core.trajectory import Trajectory, read_tum, read_tum_many
 
     print("evaluator: 1,000 trajectories of 1,500 poses against one ground truth (one core)")
     n = 1500
@@ -113,8 +113,8 @@ def bench_evaluator(tmp: Path) -> None:
 def bench_evaluate_cores(tmp: Path) -> None:
     from scipy.spatial.transform import Rotation
 
-    from runner.batch_eval import evaluate_files
-    from runner.trajectory import Trajectory
+    from runner.core.batch_eval import evaluate_files
+    from runner.core.trajectory import Trajectory
 
     jobs = len(os.sched_getaffinity(0))
     print(f"slamrun evaluate on every core ({jobs}) against one core: 1,000 trajectories of 2,206 poses")
@@ -157,9 +157,9 @@ def bench_evaluate_cores(tmp: Path) -> None:
 def bench_scheduler(tmp: Path) -> None:
     import yaml
 
-    from runner.campaign import run_campaign
     from runner.datasets.synth import generate
-    from runner.spec import DistributedSpec, load_spec
+    from runner.engine.campaign import run_campaign
+    from runner.engine.spec import DistributedSpec, load_spec
 
     print("scheduler: per-run overhead with a no-op method, against a bare spawn of the same command")
     generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
@@ -209,10 +209,11 @@ def bench_scheduler(tmp: Path) -> None:
 
 
 def bench_plan_status(tmp: Path) -> None:
-    from runner.ledger import Ledger
-    from runner.plan import plan
-    from runner.results import method_summary, results_frame
-    from runner.spec import validate_spec
+    from runner.analysis.summary import method_summary
+    from runner.engine.export import results_frame
+    from runner.engine.ledger import Ledger
+    from runner.engine.plan import plan
+    from runner.engine.spec import validate_spec
 
     print("plan and status of a 10,000-run campaign")
     raw = {
@@ -246,7 +247,8 @@ def bench_plan_status(tmp: Path) -> None:
 def bench_datasets(tmp: Path) -> None:
     import cv2
 
-    from runner.camera import rectification_maps, rectified_pinhole
+    from runner.core.camera import rectification_maps, rectified_pinhole
+    from runner.datasets.cache import prepare
     from runner.datasets.synth import (
         Renderer,
         camera_path,
@@ -257,7 +259,7 @@ def bench_datasets(tmp: Path) -> None:
         make_texture,
     )
     from runner.datasets.tum_mono import open_sequence
-    from runner.datasets.views import Direction, Profile, prepare
+    from runner.datasets.view import Direction, Profile
 
     print("datasets: synthetic rendering (one core) and rectified preparation 1280x1024 -> 640x480")
     rng = np.random.default_rng(0)
@@ -314,8 +316,9 @@ def bench_datasets(tmp: Path) -> None:
 
 
 def bench_reference_vo(tmp: Path) -> None:
+    from runner.datasets.cache import prepare
     from runner.datasets.synth import generate
-    from runner.datasets.views import Direction, Profile, prepare
+    from runner.datasets.view import Direction, Profile
 
     print("reference VO at 640x480 (one core)")
     seq = generate(tmp / "vo" / "s", frames=300, seed=0)
@@ -411,10 +414,11 @@ def bench_docker(tmp: Path) -> None:
 
     from runner.backends.base import ExecRequest
     from runner.backends.docker import DockerBackend
+    from runner.backends.monitor import ProcessTreeMonitor
+    from runner.datasets.cache import prepare
     from runner.datasets.synth import generate
-    from runner.datasets.views import Direction, Profile, prepare
+    from runner.datasets.view import Direction, Profile
     from runner.errors import InfraError
-    from runner.monitor import ProcessTreeMonitor
 
     print("docker backend: per-run overhead against `docker run --rm` of the same no-op image; monitor cost")
     backend = DockerBackend()

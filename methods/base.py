@@ -10,9 +10,9 @@ from typing import ClassVar
 
 from pydantic import BaseModel, ConfigDict
 
-from runner.datasets.views import PreparedView, Profile
+from runner.core.trajectory import Trajectory, read_tum
+from runner.datasets.view import PreparedView, Profile
 from runner.errors import MethodFailure
-from runner.trajectory import Trajectory, read_tum
 
 
 class NoParams(BaseModel):

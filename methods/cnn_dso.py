@@ -14,7 +14,7 @@ from pydantic import Field
 
 from methods.dso import Dso, DsoParams
 from methods.upstream import GpuOptional, GpuOptionalParams
-from runner.datasets.views import PreparedView
+from runner.datasets.view import PreparedView
 
 
 class CnnDsoParams(DsoParams, GpuOptionalParams):

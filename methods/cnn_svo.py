@@ -20,9 +20,9 @@ from pydantic import Field
 from methods.base import read_tum_output
 from methods.svo import Svo, SvoParams
 from methods.upstream import GpuOptional, GpuOptionalParams, pinhole_of
-from runner.datasets.views import PreparedView, Profile
+from runner.core.trajectory import Trajectory, read_timestamped_3x4
+from runner.datasets.view import PreparedView, Profile
 from runner.errors import MethodFailure, TrajectoryFormatError
-from runner.trajectory import Trajectory, read_timestamped_3x4
 
 # the authors' rpg_svo/svo_ros/param/vo_kitti.yaml (the keys the params do not set)
 VO_KITTI = {

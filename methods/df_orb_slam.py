@@ -21,7 +21,7 @@ from typing import Literal
 from pydantic import Field
 
 from methods.orb_slam2 import OrbSlam2, OrbSlam2Params, orb_settings_yaml
-from runner.datasets.views import PreparedView
+from runner.datasets.view import PreparedView
 
 
 class DfOrbSlamParams(OrbSlam2Params):

@@ -13,7 +13,7 @@ from pathlib import Path
 from pydantic import Field
 
 from methods.upstream import UpstreamMethod, UpstreamParams
-from runner.datasets.views import PreparedView, Profile
+from runner.datasets.view import PreparedView, Profile
 
 
 class DsoParams(UpstreamParams):

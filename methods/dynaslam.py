@@ -13,7 +13,7 @@ from pydantic import Field
 
 from methods.orb_slam2 import OrbSlam2, OrbSlam2Params
 from methods.upstream import GpuOptional, GpuOptionalParams
-from runner.datasets.views import PreparedView
+from runner.datasets.view import PreparedView
 from runner.errors import MethodFailure
 
 

@@ -15,9 +15,9 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from methods.base import Method, read_tum_output, require_poses
-from runner.datasets.views import PreparedView, Profile
+from runner.core.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
+from runner.datasets.view import PreparedView, Profile
 from runner.errors import MethodFailure
-from runner.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
 
 
 class OutputFormat(StrEnum):

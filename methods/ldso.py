@@ -14,7 +14,7 @@ from pathlib import Path
 from pydantic import Field
 
 from methods.dso import Dso, DsoParams
-from runner.datasets.views import PreparedView
+from runner.datasets.view import PreparedView
 
 
 class LdsoParams(DsoParams):

@@ -24,9 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from methods.upstream import UpstreamMethod, UpstreamParams
-from runner.datasets.views import PreparedView, Profile
+from runner.core.trajectory import Trajectory, from_arrays
+from runner.datasets.view import PreparedView, Profile
 from runner.errors import MethodFailure
-from runner.trajectory import Trajectory, from_arrays
 
 
 class LsdSlam(UpstreamMethod):

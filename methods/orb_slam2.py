@@ -12,7 +12,7 @@ from pathlib import Path
 from pydantic import Field
 
 from methods.upstream import UpstreamMethod, UpstreamParams, fps_of, pinhole_of
-from runner.datasets.views import PreparedView, Profile
+from runner.datasets.view import PreparedView, Profile
 
 
 class OrbSlam2Params(UpstreamParams):

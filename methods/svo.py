@@ -26,7 +26,7 @@ from typing import ClassVar
 from pydantic import Field
 
 from methods.upstream import UpstreamMethod, UpstreamParams
-from runner.datasets.views import PreparedView, Profile
+from runner.datasets.view import PreparedView, Profile
 
 
 class SvoParams(UpstreamParams):

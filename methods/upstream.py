@@ -8,7 +8,7 @@ from typing import ClassVar
 from pydantic import BaseModel, ConfigDict, Field
 
 from methods.base import Method
-from runner.datasets.views import PreparedView
+from runner.datasets.view import PreparedView
 
 
 class UpstreamParams(BaseModel):

@@ -97,11 +97,11 @@ def require_upstream(path: Path = UPSTREAM) -> Path:
 
 
 def unpack_upstream(name: str, dest: Path) -> Path:
-    """The real upstream tree of source `name` (runner/sources.py), unpacked from shared/upstream into `dest`;
+    """The real upstream tree of source `name` (runner/images/sources.py), unpacked from shared/upstream into `dest`;
     skips when shared/upstream is absent."""
     import tarfile
 
-    from runner.sources import SOURCES
+    from runner.images.sources import SOURCES
 
     archive = require_upstream(UPSTREAM / SOURCES[name].filename)
     with tarfile.open(archive, "r:gz") as tar:

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from runner.camera import (
+from runner.core.camera import (
     FovCamera,
     PinholeCamera,
     RadTanCamera,

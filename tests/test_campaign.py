@@ -18,10 +18,10 @@ import psutil
 import pytest
 
 from runner.backends.local import LocalBackend
-from runner.campaign import run_campaign
+from runner.engine.campaign import run_campaign
+from runner.engine.ledger import ResultsLock
+from runner.engine.spec import load_spec
 from runner.errors import InfraError
-from runner.ledger import ResultsLock
-from runner.spec import load_spec
 from tests.conftest import fake_method, one_sequence, write_spec
 
 REQUIRED_COLUMNS = (
@@ -462,7 +462,8 @@ def test_a_run_on_a_worker_stops_when_its_staging_folder_disappears(tmp_path, ti
     """What a Dask worker does when the campaign machine crashed and its next start removed the attempt."""
     from runner.backends.base import ExecRequest
     from runner.backends.dask import _RemoteCancel
-    from runner.datasets.views import Direction, Profile, prepare
+    from runner.datasets.cache import prepare
+    from runner.datasets.view import Direction, Profile
 
     view = prepare(tiny_dataset / "seq_a", Direction.forward, Profile.native, tmp_path / "cache")
     stage = tmp_path / ".00.tmp-1"

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import methods
-from runner.datasets.views import Direction, PreparedView, Profile
+from runner.datasets.view import Direction, PreparedView, Profile
 
 ROOT = Path(__file__).resolve().parents[1]
 DRIVER = ROOT / "docker" / "df_orb_slam" / "mono_tum_df.cc"

@@ -18,10 +18,11 @@ import pandas as pd
 import pytest
 
 from runner.backends.base import ExecRequest
-from runner.campaign import run_campaign
-from runner.datasets.views import Direction, Profile, prepare
+from runner.datasets.cache import prepare
+from runner.datasets.view import Direction, Profile
+from runner.engine.campaign import run_campaign
+from runner.engine.spec import load_spec
 from runner.errors import InfraError
-from runner.spec import load_spec
 from tests.conftest import one_sequence, write_spec
 
 IMAGE = "slamrun/reference_vo:latest"
@@ -69,7 +70,7 @@ def image(backend):
         backend.client.images.get("debian:bookworm-slim")
     except docker.errors.ImageNotFound:
         _unavailable("no debian:bookworm-slim base image (scripts/make-offline-base.sh builds it offline)")
-    from runner.images import build
+    from runner.images.build import build
 
     build(["reference_vo"], log=lambda *a: None)
     return IMAGE

@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 import methods
-from runner.datasets.views import Direction, PreparedView
+from runner.datasets.view import Direction, PreparedView
 from tests.conftest import unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from runner.errors import InfraError, SlamRunError
-from runner.images import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
-from runner.sources import SOURCES
+from runner.images.build import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
+from runner.images.sources import SOURCES
 from tests.conftest import UPSTREAM, require_upstream
 from tests.test_docker import engine_with_base
 
@@ -138,7 +138,7 @@ def _run(client, tag: str, cmd: str) -> str:
 
 
 def test_the_network_an_image_holds_is_given_a_stand_in_or_a_clear_error(tmp_path):
-    from runner.images import model_choice
+    from runner.images.build import model_choice
 
     assert model_choice("dso", BuildOptions()) == ("none", "")
     with pytest.raises(SlamRunError) as err:

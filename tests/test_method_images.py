@@ -13,11 +13,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from runner.campaign import run_campaign
 from runner.datasets.synth import generate
-from runner.images import BuildOptions, build
-from runner.spec import load_spec
-from runner.verify_images import scene_extent
+from runner.engine.campaign import run_campaign
+from runner.engine.spec import load_spec
+from runner.images.build import BuildOptions, build
+from runner.images.verify import scene_extent
 from tests.conftest import UPSTREAM, require_upstream, write_spec
 from tests.test_docker import engine_with_base
 

@@ -17,10 +17,10 @@ import yaml
 
 import methods
 from methods.base import Method
-from runner.datasets.views import Direction, PreparedView, Profile
+from runner.datasets.view import Direction, PreparedView, Profile
 from runner.errors import MethodFailure, TrajectoryFormatError
-from runner.images import sources_of
-from runner.sources import SOURCES
+from runner.images.build import sources_of
+from runner.images.sources import SOURCES
 
 ROOT = Path(__file__).resolve().parents[1]
 # upstream commits, as methods.md pins them
@@ -304,8 +304,8 @@ def test_failure_cases(tmp_path, views):
 
 
 def test_local_backend_needs_a_local_build(tiny_dataset, tmp_path):
+    from runner.engine.spec import validate_spec
     from runner.errors import SpecError
-    from runner.spec import validate_spec
 
     raw = {
         "name": "x",
@@ -385,8 +385,8 @@ def test_loop_closure_switch_where_the_study_used_one(name):
 
 
 def test_paper_spec_is_the_full_study():
-    from runner.plan import plan
-    from runner.spec import load_spec
+    from runner.engine.plan import plan
+    from runner.engine.spec import load_spec
 
     spec = load_spec(ROOT / "configs" / "paper.yaml", check_files=False)
     runs = plan(spec)
@@ -411,7 +411,7 @@ def test_paper_spec_turns_loop_closure_off_where_the_study_did():
     """The study disabled loop closure in ORB-SLAM2, DF-ORB-SLAM, DynaSLAM, LDSO and DSM only (shared/docs/
     study.md); LSD-SLAM ran with its own default, global mapping on (`_doSLAM` true), so the paper spec asks
     for it. slamrun's own default stays off for every method that has a switch."""
-    from runner.spec import load_spec
+    from runner.engine.spec import load_spec
 
     for name in ("paper.yaml", "paper-timing.yaml"):
         spec = load_spec(ROOT / "configs" / name, check_files=False)
@@ -423,13 +423,13 @@ def test_paper_spec_turns_loop_closure_off_where_the_study_did():
 
 def test_pure_modules_import_in_one_direction():
     """Trajectory, alignment, evaluation and statistics never import the scheduler, Docker or the CLI."""
-    banned = ("runner.scheduler", "runner.backends", "runner.cli", "runner.campaign", "docker")
+    banned = ("runner.engine.scheduler", "runner.backends", "runner.cli", "runner.engine.campaign", "docker")
     for rel in (
-        "runner/trajectory.py",
-        "runner/alignment.py",
-        "runner/evaluation.py",
+        "runner/core/trajectory.py",
+        "runner/core/alignment.py",
+        "runner/core/evaluation.py",
         "runner/analysis/stats.py",
-        "runner/camera.py",
+        "runner/core/camera.py",
     ):
         tree = ast.parse((ROOT / rel).read_text())
         for node in ast.walk(tree):

@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.campaign import run_campaign
 from runner.datasets.synth import generate
-from runner.spec import load_spec
+from runner.engine.campaign import run_campaign
+from runner.engine.spec import load_spec
 from tests.conftest import one_sequence, write_spec
 
 

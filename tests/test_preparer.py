@@ -1,4 +1,4 @@
-"""The background view preparer's order and concurrency (a stand-in for views.prepare: the scheduling logic
+"""The background view preparer's order and concurrency (a stand-in for cache.prepare: the scheduling logic
 only; real preparation is tested in test_datasets.py and through every campaign test)."""
 
 from __future__ import annotations
@@ -8,9 +8,9 @@ import threading
 import time
 from pathlib import Path
 
-import runner.preparer as preparer_module
-from runner.datasets.views import Direction, Profile
-from runner.preparer import ViewPreparer
+import runner.engine.preparer as preparer_module
+from runner.datasets.view import Direction, Profile
+from runner.engine.preparer import ViewPreparer
 
 
 def test_views_are_prepared_one_at_a_time_the_idle_lanes_first_views_with_every_core(tmp_path, monkeypatch):

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from runner.progress import eta, figures
+from runner.engine.progress import eta, figures
 from tests.conftest import fake_method, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -150,8 +150,8 @@ def _counts(out: str) -> dict[tuple[str, str], list[int]]:
 
 
 def test_dry_run_counts_are_exact(tmp_path, tiny_dataset, capsys):
-    from runner.campaign import run_campaign
-    from runner.spec import load_spec
+    from runner.engine.campaign import run_campaign
+    from runner.engine.spec import load_spec
 
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(label="m")], trials=2, lanes=1, report=False)
     out = _dry(capsys, spec, tmp_path)  # new

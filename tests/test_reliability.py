@@ -15,11 +15,11 @@ import psutil
 import pytest
 
 from runner.analysis.load import evaluated
-from runner.campaign import run_campaign
+from runner.analysis.summary import method_summary
 from runner.datasets.synth import generate
+from runner.engine.campaign import run_campaign
+from runner.engine.spec import load_spec
 from runner.errors import DatasetError, SlamRunError
-from runner.results import method_summary
-from runner.spec import load_spec
 from tests.conftest import fake_method, one_sequence, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -303,7 +303,7 @@ def test_campaign_and_backends_import_in_one_direction():
     for path in root.glob("*.py"):
         tree = ast.parse(path.read_text())
         imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
-        assert "runner.campaign" not in imported, f"{path.name} imports runner.campaign"
+        assert "runner.engine.campaign" not in imported, f"{path.name} imports runner.campaign"
 
 
 # ------------------------------------------------------------ a method's environment reaches its process

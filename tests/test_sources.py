@@ -13,8 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from runner import sources as src
-from runner.sources import SOURCES, SourceError, check_archive, obtain
+from runner.images import sources as src
+from runner.images.sources import SOURCES, SourceError, check_archive, obtain
 from tests.conftest import loopback_server, require_upstream
 
 
@@ -127,7 +127,7 @@ def test_an_unreachable_server_names_the_address_and_the_folder_option(archive_s
 
 
 def test_a_pypi_file_from_a_folder_the_cache_or_the_index(tmp_path):
-    from runner.sources import PypiFile, obtain_pypi
+    from runner.images.sources import PypiFile, obtain_pypi
 
     data = b"not really a wheel " * 5000
     sha = src.hashlib.sha256(data).hexdigest()
@@ -155,7 +155,7 @@ def test_a_pypi_file_from_a_folder_the_cache_or_the_index(tmp_path):
 
 
 def test_weights_by_address_need_and_get_their_checksum(tmp_path):
-    from runner.sources import obtain_url
+    from runner.images.sources import obtain_url
 
     data = b"weights" * 1000
     sha = src.hashlib.sha256(data).hexdigest()
@@ -171,7 +171,7 @@ def test_weights_by_address_need_and_get_their_checksum(tmp_path):
 def test_a_pypi_file_from_a_mirror_with_only_the_project_index_and_relative_addresses(tmp_path):
     """A PyPI mirror (as the registry this project is tested behind) may serve /pypi/<project>/json only, with file
     addresses relative to it: the file is still found there."""
-    from runner.sources import PypiFile, obtain_pypi
+    from runner.images.sources import PypiFile, obtain_pypi
 
     data = b"a wheel from a mirror " * 3000
     f = PypiFile("demo-1.0-py3-none-any.whl", "demo", "1.0", src.hashlib.sha256(data).hexdigest())

@@ -6,9 +6,9 @@ import pytest
 import yaml
 
 from runner.cli import main
+from runner.engine.plan import plan
+from runner.engine.spec import load_spec
 from runner.errors import SpecError
-from runner.plan import plan
-from runner.spec import load_spec
 from tests.conftest import fake_method, write_spec
 
 

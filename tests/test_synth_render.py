@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.camera import FovCamera, rectified_pinhole
+from runner.core.camera import FovCamera, rectified_pinhole
 from runner.datasets.synth import Renderer, camera_path, fov_rays, make_scene, make_texture, pinhole_rays
 
 

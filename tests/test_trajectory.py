@@ -4,8 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.errors import TrajectoryFormatError
-from runner.trajectory import (
+from runner.core.trajectory import (
     from_arrays,
     read_4x4_matrices,
     read_kitti,
@@ -14,9 +13,13 @@ from runner.trajectory import (
     rotmat_to_quat,
     write_tum,
 )
+from runner.errors import TrajectoryFormatError
 from tests.conftest import SHARED_DATA as DATA
 
-REAL_FILES = sorted(DATA.glob("*/*.txt"))
+# the study's TUM files (evo_test_data beside them holds KITTI poses and other datasets' formats)
+REAL_FILES = sorted(
+    f for folder in ("dso_tum_mono_examples", "study_trajectories") for f in (DATA / folder).glob("*.txt")
+)
 
 
 def _same_rotation(q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
@@ -152,8 +155,8 @@ def test_real_file_facts(shared_data):
 
 def test_read_tum_many_matches_read_tum_file_by_file(tmp_path):
     """Batched reading gives each file exactly what read_tum gives it, errors included, in order."""
+    from runner.core.trajectory import read_tum_many, write_tum
     from runner.errors import TrajectoryFormatError
-    from runner.trajectory import read_tum_many, write_tum
 
     rng = np.random.default_rng(3)
 

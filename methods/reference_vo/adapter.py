@@ -10,7 +10,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from methods.base import Method, PythonProcess
-from runner.datasets.views import PreparedView, Profile
+from runner.datasets.view import PreparedView, Profile
 
 
 class ReferenceVOParams(BaseModel):

@@ -12,8 +12,8 @@ import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from runner.analysis.load import LABELS  # noqa: E402
 from runner.analysis.stats import StudyStats  # noqa: E402
+from runner.results.vocabulary import LABELS  # noqa: E402
 
 
 def save(fig, folder: Path, name: str) -> Path:
@@ -96,8 +96,8 @@ def boxplot(st: StudyStats, metric: str, folder: Path) -> Path:
 
 def trajectories(runs: list[tuple[str, object, object]], gt, folder: Path, name: str) -> Path:
     """Estimated trajectories (aligned to the start segment) against the ground-truth segments, top view."""
-    from runner.alignment import align_sim3
-    from runner.evaluation import associate
+    from runner.core.alignment import align_sim3
+    from runner.core.evaluation import associate
 
     fig, ax = plt.subplots(figsize=(5.5, 5))
     valid = np.isfinite(gt.positions).all(axis=1)

@@ -1,4 +1,4 @@
-"""Load a campaign's results for analysis: evaluated runs kept, failed runs counted per kind."""
+"""Load a campaign's results for analysis: the table, its evaluated runs, the metrics it has."""
 
 from __future__ import annotations
 
@@ -7,19 +7,7 @@ from pathlib import Path
 import pandas as pd
 
 from runner.errors import SlamRunError
-from runner.ledger import METHOD_FAILURES
-
-ACCURACY = ["e_t", "e_r", "e_s_sym", "e_start", "e_end", "e_rmse"]  # the study's six metrics (e_s' for scale)
-LABELS = {
-    "e_t": "translation drift e_t",
-    "e_r": "rotation drift e_r (deg)",
-    "e_s": "scale drift e_s",
-    "e_s_sym": "scale drift e_s'",
-    "e_align": "alignment error e_align",
-    "e_start": "start-segment RMSE",
-    "e_end": "end-segment RMSE",
-    "e_rmse": "RMSE (both segments)",
-}
+from runner.results.vocabulary import STUDY_METRICS
 
 
 def load_results(path: Path) -> pd.DataFrame:
@@ -44,29 +32,10 @@ def evaluated(df: pd.DataFrame, metrics: list[str]) -> pd.DataFrame:
     return df.dropna(subset=present)
 
 
-def failure_table(df: pd.DataFrame) -> pd.DataFrame:
-    """Per method: runs, evaluated, and each failure kind, counts and percentages."""
-    rows = []
-    for method, g in df.groupby("method", sort=True):
-        n = len(g)
-        row = {"method": method, "runs": n}
-        if "eval_status" in g.columns:
-            row["evaluated"] = int((g["eval_status"] == "ok").sum())
-            row["not evaluable"] = int(((g.get("status") == "done") & (g["eval_status"] != "ok")).sum())
-        if "failure" in g.columns:
-            for kind in (*METHOD_FAILURES, "infra"):
-                row[kind] = int((g["failure"] == kind).sum())
-        rows.append(row)
-    out = pd.DataFrame(rows)
-    if "failure" in df.columns and len(out):
-        out["failure_pct"] = 100 * out[list(METHOD_FAILURES)].sum(axis=1) / out["runs"]
-    return out
-
-
 def metrics_for(df: pd.DataFrame) -> list[str]:
     """The study's metrics that this table has (e_s' if present, else e_s)."""
     out = []
-    for m in ACCURACY:
+    for m in STUDY_METRICS:
         if m in df.columns:
             out.append(m)
         elif m == "e_s_sym" and "e_s" in df.columns:

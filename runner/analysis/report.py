@@ -11,8 +11,32 @@ from pathlib import Path
 import pandas as pd
 
 from runner.analysis import figures, tables
-from runner.analysis.load import LABELS, evaluated, failure_table, load_results, metrics_for
+from runner.analysis.load import evaluated, load_results, metrics_for
 from runner.analysis.stats import study_statistics
+from runner.analysis.summary import method_summary
+from runner.results.vocabulary import LABELS, METHOD_FAILURES
+
+RUNS_COLUMNS = {
+    "runs": "runs",
+    "done": "done",
+    "failed": "failed (method)",
+    "infra": "infra",
+    "pending": "pending",
+    "success_pct": "success %",
+    "failure_pct": "failure %",
+    "evaluated": "evaluated",
+    "not_evaluable": "not evaluable",
+}
+
+
+def runs_table(df: pd.DataFrame) -> pd.DataFrame:
+    """The report's runs-and-failures table: the per-method summary's counts and rates (rates over the
+    method's results: infrastructure failures and unfinished runs are left out), and each failure kind."""
+    s = method_summary(df)
+    if s.empty:
+        return s
+    out = s[["method", *RUNS_COLUMNS, *METHOD_FAILURES]].rename(columns=RUNS_COLUMNS)
+    return out.round({"success %": 1, "failure %": 1})
 
 
 def write_report(
@@ -26,7 +50,7 @@ def write_report(
     ok = evaluated(df, metrics)
     sections: list[tuple[str, str]] = []
 
-    fails = failure_table(df)
+    fails = runs_table(df)
     tables.write_all(fails, tab_dir, "failures", "Runs and failures per method")
     sections.append(("Runs and failures per method", tables.to_html(fails)))
 
@@ -94,9 +118,9 @@ def write_report(
 
 def _trajectory_figures(df: pd.DataFrame, folder: Path, n_sequences: int) -> list[Path]:
     """Best evaluated forward run of each method for the first sequences, against the ground truth."""
+    from runner.core.trajectory import read_tum
     from runner.datasets.tum_mono import open_sequence
     from runner.errors import SlamRunError
-    from runner.trajectory import read_tum
 
     out = []
     if "run_dir" not in df.columns or "e_align" not in df.columns:

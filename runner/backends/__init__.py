@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from runner.backends.base import Backend
-    from runner.spec import CampaignSpec
+    from runner.engine.spec import CampaignSpec
 
 
 def make_backend(spec: CampaignSpec) -> Backend:

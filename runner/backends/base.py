@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
-from runner.datasets.views import PreparedView
+from runner.datasets.view import PreparedView
 
 
 @dataclass(frozen=True)
@@ -44,7 +44,11 @@ class ExecResult:
 
 
 class Backend(Protocol):
+    """What the campaign asks of a backend. The last four are optional features: `Defaults` gives a backend
+    that lacks them their neutral form."""
+
     name: str
+    engine: str | None  # the engine runs go through beside the backend (e.g. "dask"), for run.json
 
     def check(self, images: dict[str, str | None] | None = None) -> None:
         """Raise InfraError before any run starts when the backend cannot work (daemon unreachable, images
@@ -57,6 +61,37 @@ class Backend(Protocol):
         self, req: ExecRequest, cancel: threading.Event, on_start: Callable[[int, float], None] | None = None
     ) -> ExecResult:
         """Run to completion, timeout or cancel; always leaves no process behind."""
+
+    def describe_image(self, tag: str) -> dict | None:
+        """The image a run used (id, sources, vocabulary, weights), for run.json; None when the backend does not
+        know it (no image runs here)."""
+
+    def leftovers(self, campaign: str) -> list:
+        """Runs of this campaign that a killed runner or a lost daemon left behind, for `collect` (containers)."""
+
+    def collect(self, leftover, log_path: Path, log_cap_bytes: int, n_frames: int) -> ExecResult | None:
+        """The result of a leftover that ended by itself; None while it runs or when it never started."""
+
+    def close(self) -> None:
+        """Release what the backend holds (a cluster client)."""
+
+
+class Defaults:
+    """The optional features' neutral forms, for backends that have no images, leftovers or resources."""
+
+    engine: str | None = None
+
+    def describe_image(self, tag: str) -> dict | None:
+        return None
+
+    def leftovers(self, campaign: str) -> list:
+        return []
+
+    def collect(self, leftover, log_path: Path, log_cap_bytes: int, n_frames: int) -> ExecResult | None:
+        return None
+
+    def close(self) -> None:
+        pass
 
 
 def supervise(

@@ -16,7 +16,7 @@ import time
 import uuid
 from pathlib import Path
 
-from runner.backends.base import ExecRequest, ExecResult
+from runner.backends.base import Defaults, ExecRequest, ExecResult
 from runner.errors import InfraError
 
 SILENCE_MARGIN_S = 120.0  # beyond a run's timeout, how long to wait for a worker's answer
@@ -58,9 +58,10 @@ def _check_on_worker(backend_name: str, images: dict | None, probe: str) -> str 
     return None
 
 
-class DaskBackend:
+class DaskBackend(Defaults):
     """Runs through a Dask cluster; `name` is the backend each worker uses (local or docker)."""
 
+    name: str  # the backend the workers run runs with (local or docker)
     engine = "dask"
 
     def __init__(

@@ -14,11 +14,11 @@ import threading
 import time
 from pathlib import Path
 
-from runner.backends.base import ExecRequest, ExecResult, supervise
-from runner.datasets.views import PreparedView
+from runner.backends.base import Defaults, ExecRequest, ExecResult, supervise
+from runner.backends.logcap import CappedLog
+from runner.backends.monitor import Gpu, ResourceSeries, Sample
+from runner.datasets.view import PreparedView
 from runner.errors import DaemonUnreachable, InfraError
-from runner.logcap import CappedLog
-from runner.monitor import Gpu, ResourceSeries, Sample
 
 DATA = Path("/data")
 WORK = Path("/work")
@@ -64,7 +64,7 @@ def _docker():
     return docker
 
 
-class DockerBackend:
+class DockerBackend(Defaults):
     name = "docker"
 
     def __init__(self, sample_interval_s: float = 0.5, client=None):
@@ -136,13 +136,6 @@ class DockerBackend:
     def leftovers(self, campaign: str) -> list:
         """Containers of this campaign that a killed runner or a lost daemon left behind."""
         return self.client.containers.list(all=True, filters={"label": f"{LABEL_CAMPAIGN}={campaign}"})
-
-    def remove_leftovers(self, campaign: str) -> int:
-        """Remove containers of this campaign that a killed runner left behind."""
-        found = self.leftovers(campaign)
-        for c in found:
-            c.remove(force=True)
-        return len(found)
 
     @staticmethod
     def collect(container, log_path: Path, log_cap_bytes: int, n_frames: int) -> ExecResult | None:

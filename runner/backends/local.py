@@ -11,17 +11,17 @@ import uuid
 
 import psutil
 
-from runner.backends.base import ExecRequest, ExecResult, supervise
+from runner.backends.base import Defaults, ExecRequest, ExecResult, supervise
+from runner.backends.logcap import CappedLog
+from runner.backends.monitor import Gpu, ProcessTreeMonitor
 from runner.errors import InfraError
-from runner.logcap import CappedLog
-from runner.monitor import Gpu, ProcessTreeMonitor
 
 KILL_GRACE_S = 3.0
 PUMP_DRAIN_S = 2.0
 TOKEN_VAR = "SLAMRUN_RUN_TOKEN"  # in the environment of every process a run starts
 
 
-class LocalBackend:
+class LocalBackend(Defaults):
     name = "local"
 
     def __init__(self, sample_interval_s: float = 0.5):

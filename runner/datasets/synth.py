@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from runner.camera import FovCamera, PinholeCamera, write_camera_txt
+from runner.core.camera import FovCamera, PinholeCamera, write_camera_txt
 
 GAMMA = 1.25  # response G(x) = 255 (x/255)^(1/GAMMA); pcalib holds G^-1
 FPS = 30.0

@@ -11,9 +11,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from runner.camera import CameraFile, read_camera_txt
+from runner.core.camera import CameraFile, read_camera_txt
+from runner.core.trajectory import Trajectory
 from runner.errors import DatasetError
-from runner.trajectory import Trajectory
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
 REQUIRED = ("times.txt", "camera.txt", "pcalib.txt", "vignette.png")

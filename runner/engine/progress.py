@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import statistics
 from collections import Counter, defaultdict
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 
-from runner.ledger import METHOD_FAILURES
+from runner.results.summary import tally_rows
+from runner.results.vocabulary import is_infra
 
 
 @dataclass
@@ -55,20 +57,24 @@ def eta(left: dict[str, int], walls: dict[str, list[float]], lanes: int) -> tupl
     return total / max(lanes, 1), basis
 
 
+def wall_times(rows: Iterable[dict]) -> dict[str, list[float]]:
+    """Per method label, the wall times of its finished runs (method results, not infrastructure failures)."""
+    walls: dict[str, list[float]] = defaultdict(list)
+    for r in rows:
+        if r["state"] in ("done", "failed") and not is_infra(r["state"], r.get("failure")) and r.get("wall_s"):
+            walls[r["label"]].append(float(r["wall_s"]))
+    return walls
+
+
 def figures(rows: list[dict], session: dict | None = None, now: float | None = None, campaign: str = "") -> Figures:
     session = session or {}
     lanes = int(session.get("lanes") or 1)
-    states = Counter(r["state"] for r in rows)
-    infra_rows = [r for r in rows if r["state"] == "failed" and r.get("failure") == "infra"]
-    kinds = Counter(r.get("failure") for r in rows if r["state"] == "failed" and r.get("failure") != "infra")
-    left: dict[str, int] = Counter(r["label"] for r in rows if r["state"] in ("pending", "running"))
-    for r in infra_rows:  # retried at the next start
-        left[r["label"]] += 1
-    walls: dict[str, list[float]] = defaultdict(list)
-    for r in rows:
-        if r["state"] in ("done", "failed") and r.get("failure") != "infra" and r.get("wall_s"):
-            walls[r["label"]].append(float(r["wall_s"]))
-    eta_s, basis = eta(left, walls, lanes)
+    t = tally_rows(rows)
+    # runs left: unfinished, and infrastructure failures (retried at the next start)
+    left: dict[str, int] = Counter(
+        r["label"] for r in rows if r["state"] in ("pending", "running") or is_infra(r["state"], r.get("failure"))
+    )
+    eta_s, basis = eta(left, wall_times(rows), lanes)
     started = session.get("runs_from") or session.get("started_at")  # the scheduler's span when known
     ended = session.get("runs_to") or session.get("ended_at")
     elapsed = occupancy = None
@@ -85,12 +91,12 @@ def figures(rows: list[dict], session: dict | None = None, now: float | None = N
     return Figures(
         campaign=campaign,
         total=len(rows),
-        done=states["done"],
-        failed=states["failed"] - len(infra_rows),
-        infra=len(infra_rows),
-        pending=states["pending"],
-        running=states["running"],
-        failures={k: kinds[k] for k in METHOD_FAILURES if kinds[k]},
+        done=t.done,
+        failed=t.failed,
+        infra=t.infra,
+        pending=sum(r["state"] == "pending" for r in rows),
+        running=sum(r["state"] == "running" for r in rows),
+        failures={k: n for k, n in t.failures.items() if n},
         lanes=lanes,
         elapsed_s=elapsed,
         eta_s=eta_s,
@@ -103,24 +109,22 @@ def figures(rows: list[dict], session: dict | None = None, now: float | None = N
 
 def per_group(rows: list[dict]) -> list[dict]:
     """Counts per method label and direction, with the success rate over method results."""
-    groups: dict[tuple[str, str], Counter] = defaultdict(Counter)
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
     for r in rows:
-        c = groups[(r["label"], r["direction"])]
-        kind = "infra" if r["state"] == "failed" and r.get("failure") == "infra" else r["state"]
-        c[kind] += 1
+        groups[(r["label"], r["direction"])].append(r)
     out = []
-    for (label, direction), c in sorted(groups.items()):
-        results = c["done"] + c["failed"]
+    for (label, direction), group in sorted(groups.items()):
+        t = tally_rows(group)
         out.append(
             {
                 "method": label,
                 "direction": direction,
-                "pending": c["pending"],
-                "running": c["running"],
-                "done": c["done"],
-                "failed": c["failed"],
-                "infra": c["infra"],
-                "success_pct": 100.0 * c["done"] / results if results else None,
+                "pending": sum(r["state"] == "pending" for r in group),
+                "running": sum(r["state"] == "running" for r in group),
+                "done": t.done,
+                "failed": t.failed,
+                "infra": t.infra,
+                "success_pct": t.success_pct,
             }
         )
     return out

@@ -2,7 +2,7 @@
 
 Each image is built from `docker/<name>/Dockerfile` in a build context the runner assembles: the
 project's `docker/` and `methods/` folders, the upstream sources the Dockerfile copies
-(`COPY sources/<source>.tar.gz ...`, checked archives from a folder or GitHub, see runner/sources.py) and
+(`COPY sources/<source>.tar.gz ...`, checked archives from a folder or GitHub, see runner/images/sources.py) and
 the inputs a build needs (`inputs/`: a vocabulary, weights, frames to train a vocabulary on). Build
 arguments (MARCH, JOBS, VOCABULARY, any --build-arg) reach the Dockerfile. The image carries labels saying
 what it holds (sources and commits, vocabulary, weights, target). Every build writes its log to
@@ -23,10 +23,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import methods
-from runner import sources as src
 from runner.errors import InfraError, SlamRunError
+from runner.images import sources as src
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_LOG_DIR = ROOT / ".cache" / "images"
 SOURCE_RE = re.compile(r"\bsources/([A-Za-z0-9_.+-]+)\.tar\.gz\b")
 PYPI_RE = re.compile(r"\bpypi/([A-Za-z0-9_.+-]+\.whl)\b")

@@ -8,7 +8,8 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
-from runner.plan import RunKey
+from runner.engine.plan import RunKey
+from runner.results.vocabulary import is_infra
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ def finished_record(run_dir: Path, key: str) -> dict | None:
         return None
     if not isinstance(rec, dict) or rec.get("key") != key or rec.get("state") not in ("done", "failed"):
         return None
-    if rec.get("failure") == "infra":
+    if is_infra(rec["state"], rec.get("failure")):
         return None
     return rec
 

@@ -13,11 +13,11 @@ from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
 
+from runner.core.evaluation import tum_mono_file
+from runner.core.trajectory import Trajectory, read_tum_many
 from runner.errors import TrajectoryFormatError
-from runner.evaluation import tum_mono_file
-from runner.trajectory import Trajectory, read_tum_many
+from runner.results.vocabulary import EVALUATE_FIELDS
 
-FIELDS = ("status", "e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse", "n_poses")
 _GT: Trajectory | None = None  # the ground truth in a worker process
 
 
@@ -29,7 +29,9 @@ def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory) -> list[dict
         else:
             d = tum_mono_file(gt, traj).to_dict()
         detail = d.get("detail") if d["status"] != "ok" else None
-        out.append({"file": str(path), **{k: d.get(k) for k in FIELDS}, **({"detail": detail} if detail else {})})
+        out.append(
+            {"file": str(path), **{k: d.get(k) for k in EVALUATE_FIELDS}, **({"detail": detail} if detail else {})}
+        )
     return out
 
 

@@ -11,14 +11,16 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from runner.datasets.cache import whole_mirror, whole_view
 from runner.datasets.tum_mono import open_sequence
-from runner.datasets.views import Profile, whole_mirror, whole_view
+from runner.datasets.view import Profile
+from runner.engine.ledger import Ledger
+from runner.engine.paths import RunPaths, finished_record
+from runner.engine.plan import plan
+from runner.engine.progress import eta, wall_times
+from runner.engine.spec import CampaignSpec
 from runner.errors import DatasetError
-from runner.ledger import Ledger
-from runner.paths import RunPaths, finished_record
-from runner.plan import plan
-from runner.progress import eta
-from runner.spec import CampaignSpec
+from runner.results.vocabulary import is_infra
 
 
 @dataclass
@@ -55,7 +57,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         if row is None:
             rec = finished_record(RunPaths(spec.results, run.key).final, run.key.id)  # imported at the start
             state = "new" if rec is None else rec["state"]
-        elif row["state"] == "failed" and row.get("failure") == "infra":
+        elif is_infra(row["state"], row.get("failure")):
             state = "infra"
         elif row["state"] in ("pending", "running"):
             state = "pending"
@@ -100,11 +102,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
             out.views_to_prepare += 1
             out.view_bytes += 0 if (seq_dir, profile) in frames_counted else size
             frames_counted.add((seq_dir, profile))
-    walls: dict[str, list[float]] = defaultdict(list)
-    for r in rows.values():
-        if r["state"] in ("done", "failed") and r.get("failure") != "infra" and r.get("wall_s"):
-            walls[r["label"]].append(float(r["wall_s"]))
-    out.eta_s, out.eta_basis = eta(dict(todo_by_method), walls, lanes)
+    out.eta_s, out.eta_basis = eta(dict(todo_by_method), wall_times(rows.values()), lanes)
     return out
 
 

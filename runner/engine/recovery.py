@@ -11,13 +11,13 @@ import shutil
 from pathlib import Path
 
 from methods.base import Method
-from runner.datasets.views import PreparedView
+from runner.core.trajectory import Trajectory
+from runner.datasets.view import PreparedView
+from runner.engine.execute import finish_attempt
+from runner.engine.ledger import Ledger
+from runner.engine.paths import RunPaths, finished_record, run_token
+from runner.engine.plan import PlannedRun
 from runner.errors import SlamRunError
-from runner.execute import finish_attempt
-from runner.ledger import Ledger
-from runner.paths import RunPaths, finished_record, run_token
-from runner.plan import PlannedRun
-from runner.trajectory import Trajectory
 
 
 def import_finished(ledger: Ledger, runs: list[PlannedRun], results: Path) -> int:

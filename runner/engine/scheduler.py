@@ -17,7 +17,14 @@ from dataclasses import dataclass
 
 from methods import get as get_method
 from runner.backends.base import Backend
-from runner.datasets.views import PreparedView
+from runner.core.trajectory import Trajectory
+from runner.datasets.view import PreparedView
+from runner.engine.execute import Launched, RunOutcome, finish_attempt, launch_run
+from runner.engine.ledger import Ledger
+from runner.engine.paths import RunPaths, finished_record
+from runner.engine.plan import PlannedRun
+from runner.engine.preparer import ViewPreparer
+from runner.engine.spec import CampaignSpec
 from runner.errors import (
     DaemonUnreachable,
     DatasetError,
@@ -27,13 +34,7 @@ from runner.errors import (
     SlamRunError,
     is_disk_full,
 )
-from runner.execute import Launched, RunOutcome, finish_attempt, launch_run
-from runner.ledger import Ledger
-from runner.paths import RunPaths, finished_record
-from runner.plan import PlannedRun
-from runner.preparer import ViewPreparer
-from runner.spec import CampaignSpec
-from runner.trajectory import Trajectory
+from runner.results.vocabulary import INFRA
 
 
 @dataclass(frozen=True)
@@ -137,9 +138,12 @@ class Scheduler:
                     self._stop_for_full_disk(run, lane, f"{run.key.id}: the disk is full ({exc})", requeue=False)
                     continue
                 # a bug: keep the traceback, record it, let the other runs go on
-                msg = traceback.format_exc()
-                self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": msg[-2000:]})
-                self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": msg})
+                self._record_infra(run, lane, traceback.format_exc())
+
+    def _record_infra(self, run: PlannedRun, lane: Lane, message: str) -> None:
+        """The run failed for infrastructure reasons (not the method's result): recorded, retried next start."""
+        self.ledger.finish(run.key.id, "failed", {"failure": INFRA, "message": message[-2000:]})
+        self.on_event("finished", run, lane, {"state": "failed", "failure": INFRA, "message": message})
 
     def _stop_for_full_disk(self, run: PlannedRun, lane: Lane, message: str, requeue: bool) -> None:
         """No new runs. A row the ledger cannot update stays `running`: the next start recovers it (imports
@@ -214,8 +218,7 @@ class Scheduler:
                     if self.stop.wait(delay):
                         return
                     continue
-                self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": str(exc)})
-                self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": str(exc)})
+                self._record_infra(run, lane, str(exc))
                 return
             if isinstance(launched, RunOutcome):  # cancelled
                 self.ledger.reset_to_pending(run.key.id)
@@ -261,12 +264,9 @@ class Scheduler:
                     self._queue.insert(0, run)
                     self._qcond.notify_all()
                 return
-            self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": str(exc)})
-            self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": str(exc)})
+            self._record_infra(run, lane, str(exc))
         except Exception as exc:
             if is_disk_full(exc):
                 self._stop_for_full_disk(run, lane, f"{run.key.id}: the disk is full ({exc})", requeue=False)
                 return
-            msg = traceback.format_exc()
-            self.ledger.finish(run.key.id, "failed", {"failure": "infra", "message": msg[-2000:]})
-            self.on_event("finished", run, lane, {"state": "failed", "failure": "infra", "message": msg})
+            self._record_infra(run, lane, traceback.format_exc())

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import methods
 from runner.datasets.tum_mono import sequence_identity
-from runner.datasets.views import Direction, Profile
-from runner.spec import CampaignSpec, MethodSpec
+from runner.datasets.view import Direction, Profile
+from runner.engine.spec import CampaignSpec, MethodSpec
 
 
 @dataclass(frozen=True)

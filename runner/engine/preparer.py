@@ -2,8 +2,8 @@
 the runs will start; a lane waits only for its own run's view. The first `head` views (one per lane: the
 lanes are idle until theirs is ready) are prepared with every core, one after another, so the first lane
 starts after one view's preparation rather than all of theirs (and a view whose other direction is ready
-links its frames: views.prepare); the rest with `workers` threads (the lanes need the cores then). A view
-found damaged before a run is prepared again (a new generation beside it, see views.prepare)."""
+links its frames: cache.prepare); the rest with `workers` threads (the lanes need the cores then). A view
+found damaged before a run is prepared again (a new generation beside it, see cache.prepare)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import os
 import threading
 from pathlib import Path
 
-from runner.datasets.views import Direction, PreparedView, Profile, prepare, verify_view
+from runner.datasets.cache import prepare, verify_view
+from runner.datasets.view import Direction, PreparedView, Profile
 from runner.errors import DatasetError, InfraError, SlamRunError
 
 ViewKey = tuple[str, Direction, Profile]  # (sequence folder, direction, profile)

@@ -11,23 +11,10 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 
+from runner.engine.plan import PlannedRun
 from runner.errors import LedgerLockedError, LedgerLostError, SlamRunError
-from runner.plan import PlannedRun
+from runner.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
 
-STATES = ("pending", "running", "done", "failed")
-METHOD_FAILURES = ("not_initialized", "lost", "no_output", "crashed", "timeout", "oom")
-FAILURES = METHOD_FAILURES + ("infra",)
-METRIC_COLUMNS = ("e_t", "e_r", "e_s", "e_s_sym", "e_align", "e_start", "e_end", "e_rmse", "n_poses")
-RESOURCE_COLUMNS = (
-    "wall_s",
-    "fps",
-    "cpu_mean_pct",
-    "cpu_peak_pct",
-    "ram_peak_mb",
-    "gpu_mem_peak_mb",
-    "gpu_util_mean_pct",
-    "n_frames",
-)
 KEY_COLUMNS = ("key", "label", "method", "dataset", "sequence", "direction", "trial", "settings")
 STATE_COLUMNS = (
     "active",

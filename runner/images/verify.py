@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from runner.errors import SlamRunError
-from runner.images import ROOT, BuildOptions, build, buildable, last_record
+from runner.images.build import ROOT, BuildOptions, build, buildable, last_record
 
 DEFAULT_RESULTS = ROOT / ".cache" / "verify"
 SEQUENCES = ("room_a", "room_b")
@@ -148,9 +148,9 @@ def merged(path: Path, rows: list[VerifyRow]) -> list[VerifyRow]:
 
 
 def _campaign(name: str, row: VerifyRow, results: Path, trials: int, frames: int, log) -> None:
-    from runner.campaign import run_campaign
-    from runner.ledger import Ledger
-    from runner.spec import load_spec
+    from runner.engine.campaign import run_campaign
+    from runner.engine.ledger import Ledger
+    from runner.engine.spec import load_spec
 
     data = results / "data"
     spec = {

@@ -14,7 +14,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 import methods
-from runner.datasets.views import Direction
+from runner.datasets.view import Direction
 from runner.errors import SpecError
 
 

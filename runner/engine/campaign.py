@@ -12,15 +12,16 @@ import yaml
 import methods
 from runner.backends import make_backend
 from runner.backends.base import Backend
+from runner.datasets.cache import prepare, remove_damaged
 from runner.datasets.tum_mono import open_sequence
-from runner.datasets.views import prepare, remove_damaged
+from runner.engine.ledger import Ledger, ResultsLock
+from runner.engine.plan import PlannedRun, plan
+from runner.engine.preparer import ViewPreparer
+from runner.engine.recovery import collect_leftovers, import_finished, recover
+from runner.engine.scheduler import Event, Scheduler
+from runner.engine.spec import CampaignSpec
 from runner.errors import DaemonUnreachable, DatasetError, DiskFullError, LedgerLostError, is_disk_full
-from runner.ledger import Ledger, ResultsLock
-from runner.plan import PlannedRun, plan
-from runner.preparer import ViewPreparer
-from runner.recovery import collect_leftovers, import_finished, recover
-from runner.scheduler import Event, Scheduler
-from runner.spec import CampaignSpec
+from runner.results.vocabulary import is_infra
 
 
 @dataclass
@@ -168,8 +169,8 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         backend = backend or make_backend(spec)
         images = {m.run_label: methods.get(m.name)(m.params).image for m in spec.methods}
         backend.check(images)
-        if hasattr(backend, "describe_image"):  # which image, from which sources, made these results
-            described = {label: backend.describe_image(tag) for label, tag in images.items() if tag}
+        described = {label: backend.describe_image(tag) for label, tag in images.items() if tag}
+        if any(d is not None for d in described.values()):  # which image, from which sources, made these results
             (results / "images.json").write_text(json.dumps(described, indent=1))
         pending = set(ledger.pending_keys())
         removed = remove_damaged(spec.cache)
@@ -181,15 +182,13 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         views = ViewPreparer(order, spec.cache, spec.frame_format, head=lanes).start()  # the idle lanes' first views
         gts = load_groundtruths(runs) if spec.evaluate else {}
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
-        if hasattr(backend, "leftovers"):  # containers left by a killed runner or a lost daemon
-            n = collect_leftovers(
-                backend, spec.name, ledger, runs, sched.methods, views.get, gts, results, int(spec.log_cap_mb * 2**20)
-            )
-            if n:
-                log(f"collected {n} run(s) whose container finished while the runner or the daemon was away")
-            recovered["collected"] = n
-        elif hasattr(backend, "remove_leftovers"):
-            backend.remove_leftovers(spec.name)
+        # containers left by a killed runner or a lost daemon
+        n = collect_leftovers(
+            backend, spec.name, ledger, runs, sched.methods, views.get, gts, results, int(spec.log_cap_mb * 2**20)
+        )
+        if n:
+            log(f"collected {n} run(s) whose container finished while the runner or the daemon was away")
+        recovered["collected"] = n
         if scheduler_hook:
             scheduler_hook(sched)
         ledger.set_meta("eta", {"pending": len(pending), "lanes": spec.lanes})
@@ -199,8 +198,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             sched.run(runs)
         finally:
             views.close()
-            if hasattr(backend, "close"):
-                backend.close()
+            backend.close()
             try:
                 ledger.set_meta(
                     "session",
@@ -209,7 +207,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             except Exception:  # noqa: BLE001 - a lost ledger or a full disk: status then sees the process gone
                 pass
         remove_damaged(spec.cache)  # no run in flight any more
-        from runner.results import export  # pandas: imported after the runs, not before the first one starts
+        from runner.engine.export import export  # pandas: imported after the runs, not before the first one starts
 
         if isinstance(sched.fatal_error, LedgerLostError):
             ledger.close()
@@ -228,7 +226,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             ledger.close()
             raise DiskFullError(f"{sched.fatal}\n{_full_disk_advice(spec)}")
         counts = ledger.counts()
-        infra = sum(1 for r in ledger.rows(state="failed") if r["failure"] == "infra")
+        infra = sum(1 for r in ledger.rows(state="failed") if is_infra(r["state"], r["failure"]))
         ledger.close()
         return CampaignResult(results, csv, counts, recovered, added, infra, sched.stop.is_set())
     finally:

@@ -1,4 +1,4 @@
-"""The TUM-Mono benchmark's metrics (Engel et al. 2016), plus ATE and RPE. Pure functions, no I/O.
+"""The TUM-Mono benchmark's metrics (Engel et al. 2016). Pure functions, no I/O.
 
 See docs: association within 1 ms, start/end segments split by ground-truth rows, a Sim(3) alignment
 per segment, and the drift figures e_t, e_r, e_s, e_align, e_start, e_end, e_rmse derived from them.
@@ -8,25 +8,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from enum import StrEnum
 
 import numpy as np
 
-from runner.alignment import Sim3, align_sim3, rmse, rotation_angle_deg
-from runner.trajectory import Trajectory
+from runner.core.alignment import Sim3, align_sim3, rmse, rotation_angle_deg
+from runner.core.trajectory import Trajectory
+from runner.results.vocabulary import TUM_MONO_METRICS, EvalStatus
 
 ASSOCIATION_TOLERANCE_S = 1e-3
 MIN_SEGMENT_POSES = 3  # a Sim(3) alignment needs at least three poses to be determined
-
-METRIC_NAMES = ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse")
-
-
-class EvalStatus(StrEnum):
-    ok = "ok"
-    empty = "empty"  # no pose at all
-    nan = "nan"  # a NaN or infinite value in the estimate
-    unassociated = "unassociated"  # a pose without a ground-truth row within 1 ms
-    incomplete = "incomplete"  # a segment with fewer than MIN_SEGMENT_POSES poses
 
 
 @dataclass(frozen=True)
@@ -53,7 +43,7 @@ class TumMonoResult:
         """JSON-ready: metrics are null unless ok."""
         ok = self.status is EvalStatus.ok
         d = {"status": self.status.value}
-        for k in METRIC_NAMES:
+        for k in TUM_MONO_METRICS:
             d[k] = getattr(self, k) if ok else None
         d.update(n_poses=self.n_poses, detail=self.detail, e_s_sym=self.e_s_sym if ok else None)
         return d
@@ -198,75 +188,3 @@ def _align_segments(est: list[np.ndarray], gt: list[np.ndarray]) -> tuple[list[S
         errors.append(math.sqrt(float(np.einsum("ij,ij->", r, r)) / len(r)))
     sims = [Sim3(rots[k], mu_g[k] - maps[k] @ mu_e[k], float(scales[k])) for k in (0, 1)]
     return sims, errors
-
-
-@dataclass(frozen=True)
-class AteResult:
-    status: EvalStatus
-    rmse: float = math.nan
-    scale: float = math.nan
-    n_poses: int = 0
-
-
-def ate(gt: Trajectory, est: Trajectory) -> AteResult:
-    """Absolute trajectory error: RMSE after one Sim(3) alignment over all associated poses with GT."""
-    n = len(est)
-    if n == 0:
-        return AteResult(EvalStatus.empty)
-    if not np.isfinite(est.positions).all():
-        return AteResult(EvalStatus.nan, n_poses=n)
-    match = associate(gt.timestamps, est.timestamps)
-    use = match >= 0
-    use[use] = np.isfinite(gt.positions[match[use]]).all(axis=1)
-    if use.sum() < MIN_SEGMENT_POSES:
-        return AteResult(EvalStatus.unassociated if not (match >= 0).any() else EvalStatus.incomplete, n_poses=n)
-    a, b = est.positions[use], gt.positions[match[use]]
-    sim = align_sim3(a, b)
-    return AteResult(EvalStatus.ok, rmse(sim.apply(a), b), sim.scale, int(use.sum()))
-
-
-@dataclass(frozen=True)
-class RpeResult:
-    status: EvalStatus
-    trans_rmse: float = math.nan
-    rot_rmse_deg: float = math.nan
-    n_pairs: int = 0
-
-
-def rpe(gt: Trajectory, est: Trajectory, delta: int = 1) -> RpeResult:
-    """Relative pose error over pairs `delta` associated poses apart (Sturm et al. 2012).
-
-    The estimate's scale is first corrected with the ATE Sim(3) scale (monocular methods have none).
-    """
-    match = associate(gt.timestamps, est.timestamps) if len(est) else np.zeros(0, int)
-    use = np.flatnonzero(match >= 0)
-    if len(est) == 0:
-        return RpeResult(EvalStatus.empty)
-    use = use[np.isfinite(gt.positions[match[use]]).all(axis=1)]
-    if len(use) <= delta:
-        return RpeResult(EvalStatus.incomplete)
-    scale = align_sim3(est.positions[use], gt.positions[match[use]]).scale
-    r_est, r_gt = est.rotations()[use], gt.rotations()[match[use]]
-    p_est, p_gt = scale * est.positions[use], gt.positions[match[use]]
-
-    def relative(r: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r_rel = np.einsum("nji,njk->nik", r[:-delta], r[delta:])
-        p_rel = np.einsum("nji,nj->ni", r[:-delta], p[delta:] - p[:-delta])
-        return r_rel, p_rel
-
-    re, pe = relative(r_est, p_est)
-    rg, pg = relative(r_gt, p_gt)
-    # error = inv(gt_rel) * est_rel
-    r_err = np.einsum("nji,njk->nik", rg, re)
-    p_err = np.einsum("nji,nj->ni", rg, pe - pg)
-    cos = (np.trace(r_err, axis1=1, axis2=2) - 1.0) / 2.0
-    axis = np.stack(
-        [r_err[:, 2, 1] - r_err[:, 1, 2], r_err[:, 0, 2] - r_err[:, 2, 0], r_err[:, 1, 0] - r_err[:, 0, 1]], 1
-    )
-    angle = np.arctan2(np.linalg.norm(axis, axis=1) / 2.0, cos)
-    return RpeResult(
-        EvalStatus.ok,
-        float(np.sqrt(np.mean(np.sum(p_err**2, axis=1)))),
-        float(np.degrees(np.sqrt(np.mean(angle**2)))),
-        len(re),
-    )

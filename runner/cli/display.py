@@ -1,6 +1,6 @@
 """What the CLI shows of a campaign: the live view while it runs, `slamrun status`, the end summary.
 
-Every number comes from runner.progress.figures over the ledger, so the live view, the status of a second
+Every number comes from runner.engine.progress.figures over the ledger, so the live view, the status of a second
 terminal and the summary agree. Only the CLI uses this module.
 """
 
@@ -15,14 +15,14 @@ from rich.progress_bar import ProgressBar
 from rich.table import Table
 from rich.text import Text
 
-from runner.ledger import Ledger
-from runner.progress import Figures, duration, figures, one_line
+from runner.engine.ledger import Ledger
+from runner.engine.progress import Figures, duration, figures, one_line
 
 
 def read_figures(results: Path, now: float | None = None) -> Figures | None:
     """The figures of a results folder's ledger, read without writing or locking anything; None when the
     ledger does not exist yet."""
-    from runner.campaign import session_alive
+    from runner.engine.campaign import session_alive
 
     path = Path(results) / "ledger.sqlite"
     if not path.exists():

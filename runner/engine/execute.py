@@ -20,7 +20,13 @@ import numpy as np
 
 from methods.base import Method
 from runner.backends.base import Backend, ExecRequest, ExecResult
-from runner.datasets.views import PreparedView, verify_view
+from runner.backends.logcap import tail
+from runner.core.evaluation import tum_mono
+from runner.core.trajectory import Trajectory, write_tum
+from runner.datasets.cache import verify_view
+from runner.datasets.view import PreparedView
+from runner.engine.paths import RunPaths, finished_record
+from runner.engine.plan import PlannedRun
 from runner.errors import (
     DaemonUnreachable,
     DiskFullError,
@@ -29,11 +35,7 @@ from runner.errors import (
     TrajectoryFormatError,
     is_disk_full,
 )
-from runner.evaluation import EvalStatus, tum_mono
-from runner.logcap import tail
-from runner.paths import RunPaths, finished_record
-from runner.plan import PlannedRun
-from runner.trajectory import Trajectory, write_tum
+from runner.results.vocabulary import EvalStatus
 
 
 @dataclass(frozen=True)
@@ -115,9 +117,9 @@ def launch_run(
             shutil.rmtree(stage, ignore_errors=True)
             return RunOutcome("cancelled", {})
         extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
-        extra["engine"] = getattr(backend, "engine", None)
-        if method.image and hasattr(backend, "describe_image"):
-            extra["image"] = backend.describe_image(method.image)  # its sources, vocabulary, weights
+        extra["engine"] = backend.engine
+        if method.image and (image := backend.describe_image(method.image)) is not None:
+            extra["image"] = image  # its sources, vocabulary, weights
         return Launched(result, started, extra)
 
 

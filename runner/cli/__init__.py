@@ -1,0 +1,46 @@
+"""slamrun: the command line. Thin: each command group's module (campaign, evaluate, analysis, images, data)
+adds its subcommands, whose functions call library functions; errors become one line."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from runner.cli import analysis, campaign, data, evaluate, images
+from runner.errors import SlamRunError
+
+GROUPS = (campaign, evaluate, analysis, images, data)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return args.func(args) or 0
+    except SlamRunError as exc:
+        print(f"slamrun: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("slamrun: interrupted", file=sys.stderr)
+        return 130
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("slamrun")
+    except PackageNotFoundError:
+        return "unknown (not installed)"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="slamrun", description="Run and compare monocular SLAM/VO methods.")
+    p.add_argument("--version", action="version", version=f"slamrun {_version()}")
+    sub = p.add_subparsers()
+    for group in GROUPS:
+        group.add_commands(sub)
+    return p

@@ -1,0 +1,61 @@
+"""slamrun dataset download and synth: getting sequences, real or generated."""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from runner.cli.console import console
+
+
+def add_commands(sub) -> None:
+    ds = sub.add_parser("dataset", help="dataset tools")
+    dsub = ds.add_subparsers()
+    dl = dsub.add_parser("download", help="download TUM-Mono sequences (resumable)")
+    dl.add_argument("name", choices=["tum-mono"], help="the dataset")
+    dl.add_argument("dest", type=Path, help="folder to download into")
+    dl.add_argument("--sequences", default="1-50", help="numbers and ranges, e.g. 1-5,7")
+    dl.add_argument("--url", help="base address of the sequence zips (default: the dataset's site)")
+    dl.set_defaults(func=cmd_download)
+    sy = sub.add_parser("synth", help="write a synthetic sequence in the TUM-Mono layout")
+    sy.add_argument("out", type=Path, help="the sequence folder to write")
+    sy.add_argument("--frames", type=int, default=300, help="number of frames")
+    sy.add_argument("--seed", type=int, default=0, help="random seed of the scene and its texture")
+    sy.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT")
+    sy.add_argument("--scene", choices=["indoor", "outdoor"], default="indoor", help="room or courtyard scale")
+    sy.set_defaults(func=cmd_synth)
+
+
+def cmd_download(args) -> int:
+    from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TransferSpeedColumn
+
+    from runner.datasets.download import TUM_MONO_URL, download_tum_mono, parse_sequences
+
+    numbers = parse_sequences(args.sequences)
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        DownloadColumn(),
+        TransferSpeedColumn(),
+        console=console,
+        disable=not sys.stdout.isatty(),
+    ) as progress:
+
+        def factory(name):
+            task = progress.add_task(name, total=None)
+            return lambda done, total: progress.update(task, completed=done, total=total or None)
+
+        folders = download_tum_mono(args.dest, numbers, args.url or TUM_MONO_URL, factory, log=progress.console.print)
+    console.print(f"{len(folders)} sequence(s) in {args.dest}")
+    return 0
+
+
+def cmd_synth(args) -> int:
+    from runner.datasets.synth import generate
+
+    w, h = (int(v) for v in args.size.lower().split("x"))
+    t0 = time.monotonic()
+    out = generate(args.out, frames=args.frames, seed=args.seed, size=(w, h), scene_kind=args.scene)
+    console.print(f"{out}: {args.frames} frames in {time.monotonic() - t0:.1f} s")
+    return 0

@@ -1,0 +1,116 @@
+"""slamrun images and list-methods: the methods, and building and verifying their Docker images."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from rich.table import Table
+
+from runner.cli.console import console
+from runner.errors import SlamRunError
+
+
+def add_commands(sub) -> None:
+    lm = sub.add_parser("list-methods", help="the registered methods")
+    lm.set_defaults(func=cmd_list_methods)
+    im = sub.add_parser("images", help="build (and verify) the methods' Docker images")
+    im.add_argument("--method", action="append", help="only this method (repeatable)")
+    im.add_argument("--list", action="store_true", help="list the buildable images and exit")
+    im.add_argument("--sources", type=Path, help="folder of upstream source archives (no network needed)")
+    im.add_argument("--source-url", help="base address of the source archives (default https://github.com)")
+    im.add_argument("--march", default="x86-64-v2", help="-march target the methods are compiled for")
+    im.add_argument("--jobs", type=int, help="parallel compile jobs (default: all cores)")
+    im.add_argument(
+        "--vocabulary", action="append", default=[], metavar="[METHOD=]FILE", help="a vocabulary file for the build"
+    )
+    im.add_argument(
+        "--weights",
+        action="append",
+        default=[],
+        metavar="NAME=FILE",
+        help="weights for the build: a file, or URL#sha256=HEX",
+    )
+    im.add_argument(
+        "--no-train-vocabulary", action="store_true", help="fail instead of training a vocabulary the source lacks"
+    )
+    im.add_argument(
+        "--standin-model",
+        action="store_true",
+        help="without --weights: an untrained stand-in network (CNN-DSO, CNN-SVO), for plumbing tests only",
+    )
+    im.add_argument("--build-arg", action="append", default=[], metavar="KEY=VALUE", help="extra Docker build argument")
+    im.add_argument("--log-dir", type=Path, help="where build logs and records go (default .cache/images)")
+    im.add_argument("--missing", action="store_true", help="build only the images that do not exist yet")
+    im.add_argument("--no-cache", action="store_true", help="rebuild every step (a from-scratch build time)")
+    im.add_argument(
+        "--verify",
+        action="store_true",
+        help="build what is missing, run a short Docker campaign per image, print a table of results",
+    )
+    im.add_argument("--results", type=Path, help="results folder of --verify (default .cache/verify)")
+    im.set_defaults(func=cmd_images)
+
+
+def cmd_list_methods(args) -> int:
+    import methods
+
+    t = Table(title="methods")
+    for c in ("name", "view", "image", "gpu", "native", "loop closure switch"):
+        t.add_column(c)
+    for name, cls in sorted(methods.REGISTRY.items()):
+        prof = cls.profile if isinstance(cls.profile, str) else getattr(cls.profile, "value", "per spec")
+        t.add_row(
+            name,
+            str(prof),
+            cls.image if isinstance(cls.image, str) else "-" if cls.image is None else "from the spec",
+            "optional" if cls.gpu_capable else "no",
+            "yes" if cls.native else "no",
+            cls.loop_closure_switch or "-",
+        )
+    console.print(t)
+    return 0
+
+
+def cmd_images(args) -> int:
+    import methods
+    from runner.images.build import BuildOptions, build, buildable
+
+    if args.list:
+        for name, (tag, dockerfile) in buildable().items():
+            gpu = " (GPU optional, CPU by default)" if methods.REGISTRY[name].gpu_capable else ""
+            console.print(f"{name}: {tag} <- {dockerfile.parent.name}/Dockerfile{gpu}")
+        return 0
+    opts = BuildOptions(
+        sources_dir=args.sources,
+        source_url=args.source_url,
+        march=args.march,
+        vocabulary=dict(_pair(v, "*") for v in args.vocabulary),
+        weights=dict(_pair(w) for w in args.weights),
+        train_vocabulary=not args.no_train_vocabulary,
+        standin_model=args.standin_model,
+        build_args=dict(_pair(b) for b in args.build_arg),
+        no_cache=args.no_cache,
+    )
+    if args.jobs:
+        opts.jobs = args.jobs
+    if args.log_dir:
+        opts.log_dir = args.log_dir
+    if args.verify:
+        from runner.images.verify import print_table, verify
+
+        rows = verify(args.method, opts, args.results, log=lambda m: print(m, flush=True))
+        print_table(rows, console)
+        return 0 if all(r.passed for r in rows) else 1
+    records = build(args.method, log=lambda m: print(m, flush=True), opts=opts, only_missing=args.missing)
+    console.print(f"built {len(records)} image(s): {', '.join(r.tag for r in records) or '-'}")
+    return 0
+
+
+def _pair(text: str, default_key: str | None = None) -> tuple[str, Path | str]:
+    """KEY=VALUE (or VALUE alone when a default key is allowed)."""
+    if "=" in text:
+        key, value = text.split("=", 1)
+        return key, value
+    if default_key is None:
+        raise SlamRunError(f"{text!r}: expected KEY=VALUE")
+    return default_key, text

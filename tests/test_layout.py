@@ -1,0 +1,115 @@
+"""The package's layers import in one direction and the module graph has no cycle (style.md, rule 1)."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# lower layers never import higher ones; a layer may import itself
+LAYERS = [
+    ("runner.errors", "runner.results"),
+    ("runner.core",),
+    ("runner.datasets",),
+    ("methods", "runner.backends"),
+    ("runner.engine",),
+    ("runner.analysis", "runner.images"),
+    ("runner.cli",),
+]
+
+
+def layer(module: str) -> int | None:
+    for i, prefixes in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return i
+    return None
+
+
+def modules() -> dict[str, Path]:
+    out = {}
+    for top in ("runner", "methods"):
+        for path in (ROOT / top).rglob("*.py"):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    out.pop("runner")  # the empty root package
+    return out
+
+
+def imports(path: Path, top_level_only: bool) -> set[str]:
+    """Project modules a file imports (`from a import b` counts b when b is a module), TYPE_CHECKING blocks
+    excluded; with `top_level_only`, only the imports run when the module loads."""
+    tree = ast.parse(path.read_text())
+    known = modules()
+    nodes = tree.body if top_level_only else list(ast.walk(tree))
+    found = set()
+    skip = {
+        id(n)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test)
+        for n in ast.walk(node)
+    }
+    for node in nodes:
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            found |= {f"{node.module}.{a.name}" for a in node.names if f"{node.module}.{a.name}" in known}
+    return {m for m in found if m in known}
+
+
+def test_no_module_imports_a_higher_layer():
+    upward = []
+    for name, path in modules().items():
+        mine = layer(name)
+        assert mine is not None, f"{name} belongs to no layer of tests/test_layout.py"
+        for target in imports(path, top_level_only=False):
+            if layer(target) > mine:
+                upward.append(f"{name} -> {target}")
+    assert not upward, upward
+
+
+def test_module_graph_has_no_cycle():
+    graph = {name: imports(path, top_level_only=True) - {name} for name, path in modules().items()}
+    state: dict[str, int] = {}
+
+    def visit(node: str, stack: list[str]) -> None:
+        state[node] = 1
+        for nxt in graph.get(node, ()):
+            if state.get(nxt) == 1:
+                raise AssertionError("import cycle: " + " -> ".join([*stack[stack.index(nxt) :], nxt]))
+            if nxt not in state:
+                visit(nxt, [*stack, nxt])
+        state[node] = 2
+
+    for node in graph:
+        if node not in state:
+            visit(node, [node])
+
+
+def test_reading_results_imports_neither_methods_nor_opencv():
+    code = (
+        "import sys; import runner.analysis.load, runner.analysis.summary, runner.analysis.stats; "
+        "print(sorted(m for m in sys.modules "
+        "if m.split('.')[0] in ('methods', 'cv2') or m.startswith('runner.engine')))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True).stdout
+    assert out.strip() == "[]", out
+
+
+def test_backends_provide_the_whole_protocol():
+    """Every backend has every call the Backend protocol declares (optional ones through Defaults), so the
+    campaign never probes with hasattr."""
+    from runner.backends.base import Backend
+    from runner.backends.dask import DaskBackend
+    from runner.backends.docker import DockerBackend
+    from runner.backends.local import LocalBackend
+
+    declared = {n for n in vars(Backend) if not n.startswith("_")} | set(Backend.__annotations__)
+    for cls in (LocalBackend, DockerBackend, DaskBackend):
+        missing = sorted(n for n in declared if not hasattr(cls, n) and n not in getattr(cls, "__annotations__", {}))
+        assert not missing, f"{cls.__name__} lacks {missing}"
