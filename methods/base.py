@@ -14,6 +14,8 @@ from runner.core.trajectory import Trajectory, read_tum
 from runner.datasets.view import PreparedView, Profile
 from runner.errors import MethodFailure
 
+MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (MAX_ARG_STRLEN)
+
 
 class NoParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
@@ -65,6 +67,19 @@ class Method(ABC):
                 f"{self.name} has no native build here: give params.executable (a local build) or use backend: docker"
             ]
         return []
+
+    def launch_problems(self) -> list[str]:
+        """Why no process could ever be started with this method's environment (a spec error, never an
+        infrastructure retry): Linux refuses an argument or variable of MAX_ARG_BYTES or more."""
+        out = []
+        for key, value in self.environment().items():
+            size = len(key.encode()) + len(value.encode()) + 1
+            if size >= MAX_ARG_BYTES:
+                out.append(
+                    f"environment variable {key}: {size} bytes; no process can be started with a variable of "
+                    f"{MAX_ARG_BYTES // 1024} KiB or more (pass a file instead)"
+                )
+        return out
 
     @abstractmethod
     def command(self, view: PreparedView, workdir: Path) -> list[str]:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from methods.base import Method, read_tum_output, require_poses
+from methods.base import MAX_ARG_BYTES, Method, read_tum_output, require_poses
 from runner.core.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
 from runner.datasets.view import PreparedView, Profile
 from runner.errors import MethodFailure
@@ -63,6 +63,9 @@ class External(Method):
             PreparedView(Path("/data"), "s", "forward", Profile.native, 1, 0, 1, 1, 1, None), Path("/w")
         )
         for i, arg in enumerate(self.params.argv):
+            if len(arg.encode()) >= MAX_ARG_BYTES:
+                out.append(f"params.argv[{i}]: {len(arg.encode())} bytes; no process takes an argument that long")
+                continue
             try:
                 arg.format_map(known)
             except (KeyError, ValueError, IndexError) as exc:

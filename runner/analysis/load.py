@@ -11,8 +11,21 @@ from runner.results.vocabulary import STUDY_METRICS
 
 
 def load_results(path: Path) -> pd.DataFrame:
-    """results.csv or results.parquet, or a results directory holding them."""
+    """results.csv or results.parquet, or a results directory: its ledger when it has one (the truth, also while
+    a campaign runs and before its first export), else the table it holds."""
     path = Path(path)
+    if path.is_dir() and (path / "ledger.sqlite").is_file():
+        from runner.engine.export import results_frame
+        from runner.engine.ledger import Ledger
+
+        ledger = Ledger(path / "ledger.sqlite", read_only=True)
+        try:
+            df = results_frame(ledger)
+        finally:
+            ledger.close()
+        if df.empty:
+            raise SlamRunError(f"{path}: no run in its ledger yet")
+        return df
     if path.is_dir():
         path = path / "results.parquet" if (path / "results.parquet").exists() else path / "results.csv"
     if not path.exists():

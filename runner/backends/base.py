@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import shutil
 import threading
 import time
 from collections.abc import Callable
@@ -30,6 +32,7 @@ class ExecRequest:
     labels: dict[str, str] = field(default_factory=dict)
     env: dict[str, str] = field(default_factory=dict)
     token: str = ""  # marks every process of the run (RunPaths.token); a backend may make its own
+    max_output_bytes: int | None = None  # the run's work folder may not grow past this (spec max_output_mb)
 
 
 @dataclass(frozen=True)
@@ -41,6 +44,7 @@ class ExecResult:
     cancelled: bool = False
     log_truncated: bool = False
     resources: dict = field(default_factory=dict)
+    output_exceeded: str | None = None  # why the run was stopped for its output (too large, or it filled the disk)
 
 
 class Backend(Protocol):
@@ -95,18 +99,89 @@ class Defaults:
 
 
 def supervise(
-    wait_step: Callable[[float], bool], t0: float, timeout_s: float, cancel: threading.Event
-) -> tuple[bool, bool]:
-    """Wait for a run until it ends, its wall-clock timeout passes or `cancel` is set.
+    wait_step: Callable[[float], bool],
+    t0: float,
+    timeout_s: float,
+    cancel: threading.Event,
+    output: OutputWatch | None = None,
+) -> tuple[bool, bool, str | None]:
+    """Wait for a run until it ends, its wall-clock timeout passes, `cancel` is set or its output grows past
+    what it may write.
 
     `wait_step(remaining_s)` waits a short while and returns True once the process has ended.
-    Returns (timed_out, cancelled).
+    Returns (timed_out, cancelled, why the output stopped it or None).
     """
     while True:
         remaining = t0 + timeout_s - time.monotonic()
         if remaining <= 0:
-            return True, False
+            return True, False, None
         if cancel.is_set():
-            return False, True
-        if wait_step(remaining):
-            return False, False
+            return False, True, None
+        if output is not None and (exceeded := output.check()):
+            return False, False, exceeded
+        if wait_step(remaining):  # ended: what it left counts too
+            return False, False, output.check(force=True) if output is not None else None
+
+
+def folder_bytes(root: Path) -> int:
+    """Bytes of the regular files below `root` (links not followed)."""
+    total = 0
+    stack = [root]
+    while stack:
+        try:
+            entries = list(os.scandir(stack.pop()))
+        except OSError:
+            continue
+        for e in entries:
+            try:
+                if e.is_dir(follow_symlinks=False):
+                    stack.append(Path(e.path))
+                elif e.is_file(follow_symlinks=False):
+                    total += e.stat(follow_symlinks=False).st_size
+            except OSError:
+                pass
+    return total
+
+
+def disk_reserve_bytes(path: Path) -> int:
+    """The free space a run may not eat into: 10 % of its filesystem, at most 256 MiB. A run that holds at least
+    that much output when the free space falls below it is the one filling the disk."""
+    return min(256 * 2**20, shutil.disk_usage(path).total // 10)
+
+
+class OutputWatch:
+    """Watches a run's work folder: past `max_bytes`, or holding at least the disk reserve while the free
+    space is below it, the run must stop (and is charged: output_limit). The free space is read often
+    (one statfs), the folder's size once a second or when the space runs low."""
+
+    def __init__(self, workdir: Path, max_bytes: int, size_every_s: float = 1.0):
+        self.workdir = workdir
+        self.max_bytes = max_bytes
+        self.reserve = disk_reserve_bytes(workdir)
+        self.size_every_s = size_every_s
+        self._next_size = 0.0
+
+    def check(self, force: bool = False) -> str | None:
+        """Why the run must stop for its output, or None; `force` measures the folder now."""
+        now = time.monotonic()
+        try:
+            free = shutil.disk_usage(self.workdir).free
+        except OSError:
+            return None
+        low = free < self.reserve
+        if not (low or force) and now < self._next_size:
+            return None
+        self._next_size = now + self.size_every_s
+        size = folder_bytes(self.workdir)
+        if size > self.max_bytes:
+            return f"it wrote {size / 2**20:.0f} MB, more than max_output_mb ({self.max_bytes / 2**20:.0f} MB)"
+        if low and size >= self.reserve:
+            return (
+                f"it filled the disk: {size / 2**20:.0f} MB written, {free / 2**20:.0f} MB left on "
+                f"{self.workdir.anchor} of {self.workdir}"
+            )
+        return None
+
+    @classmethod
+    def of(cls, req: ExecRequest) -> OutputWatch | None:
+        return cls(req.workdir, req.max_output_bytes) if req.max_output_bytes else None

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from runner.backends.base import Defaults, ExecRequest, ExecResult, supervise
+from runner.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise
 from runner.backends.logcap import CappedLog
 from runner.backends.monitor import Gpu, ResourceSeries, Sample
 from runner.datasets.view import PreparedView
@@ -256,7 +256,7 @@ class DockerBackend(Defaults):
                 raise self.daemon_lost(exc) from None
 
         try:
-            timed_out, cancelled = supervise(step, t0, req.timeout_s, cancel)
+            timed_out, cancelled, exceeded = supervise(step, t0, req.timeout_s, cancel, OutputWatch.of(req))
         except DaemonUnreachable:
             monitor.stop()
             log.close()
@@ -288,6 +288,7 @@ class DockerBackend(Defaults):
             oom=oom and not timed_out and not cancelled,
             log_truncated=log.truncated,
             resources=series.summary(wall_s, req.view.n_frames),
+            output_exceeded=exceeded,
         )
 
     @staticmethod

@@ -11,7 +11,7 @@ import uuid
 
 import psutil
 
-from runner.backends.base import Defaults, ExecRequest, ExecResult, supervise
+from runner.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise
 from runner.backends.logcap import CappedLog
 from runner.backends.monitor import Gpu, ProcessTreeMonitor
 from runner.errors import InfraError
@@ -73,8 +73,8 @@ class LocalBackend(Defaults):
             except subprocess.TimeoutExpired:
                 return False
 
-        timed_out, cancelled = supervise(step, t0, req.timeout_s, cancel)
-        if timed_out or cancelled:
+        timed_out, cancelled, exceeded = supervise(step, t0, req.timeout_s, cancel, OutputWatch.of(req))
+        if timed_out or cancelled or exceeded:
             kill_tree(proc, monitor.descendants() + processes_with_token(token))
         exit_code = proc.wait()
         wall_s = time.monotonic() - t0
@@ -95,6 +95,7 @@ class LocalBackend(Defaults):
             cancelled=cancelled,
             log_truncated=log.truncated,
             resources=series.summary(wall_s, req.view.n_frames),
+            output_exceeded=exceeded,
         )
 
 

@@ -104,7 +104,7 @@ def tum_mono(gt: Trajectory, est: Trajectory) -> TumMonoResult:
     if far.any():
         bad = t[np.flatnonzero(far)[0]]
         return _failed(
-            EvalStatus.unassociated, n, f"{np.count_nonzero(far)} poses (first t={bad!r}) have no GT within 1 ms"
+            EvalStatus.unassociated, n, f"{np.count_nonzero(far)} poses (first t={bad:.6f}) have no GT within 1 ms"
         )
     n_gt = len(gt_t)
     # Segments by ground-truth rows (1-based: 1..floor(n/2) and ceil(n/2)..n); est is sorted, so each

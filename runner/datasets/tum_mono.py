@@ -17,6 +17,27 @@ from runner.errors import DatasetError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
 REQUIRED = ("times.txt", "camera.txt", "pcalib.txt", "vignette.png")
+# The text files' size limit: far above any real sequence's (a times.txt of a million frames is 40 MB), far below
+# what would exhaust memory.
+MAX_TEXT_BYTES = 256 * 2**20
+TEXT_FILES = ("times.txt", "camera.txt", "pcalib.txt", "groundtruthSync.txt")
+
+
+def unusable_files(root: Path) -> list[str]:
+    """The sequence's files that exist but cannot be read to an end: not regular files (a device such as
+    /dev/zero, a pipe, a folder) or text files beyond MAX_TEXT_BYTES."""
+    problems = []
+    for name in (*REQUIRED, "images.zip", "groundtruthSync.txt"):
+        p = root / name
+        if not (p.exists() or p.is_symlink()):
+            continue
+        if not p.is_file():
+            problems.append(
+                f"{p}: not a regular file (a device, pipe, folder or broken link); expected the file itself"
+            )
+        elif name in TEXT_FILES and p.stat().st_size > MAX_TEXT_BYTES:
+            problems.append(f"{p}: {p.stat().st_size / 2**20:.0f} MB, more than a sequence's {name} can be")
+    return problems
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,6 +114,9 @@ def open_sequence(root: str | Path) -> Sequence:
     for name in REQUIRED:
         if not (root / name).exists():
             problems.append(f"{root / name}: missing")
+    unusable = unusable_files(root)
+    if unusable:  # reading them would never end, or exhaust memory
+        raise DatasetError(f"{root}: invalid sequence:\n  " + "\n  ".join(problems + unusable))
 
     names, zip_path = _frame_names(root, problems)
     timestamps, exposures = _read_times(root / "times.txt", problems)

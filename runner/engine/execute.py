@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from methods.base import Method
-from runner.backends.base import Backend, ExecRequest, ExecResult
+from runner.backends.base import Backend, ExecRequest, ExecResult, disk_reserve_bytes, folder_bytes
 from runner.backends.logcap import tail
-from runner.core.evaluation import tum_mono
+from runner.core.evaluation import ASSOCIATION_TOLERANCE_S, tum_mono
 from runner.core.trajectory import Trajectory, write_tum
 from runner.datasets.cache import verify_view
 from runner.datasets.view import PreparedView
@@ -64,6 +64,7 @@ def launch_run(
     cpus: tuple[int, ...] | None = None,
     memory_mb: int | None = None,
     log_cap_bytes: int = 20 * 2**20,
+    max_output_bytes: int | None = None,
     campaign: str = "",
     on_start=None,
 ) -> Launched | RunOutcome:
@@ -100,6 +101,7 @@ def launch_run(
             cpus=cpus,
             memory_mb=memory_mb,
             log_cap_bytes=log_cap_bytes,
+            max_output_bytes=max_output_bytes,
             image=method.image,
             needs_gpu=method.needs_gpu,
             env=method.environment(),
@@ -141,7 +143,13 @@ def finish_attempt(
         raw = RunPaths.raw(stage)
         log_tail = tail(RunPaths.log(stage))
         failure, message, traj = _classify(result, method, raw, view, log_tail)
-        if failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
+        if failure and failure != "output_limit" and _out_of_space(raw, log_tail):
+            if (size := folder_bytes(raw)) >= disk_reserve_bytes(raw):  # it filled the disk itself
+                failure, message, traj = "output_limit", f"it filled the disk ({size / 2**20:.0f} MB written)", None
+        if failure == "output_limit":  # its output is removed: it may not keep the disk
+            shutil.rmtree(raw, ignore_errors=True)
+            raw.mkdir()
+        elif failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
             shutil.rmtree(stage, ignore_errors=True)
             raise DiskFullError(f"{run.key.id}: the disk is full ({failure}: {message})")
         if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
@@ -150,6 +158,8 @@ def finish_attempt(
                 shutil.rmtree(stage, ignore_errors=True)
                 raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
         values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
+        if traj is None or not len(traj):
+            values["fps"] = None  # frames per second of processing: nothing was processed to a pose
         if traj is not None and len(traj):
             write_tum(RunPaths.trajectory(stage), traj)
             values["n_poses"] = len(traj)
@@ -169,6 +179,9 @@ def finish_attempt(
                     )
                 elif not values["message"]:
                     values["message"] = f"evaluation {ev.status.value}: {ev.detail}"
+        if failure is None and values.get("eval_status") == EvalStatus.incomplete.value:
+            failure = "lost"  # too few poses in a segment to evaluate: the method did not track the sequence
+            values.update(failure=failure, message=f"too few poses to evaluate ({values['message']})")
         if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
             recovered = values.get("eval_status") == EvalStatus.ok.value
             failure = None if recovered else "lost"
@@ -229,6 +242,8 @@ def _classify(
     result, method: Method, raw: Path, view: PreparedView, log_tail: str
 ) -> tuple[str | None, str | None, Trajectory | None]:
     """(failure kind or None, message, trajectory or None) from what the process left behind."""
+    if result.output_exceeded:
+        return "output_limit", f"stopped: {result.output_exceeded}; its output was removed", None
     if result.oom:
         return "oom", "killed: out of memory", None
     if result.timed_out:
@@ -244,9 +259,31 @@ def _classify(
         return method.failure_from_log(log_tail) or exc.kind, str(exc), None
     except TrajectoryFormatError as exc:
         return "no_output", f"unreadable output: {exc}", None
+    foreign = foreign_timestamps(traj, view)
+    if foreign:
+        return "bad_timestamps", foreign, traj
     if method.failure_from_log(log_tail) == "lost":
         return "lost?", "the method reported it was lost", traj
     return None, None, traj
+
+
+def foreign_timestamps(traj: Trajectory, view: PreparedView, tol_s: float = ASSOCIATION_TOLERANCE_S) -> str | None:
+    """Why a trajectory's poses are not at the sequence's frame times (more than `tol_s` from every frame of
+    times.txt), or None when each pose is at a frame."""
+    frames = view.original_timestamps()
+    if not len(traj) or not len(frames):
+        return None
+    t = traj.timestamps
+    idx = np.clip(np.searchsorted(frames, t), 1, len(frames) - 1)
+    distance = np.minimum(np.abs(frames[idx - 1] - t), np.abs(frames[idx] - t))
+    far = np.flatnonzero(distance > tol_s)
+    if not len(far):
+        return None
+    first = far[0]
+    return (
+        f"{len(far)} of {len(t)} poses are at times that are not frame times of the sequence's times.txt "
+        f"(first at t={float(t[first]):.6f}, {1000 * float(distance[first]):.1f} ms from the nearest frame)"
+    )
 
 
 def _out_of_space(folder: Path, log_tail: str) -> bool:

@@ -10,10 +10,13 @@ import threading
 import time
 from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from runner.engine.plan import PlannedRun
 from runner.errors import LedgerLockedError, LedgerLostError, SlamRunError
 from runner.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
+
+if TYPE_CHECKING:
+    from runner.engine.plan import PlannedRun
 
 KEY_COLUMNS = ("key", "label", "method", "dataset", "sequence", "direction", "trial", "settings")
 STATE_COLUMNS = (

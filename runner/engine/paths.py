@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from runner.engine.plan import RunKey
+from runner.errors import SlamRunError
 from runner.results.vocabulary import is_infra
 
 
@@ -16,6 +17,12 @@ from runner.results.vocabulary import is_infra
 class RunPaths:
     results: Path
     key: RunKey
+
+    def __post_init__(self) -> None:
+        root = Path(self.results).resolve()
+        final = (root / self.key.relpath).resolve()
+        if not final.is_relative_to(root / "runs"):
+            raise SlamRunError(f"run {self.key.id}: its folder {final} would be outside {root / 'runs'}")
 
     @property
     def final(self) -> Path:

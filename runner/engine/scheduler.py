@@ -199,6 +199,7 @@ class Scheduler:
                     cpus=lane.cpus,
                     memory_mb=self.spec.memory_limit_mb,
                     log_cap_bytes=int(self.spec.log_cap_mb * 2**20),
+                    max_output_bytes=int(self.spec.max_output_mb * 2**20),
                     campaign=self.spec.name,
                     on_start=lambda pid, t0: self.ledger.set_process(run.key.id, pid, t0),
                 )

@@ -6,6 +6,7 @@ Relative paths in a spec file are resolved against the folder that holds the spe
 from __future__ import annotations
 
 import os
+import re
 from enum import StrEnum
 from pathlib import Path
 from typing import Any, Literal
@@ -14,7 +15,9 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 import methods
+from runner.datasets.generated import target_problem
 from runner.datasets.view import Direction
+from runner.engine.folders import path_part_problem, results_folder_problem
 from runner.errors import SpecError
 
 
@@ -96,6 +99,12 @@ class CampaignSpec(Strict):
     evaluate: bool = Field(True, description="Evaluate each finished run against the ground truth.")
     stop_grace_s: float = Field(30.0, ge=0, description="On SIGINT/SIGTERM, time in-flight runs get to finish.")
     log_cap_mb: float = Field(20.0, gt=0, description="Size cap of one run's log.txt.")
+    max_output_mb: float = Field(
+        4096.0,
+        gt=0,
+        description="Largest output one run may write (its work folder); past it, or when it fills the disk, the "
+        "run is stopped, charged (output_limit) and its output removed.",
+    )
     report: bool = Field(True, description="Write the report when the campaign ends.")
     frame_format: Literal["png", "pgm"] = Field(
         "png", description="Rectified frames on disk: png (compact) or pgm (fastest, ~4x the disk)."
@@ -124,20 +133,68 @@ def _loc(loc: tuple) -> str:
     return out or "<top>"
 
 
+MAX_SPEC_BYTES = 2**20  # a spec is a page of YAML
+MAX_SPEC_VALUES = 100_000  # values in the document once its aliases are expanded
+
+
 def load_spec(path: str | Path, check_files: bool = True) -> CampaignSpec:
-    """Read, validate and resolve a spec file; raises SpecError listing every problem."""
+    """Read, validate and resolve a spec file; raises SpecError listing every problem, each with its line."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
+        if path.is_file() and path.stat().st_size > MAX_SPEC_BYTES:
+            raise SpecError(str(path), [f"{path.stat().st_size} bytes; a spec is at most {MAX_SPEC_BYTES} bytes"])
+        text = path.read_text()
+    except (FileNotFoundError, IsADirectoryError):
         raise SpecError(str(path), ["file not found"]) from None
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        if node is not None and (n := _expanded_size(node, {})) > MAX_SPEC_VALUES:
+            raise SpecError(
+                str(path),
+                [f"its YAML aliases expand to {n:,} values (at most {MAX_SPEC_VALUES:,}): an alias bomb? Write it out"],
+            )
+        raw = yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
         raise SpecError(str(path), [f"{where}not valid YAML ({getattr(exc, 'problem', exc)})"]) from None
     if not isinstance(raw, dict):
         raise SpecError(str(path), ["expected a mapping at the top (name, datasets, methods, ...)"])
-    return validate_spec(raw, base_dir=path.resolve().parent, source=str(path), check_files=check_files)
+    try:
+        return validate_spec(raw, base_dir=path.resolve().parent, source=str(path), check_files=check_files)
+    except SpecError as exc:
+        raise SpecError(exc.source, [_with_line(p, node) for p in exc.problems]) from None
+
+
+def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
+    """How many values a node stands for with every alias expanded (an alias is the same node object again)."""
+    if id(node) not in memo:
+        memo[id(node)] = 1  # a recursive alias counts once
+        if isinstance(node, yaml.SequenceNode):
+            memo[id(node)] = 1 + sum(_expanded_size(c, memo) for c in node.value)
+        elif isinstance(node, yaml.MappingNode):
+            memo[id(node)] = 1 + sum(_expanded_size(k, memo) + _expanded_size(v, memo) for k, v in node.value)
+    return memo[id(node)]
+
+
+def _with_line(problem: str, root: yaml.Node | None) -> str:
+    """'methods[0].params.x: msg' -> 'line 12: methods[0].params.x: msg', the line of the deepest part of the
+    location that the document has."""
+    where, sep, msg = problem.partition(": ")
+    if not sep or root is None:
+        return problem
+    node, line = root, None
+    for key, index in re.findall(r"([A-Za-z_][\w-]*)|\[(\d+)\]", where):
+        if isinstance(node, yaml.MappingNode) and key:
+            node = next((v for k, v in node.value if getattr(k, "value", None) == key), None)
+        elif isinstance(node, yaml.SequenceNode) and index and int(index) < len(node.value):
+            node = node.value[int(index)]
+        else:
+            node = None
+        if node is None:
+            break
+        line = node.start_mark.line + 1
+    return f"line {line}: {problem}" if line else problem
 
 
 def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files: bool = True) -> CampaignSpec:
@@ -170,14 +227,17 @@ def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files
                 problems.append(f"methods[{i}].params.{_loc(err['loc'])}: {msg}")
         else:
             backend = raw.get("backend", "local")
-            problems += [f"methods[{i}]: {p}" for p in cls(params).problems(backend)]
+            method = cls(params)
+            problems += [f"methods[{i}]: {p}" for p in method.problems(backend) + method.launch_problems()]
         label = m.get("label") or m["name"]
         if label in labels:
             problems.append(f"methods[{i}].label: {label!r} used by methods[{labels[label]}] too; give a label")
         labels[label] = i
+    names = _name_problems(raw)
+    problems += names
     if spec is not None:
         spec = _resolve(spec, base_dir)
-        if check_files:
+        if check_files and not names:
             problems += _file_problems(spec)
         seen: dict[str, str] = {}
         for d, ds in enumerate(spec.datasets):
@@ -202,10 +262,36 @@ def _resolve(spec: CampaignSpec, base: Path) -> CampaignSpec:
     return spec.model_copy(update={"results": results, "cache": cache, "datasets": datasets})
 
 
+def _name_problems(raw: dict) -> list[str]:
+    """Sequence names and method labels become path parts: none may hold a separator or be '..'."""
+    problems = []
+    datasets = raw.get("datasets") if isinstance(raw.get("datasets"), list) else []
+    for d, ds in enumerate(datasets):
+        sequences = ds.get("sequences") if isinstance(ds, dict) and isinstance(ds.get("sequences"), list) else []
+        for s, seq in enumerate(sequences):
+            if isinstance(seq, str) and (why := path_part_problem(seq)):
+                problems.append(f"datasets[{d}].sequences[{s}]: the sequence name {why}")
+    raw_methods = raw.get("methods") if isinstance(raw.get("methods"), list) else []
+    for i, m in enumerate(raw_methods):
+        label = (m.get("label") or m.get("name")) if isinstance(m, dict) else None
+        if isinstance(label, str) and (why := path_part_problem(label)):
+            problems.append(f"methods[{i}].label: the label (a folder name in the results) {why}")
+    return problems
+
+
 def _file_problems(spec: CampaignSpec) -> list[str]:
     problems = []
+    if why := results_folder_problem(spec.results):
+        problems.append(f"results: {why}")
     for d, ds in enumerate(spec.datasets):
         if ds.synthetic is not None:
+            if ds.path.exists() and not ds.path.is_dir():
+                problems.append(f"datasets[{d}].path: {ds.path} exists and is not a folder")
+                continue
+            for s, seq in enumerate(ds.sequences):
+                folder = ds.path / seq
+                if not (folder / "times.txt").is_file() and (why := target_problem(folder)):
+                    problems.append(f"datasets[{d}].sequences[{s}]: {why}")
             continue
         if not ds.path.is_dir():
             problems.append(f"datasets[{d}].path: folder {ds.path} not found (download it: slamrun dataset download)")
