@@ -25,6 +25,10 @@ class TrajectoryFormatError(SlamRunError):
     """A trajectory file cannot be parsed; the message names the file and line."""
 
 
+class MetricError(SlamRunError):
+    """A metric cannot be computed for this pair of trajectories (nothing to pair, too few poses, ...)."""
+
+
 class MethodFailure(SlamRunError):
     """A method ran but produced no usable trajectory: this is data, not a bug.
 
@@ -40,22 +44,49 @@ class InfraError(SlamRunError):
     """An infrastructure fault (image missing, daemon gone, disk full): retried, never the method's result."""
 
 
-class DaemonUnreachable(InfraError):
-    """The Docker daemon stopped answering: the campaign stops starting runs until it is back."""
+class BackendUnreachable(InfraError):
+    """The engine runs go through stopped answering: the campaign stops starting runs until it is back (runs not
+    started stay pending, never `infra`)."""
 
 
-class DiskFullError(InfraError):
-    """The results or cache disk is full: the campaign stops; finished runs and the ledger stay intact."""
+class DaemonUnreachable(BackendUnreachable):
+    """The Docker daemon stopped answering."""
 
 
-def is_disk_full(exc: BaseException) -> bool:
-    """An OSError for a full disk or quota, or SQLite's 'database or disk is full'."""
+class SchedulerUnreachable(BackendUnreachable):
+    """The Dask scheduler stopped answering."""
+
+
+class StorageError(InfraError):
+    """The results or cache disk cannot be written (full, or read-only): the campaign stops; finished runs and
+    the ledger stay intact. `why` says which ("the disk is full", ...)."""
+
+    def __init__(self, message: str, why: str = "the disk is full"):
+        self.why = why
+        super().__init__(message)
+
+
+def storage_problem(exc: BaseException) -> str | None:
+    """Why a write failed for the storage's sake (a full disk or quota, a read-only filesystem, no permission;
+    SQLite's 'database or disk is full' and 'readonly database' too), or None for any other error."""
     import errno
     import sqlite3
 
     if isinstance(exc, OSError):
-        return exc.errno in (errno.ENOSPC, errno.EDQUOT)
-    return isinstance(exc, sqlite3.OperationalError) and "full" in str(exc)
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return "the disk is full"
+        if exc.errno == errno.EROFS:
+            return "the folder is on a read-only filesystem"
+        if exc.errno in (errno.EACCES, errno.EPERM):
+            return "writing there is not permitted"
+        return None
+    if isinstance(exc, sqlite3.OperationalError):
+        text = str(exc)
+        if "full" in text:
+            return "the disk is full"
+        if "readonly" in text or "read-only" in text:
+            return "the folder is on a read-only filesystem"
+    return None
 
 
 class LedgerLostError(SlamRunError):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import subprocess
 import sys
 from pathlib import Path
 
@@ -141,3 +142,15 @@ def loopback_server(routes: dict[str, Path | bytes]):
     finally:
         httpd.shutdown()
         httpd.server_close()
+
+
+def mount_tmpfs(mount: Path, size_mb: int, why: str) -> Path:
+    """Mount a tmpfs of `size_mb` at `mount` (made); skips the test where mounting is not allowed (not root),
+    fails it under CI (root there: the test must run). Unmount with `umount -l`."""
+    mount.mkdir()
+    cmd = ["mount", "-t", "tmpfs", "-o", f"size={size_mb}m", "tmpfs", str(mount)]
+    if os.geteuid() != 0 or subprocess.run(cmd).returncode:
+        if os.environ.get("CI"):
+            pytest.fail(f"CI runs as root and must be able to mount a tmpfs ({why})")
+        pytest.skip(reason=f"mounting a tmpfs ({why}) needs root")
+    return mount

@@ -22,7 +22,7 @@ from runner.engine.campaign import run_campaign
 from runner.engine.ledger import ResultsLock
 from runner.engine.spec import load_spec
 from runner.errors import InfraError
-from tests.conftest import fake_method, one_sequence, write_spec
+from tests.conftest import fake_method, mount_tmpfs, one_sequence, write_spec
 
 REQUIRED_COLUMNS = (
     "method, sequence, direction, trial, status, failure, e_t, e_r, e_s, e_align, e_start, e_end, "
@@ -314,12 +314,7 @@ def test_status_cli(tmp_path, tiny_dataset):
 @pytest.fixture
 def small_disk(tmp_path):
     """A 48 MB tmpfs for the results directory (needs root; the CI machine is root)."""
-    mount = tmp_path / "disk"
-    mount.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=48m", "tmpfs", str(mount)]).returncode:
-        if os.environ.get("CI"):
-            pytest.fail("CI runs as root and must be able to mount a tmpfs for the full-disk test")
-        pytest.skip(reason="mounting a tmpfs for the full-disk test needs root")
+    mount = mount_tmpfs(tmp_path / "disk", 48, "the full-disk test")
     yield mount
     subprocess.run(["umount", "-l", str(mount)], check=False)
 

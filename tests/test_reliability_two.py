@@ -3,10 +3,13 @@ a wrong trajectory as a success. Each test reproduces a probe's finding on real 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -16,7 +19,7 @@ import yaml
 from runner.engine.campaign import run_campaign
 from runner.engine.spec import load_spec
 from runner.errors import SpecError
-from tests.conftest import fake_method, one_sequence, write_spec
+from tests.conftest import fake_method, mount_tmpfs, one_sequence, write_spec
 from tests.test_campaign import ledger_rows
 
 
@@ -265,24 +268,20 @@ def test_a_timed_out_run_that_produced_nothing_records_no_fps(tmp_path, tiny_dat
 
 
 @pytest.fixture
-def small_disk(tmp_path):
-    """A 128 MB tmpfs mounted for the test (skipped where the test may not mount)."""
-    mnt = tmp_path / "small"
-    mnt.mkdir()
-    res = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=128m", "tmpfs", str(mnt)], capture_output=True, text=True)
-    if res.returncode != 0:
-        pytest.skip(reason=f"cannot mount a tmpfs here ({res.stderr.strip()}); the test needs root and CAP_SYS_ADMIN")
+def disk(tmp_path):
+    """A 128 MB tmpfs for the results (a filesystem the test may fill or make read-only)."""
+    mnt = mount_tmpfs(tmp_path / "disk", 128, "a disk the test fills or makes read-only")
     yield mnt
     subprocess.run(["umount", "-l", str(mnt)], check=False)
 
 
-def test_the_run_that_fills_the_disk_is_charged_and_the_others_finish(tmp_path, tiny_dataset, small_disk):
+def test_the_run_that_fills_the_disk_is_charged_and_the_others_finish(tmp_path, tiny_dataset, disk):
     spec = write_spec(
         tmp_path,
         tiny_dataset,
         [fake_method("fill-disk", label="filler") | {"trials": 1, "directions": ["forward"]}, fake_method(sleep=1.0)],
-        results=str(small_disk / "results"),
-        cache=str(small_disk / "cache"),
+        results=str(disk / "results"),
+        cache=str(disk / "cache"),
         trials=2,
         datasets=one_sequence(tiny_dataset),
     )
@@ -307,3 +306,197 @@ def test_a_run_past_max_output_mb_is_stopped_and_charged(tmp_path, tiny_dataset)
     assert {(r["state"], r["failure"]) for r in rows} == {("failed", "output_limit")}, rows
     assert "max_output_mb" in rows[0]["message"]
     assert not (Path(rows[0]["run_dir"]) / "raw" / "dump.bin").exists()
+
+
+# ------------------------------------------------------------------ 7. a results folder that turns read-only
+
+
+def read_only(folder: Path) -> None:
+    """Make `folder` read-only from now on: a read-only bind mount over it (files already open for writing
+    stay writable, as on a filesystem remounted read-only under a running process). `writable` undoes it."""
+    subprocess.run(["mount", "--bind", str(folder), str(folder)], check=True)
+    subprocess.run(["mount", "-o", "remount,bind,ro", str(folder)], check=True)
+
+
+def writable(folder: Path) -> None:
+    subprocess.run(["umount", str(folder)], check=True)
+
+
+def test_a_results_folder_that_turns_read_only_stops_the_campaign_cleanly(tmp_path, tiny_dataset, disk):
+    results = disk / "results"
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=0.5)], trials=3, results=str(results))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while sum(r["state"] == "done" for r in ledger_rows(results)) < 3 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        read_only(results)
+        try:
+            out, err = proc.communicate(timeout=120)  # it stops by itself
+        finally:
+            writable(results)
+    finally:
+        proc.kill()
+    said = (out + err).decode()
+    assert proc.returncode != 0 and "Traceback" not in said, said[-3000:]
+    assert "read-only" in said and "again" in said, said[-3000:]
+    rows = ledger_rows(results)
+    assert not [r for r in rows if r["state"] == "failed"], [r["message"] for r in rows if r["state"] == "failed"]
+    code, said = cli("campaign", str(spec))
+    assert code == 0, said
+    assert all(r["state"] == "done" for r in ledger_rows(results))
+
+
+def test_a_read_only_results_folder_at_start_is_one_message(tmp_path, tiny_dataset, disk):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], results=str(disk / "results"))
+    read_only(disk)
+    try:
+        code, said = cli("campaign", str(spec))
+    finally:
+        writable(disk)
+    assert code == 1 and "Traceback" not in said and "read-only" in said, said[-3000:]
+
+
+# ------------------------------------------------------------------ 5, 7. a hung Dask worker, a lost scheduler
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """A real Dask scheduler and two single-thread workers (no nanny: the worker is the process), on 127.0.0.1,
+    each a process of its own; yields (address, {worker address: pid}, scheduler process)."""
+    pytest.importorskip("distributed")
+    from distributed import Client
+
+    info = tmp_path / "scheduler.json"
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0"]
+            + ["--dashboard-address", "127.0.0.1:0", "--scheduler-file", str(info)],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
+    deadline = time.monotonic() + 60
+    while not info.exists() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    for _ in range(2):
+        procs.append(
+            subprocess.Popen(
+                [sys.executable, "-m", "distributed.cli.dask_worker", "--scheduler-file", str(info)]
+                + ["--nthreads", "1", "--no-nanny", "--host", "127.0.0.1", "--dashboard-address", "127.0.0.1:0"],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+                cwd=Path(__file__).resolve().parents[1],
+            )
+        )
+    address = json.loads(info.read_text())["address"]
+    with Client(address, timeout=30) as client:
+        client.wait_for_workers(2, timeout=60)
+        pids = client.run(os.getpid)
+    try:
+        yield address, pids, procs[0]
+    finally:
+        for p in procs:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(p.pid, signal.SIGCONT)
+            p.kill()
+            p.wait()
+
+
+def test_a_hung_dask_worker_gets_no_more_runs_and_the_campaign_finishes(tmp_path, tiny_dataset, dask_cluster):
+    address, pids, _ = dask_cluster
+    marker = tmp_path / "starts.txt"
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method(sleep=2.0, extra=["--marker", str(marker)])],
+        trials=3,
+        datasets=one_sequence(tiny_dataset),
+        distributed={"engine": "dask", "address": address},
+        timeout_s=60,
+    )
+    stopped = {}
+
+    def stop_one_worker() -> None:  # once both have a run: freeze one, as SIGSTOP or a frozen node would
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and (not marker.exists() or len(marker.read_text().splitlines()) < 2):
+            time.sleep(0.05)
+        worker, pid = sorted(pids.items())[0]
+        os.kill(pid, signal.SIGSTOP)
+        stopped[worker] = time.monotonic()
+
+    threading.Thread(target=stop_one_worker, daemon=True).start()
+    t0 = time.monotonic()
+    res = run_campaign(load_spec(spec), on_event=None)
+    took = time.monotonic() - t0
+    rows = ledger_rows(res.results)
+    assert [r["state"] for r in rows] == ["done"] * 6, [(r["state"], r["message"]) for r in rows]
+    assert stopped, "no worker was stopped"
+    assert took < 150, took  # bounded: a heartbeat silence of 20 s, then a retry elsewhere (not timeout + 120 s)
+    assert any(r["attempts"] > 1 for r in rows)  # the run on the stopped worker was retried elsewhere
+
+
+def test_a_lost_dask_scheduler_stops_the_campaign_with_one_message(tmp_path, tiny_dataset, dask_cluster):
+    address, _, scheduler = dask_cluster
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method(sleep=1.0)],
+        trials=5,
+        datasets=one_sequence(tiny_dataset),
+        distributed={"engine": "dask", "address": address},
+    )
+    results = tmp_path / "results"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    deadline = time.monotonic() + 120
+    while sum(r["state"] == "done" for r in ledger_rows(results)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    scheduler.kill()
+    out, err = proc.communicate(timeout=120)  # it ends by itself, within a bound
+    said = (out + err).decode()
+    assert proc.returncode != 0 and "Traceback" not in said, said[-3000:]
+    assert "Dask scheduler" in said and "stopped answering" in said, said[-3000:]
+    rows = ledger_rows(results)
+    assert not [r for r in rows if r["state"] == "failed"], [r["message"] for r in rows if r["state"] == "failed"]
+    assert sum(r["state"] == "done" for r in rows) >= 2
+    assert any(r["state"] == "pending" for r in rows)
+
+
+# ------------------------------------------------------------------ nothing outside results, cache and dataset
+
+
+def test_a_campaign_with_hostile_names_writes_only_into_results_cache_and_dataset(tmp_path):
+    scratch = tmp_path / "scratch"
+    (scratch / "mine").mkdir(parents=True)
+    (scratch / "mine" / "thesis.tex").write_text("my thesis\n")
+    (scratch / "notes.txt").write_text("keep me\n")
+    names = ["seq one", "séq-ü", "$(touch pwned)", "-rf", "a;b`c`"]
+    spec = {
+        "name": "hostile",
+        "results": "out/results",
+        "cache": "out/cache",
+        "datasets": [{"name": "d", "path": "data", "sequences": names, "synthetic": {"frames": 30, "size": "160x120"}}],
+        "methods": [fake_method(label="$(touch pwned2)"), fake_method(label="-x y", sleep=0.1)],
+        "trials": 1,
+        "directions": ["forward", "backward"],
+        "report": True,
+    }
+    (scratch / "spec.yaml").write_text(yaml.safe_dump(spec, allow_unicode=True))
+    outside = {k: v for k, v in snapshot(tmp_path).items() if not k.startswith(("scratch/out", "scratch/data"))}
+    res = subprocess.run(
+        [sys.executable, "-m", "runner.cli", "campaign", "../spec.yaml"],
+        cwd=scratch / "mine",  # a relative path that escaped would land here
+        capture_output=True,
+        text=True,
+    )
+    assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
+    after = {k: v for k, v in snapshot(tmp_path).items() if not k.startswith(("scratch/out", "scratch/data"))}
+    assert after == outside
+    rows = ledger_rows(scratch / "out" / "results")
+    assert len(rows) == 20 and all(r["state"] == "done" for r in rows), [(r["key"], r["message"]) for r in rows]
+    assert (scratch / "out" / "results" / "report" / "index.html").exists()
+    assert not list(Path("/").glob("pwned*")) and not list(Path.cwd().glob("pwned*"))

@@ -10,6 +10,7 @@ folder disappears (a new campaign start removed it after a crash here), so no ru
 from __future__ import annotations
 
 import dataclasses
+import logging
 import socket
 import threading
 import time
@@ -17,9 +18,12 @@ import uuid
 from pathlib import Path
 
 from runner.backends.base import Defaults, ExecRequest, ExecResult
-from runner.errors import InfraError
+from runner.errors import InfraError, SchedulerUnreachable
 
 SILENCE_MARGIN_S = 120.0  # beyond a run's timeout, how long to wait for a worker's answer
+WORKER_SILENCE_S = 20.0  # a worker without a heartbeat to the scheduler for this long is hung (stopped, frozen)
+SCHEDULER_SILENCE_S = 15.0  # the client disconnected from the scheduler for this long: the scheduler is gone
+PROBE_EVERY_S = 1.0  # how often the cluster's health is read (one call, shared by the lanes)
 
 
 class _RemoteCancel:
@@ -42,6 +46,38 @@ def _execute_on_worker(backend_name: str, req: ExecRequest, flag: str) -> ExecRe
         tmp.replace(tmp.with_suffix(""))
 
     return make_local_backend(backend_name).execute(req, _RemoteCancel(Path(flag)), started)  # type: ignore[arg-type]
+
+
+def _dask_logs_to(path: Path) -> None:
+    """distributed logs its reconnection attempts, with tracebacks, to the terminal; they go to a file in the
+    results folder instead (the campaign says what happened in one message)."""
+    names = [n for n in list(logging.Logger.manager.loggerDict) if n.startswith("distributed.")]
+    for name in names:  # distributed gives some of its loggers a terminal handler of their own
+        child = logging.getLogger(name)
+        for handler in list(child.handlers):
+            if not isinstance(handler, logging.FileHandler):
+                child.removeHandler(handler)
+        child.propagate = True
+    logger = logging.getLogger("distributed")
+    for handler in list(logger.handlers):
+        if not isinstance(handler, logging.FileHandler):
+            logger.removeHandler(handler)
+    if not any(isinstance(h, logging.FileHandler) and h.baseFilename == str(path) for h in logger.handlers):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handler = logging.FileHandler(path)
+        handler.setLevel(logging.WARNING)
+        handler.setFormatter(logging.Formatter("%(asctime)s %(name)s %(levelname)s %(message)s"))
+        logger.addHandler(handler)
+    logger.propagate = False
+
+
+def _kill_local_leftovers(token: str) -> None:
+    """The processes of a run whose worker stopped answering, where that worker is this machine (a worker
+    elsewhere stops them itself when it wakes up: the run's staging folder is gone)."""
+    from runner.backends.local import kill_processes, processes_with_token
+
+    if token:
+        kill_processes(processes_with_token(token))
 
 
 def _check_on_worker(backend_name: str, images: dict | None, probe: str) -> str | None:
@@ -72,8 +108,16 @@ class DaskBackend(Defaults):
         except ImportError:
             raise InfraError("the dask engine needs the 'distributed' package: pip install distributed") from None
         self.name = backend_name
+        self.address = address
         self.results = Path(results)
+        _dask_logs_to(self.results / "dask.log")
         self._cluster = None
+        self.excluded: set[str] = set()  # workers that stopped answering: no more runs go to them
+        self._health_lock = threading.Lock()
+        self._probed_at = 0.0
+        self._beats: dict[str, tuple[float, float]] = {}  # worker -> (its last_seen, when it changed here)
+        self._processing: dict[str, str] = {}  # task key -> worker running it
+        self._disconnected_since: float | None = None
         try:
             if address == "local":
                 self._cluster = LocalCluster(
@@ -117,13 +161,32 @@ class DaskBackend(Defaults):
         flag = req.workdir.parent / "cancel.flag"
         process_txt = req.workdir.parent / "process.txt"
         remote = dataclasses.replace(req, cpus=None)
+        live = self._live_workers() if self.excluded else []
+        if self.excluded and not live:
+            raise InfraError(f"no Dask worker answers (stopped answering: {', '.join(sorted(self.excluded))})")
         future = self.client.submit(
-            _execute_on_worker, self.name, remote, str(flag), pure=False, key=f"slamrun-{uuid.uuid4().hex}"
+            _execute_on_worker,
+            self.name,
+            remote,
+            str(flag),
+            pure=False,
+            key=f"slamrun-{uuid.uuid4().hex}",
+            workers=live if self.excluded else None,  # never to a worker that stopped answering
+            allow_other_workers=False,
         )
         raised = False
         started_at = None
         try:
             while not future.done():
+                hung = self._hung_worker_of(future.key)
+                if hung:
+                    flag.touch()  # a worker that wakes up stops the run
+                    future.cancel()
+                    _kill_local_leftovers(req.token)
+                    raise InfraError(
+                        f"the Dask worker {hung} stopped answering (no heartbeat for {WORKER_SILENCE_S:.0f} s); "
+                        "it gets no more runs of this campaign"
+                    )
                 if cancel.is_set() and not raised:
                     flag.touch()
                     raised = True
@@ -142,13 +205,72 @@ class DaskBackend(Defaults):
         except (InfraError, OSError):
             raise
         except Exception as exc:  # noqa: BLE001 - a worker died, the scheduler went away, ...
+            if self.client.status != "running":
+                raise self._scheduler_lost() from None
             raise InfraError(f"the Dask worker could not run it: {type(exc).__name__}: {exc}") from None
         finally:
             process_txt.unlink(missing_ok=True)
             if raised:
                 flag.unlink(missing_ok=True)
 
+    def _scheduler_lost(self) -> SchedulerUnreachable:
+        return SchedulerUnreachable(
+            f"the Dask scheduler at {self.address} stopped answering; no new run was started. Restart it (and its "
+            "workers) and run the same command: finished runs are kept, the others run then"
+        )
+
+    def _probe(self) -> None:
+        """Read the cluster's health (at most every PROBE_EVERY_S, one call for every lane): which worker
+        processes which task, and since when each worker's heartbeat has not changed. A scheduler the client
+        has been disconnected from for SCHEDULER_SILENCE_S is lost."""
+        now = time.monotonic()
+        if now - self._probed_at < PROBE_EVERY_S:
+            return
+        self._probed_at = now
+        if self.client.status != "running":
+            self._disconnected_since = self._disconnected_since or now
+            if now - self._disconnected_since > SCHEDULER_SILENCE_S:
+                raise self._scheduler_lost()
+            return
+        try:
+            workers = self.client.scheduler_info(n_workers=-1)["workers"]
+            processing = self.client.processing()
+        except Exception:  # noqa: BLE001 - the scheduler is going away: judged by the client's status
+            self._disconnected_since = self._disconnected_since or now
+            if now - self._disconnected_since > SCHEDULER_SILENCE_S:
+                raise self._scheduler_lost() from None
+            return
+        self._disconnected_since = None
+        for address, info in workers.items():
+            seen = float(info.get("last_seen") or 0.0)
+            before = self._beats.get(address)
+            if before is None or before[0] != seen:
+                self._beats[address] = (seen, now)
+        self._processing = {str(key): address for address, keys in processing.items() for key in keys}
+
+    def _hung_worker_of(self, key: str) -> str | None:
+        """The worker a task is on when that worker stopped answering (it is excluded from then on)."""
+        with self._health_lock:
+            self._probe()
+            address = self._processing.get(str(key))
+            if address is None:
+                return None
+            beat = self._beats.get(address)
+            if address in self.excluded or (beat and time.monotonic() - beat[1] > WORKER_SILENCE_S):
+                self.excluded.add(address)
+                return address
+            return None
+
+    def _live_workers(self) -> list[str]:
+        with self._health_lock:
+            self._probed_at = 0.0
+            self._probe()
+            return [w for w in self._beats if w not in self.excluded]
+
     def close(self) -> None:
-        self.client.close()
+        try:
+            self.client.close(timeout=10)
+        except Exception:  # noqa: BLE001 - a scheduler that is gone cannot be said goodbye to
+            pass
         if self._cluster is not None:
             self._cluster.close()

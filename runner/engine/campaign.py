@@ -22,7 +22,7 @@ from runner.engine.preparer import ViewPreparer
 from runner.engine.recovery import collect_leftovers, import_finished, recover
 from runner.engine.scheduler import Event, Scheduler
 from runner.engine.spec import CampaignSpec
-from runner.errors import DaemonUnreachable, DatasetError, DiskFullError, LedgerLostError, is_disk_full
+from runner.errors import BackendUnreachable, DatasetError, LedgerLostError, StorageError, storage_problem
 from runner.results.vocabulary import is_infra
 
 
@@ -137,22 +137,24 @@ def load_groundtruths(runs: list[PlannedRun]) -> dict:
 def run_campaign(
     spec: CampaignSpec, backend: Backend | None = None, on_event: Event | None = None, scheduler_hook=None, log=print
 ) -> CampaignResult:
-    """Plan, recover, prepare, run and export. A full disk at any step stops it with DiskFullError, whose
-    message says what to do; finished runs and the ledger are never damaged by it."""
+    """Plan, recover, prepare, run and export. A disk that cannot be written (full, read-only) at any step
+    stops it with StorageError, whose message says what to do; finished runs and the ledger are never damaged
+    by it."""
     try:
         return _run_campaign(spec, backend, on_event, scheduler_hook, log)
-    except DiskFullError:
+    except StorageError:
         raise
     except Exception as exc:
-        if is_disk_full(exc):
-            raise DiskFullError(f"{exc}\n{_full_disk_advice(spec)}") from exc
+        if why := storage_problem(exc):
+            raise StorageError(f"{exc}\n{_storage_advice(spec, why)}", why) from exc
         raise
 
 
-def _full_disk_advice(spec: CampaignSpec) -> str:
+def _storage_advice(spec: CampaignSpec, why: str) -> str:
+    fix = "free some space" if "full" in why else "make it writable"
     return (
-        f"Stopped: a disk is full (results {spec.results}, view cache {spec.cache}). Finished runs and the ledger "
-        "are intact; free some space, then run `make campaign` (or `slamrun campaign SPEC`) again to resume."
+        f"Stopped: {why} (results {spec.results}, view cache {spec.cache}). Finished runs and the ledger are intact; "
+        f"{fix}, then run `make campaign` (or `slamrun campaign SPEC`) again to resume."
     )
 
 
@@ -221,19 +223,21 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         if isinstance(sched.fatal_error, LedgerLostError):
             ledger.close()
             raise sched.fatal_error
-        if isinstance(sched.fatal_error, DaemonUnreachable):
+        if isinstance(sched.fatal_error, BackendUnreachable):
             export(ledger, results)
             ledger.close()
             raise sched.fatal_error
         try:
             csv = export(ledger, results)
         except Exception as exc:
-            if not (sched.fatal or is_disk_full(exc)):
+            why = storage_problem(exc)
+            if not (isinstance(sched.fatal_error, StorageError) or why):
                 raise
-            sched.fatal = sched.fatal or f"{results}: the disk is full ({exc})"
-        if sched.fatal:
+            sched.fatal_error = sched.fatal_error or StorageError(f"{results}: {why} ({exc})", why)
+        if isinstance(sched.fatal_error, StorageError):
             ledger.close()
-            raise DiskFullError(f"{sched.fatal}\n{_full_disk_advice(spec)}")
+            why = sched.fatal_error.why
+            raise StorageError(f"{sched.fatal_error}\n{_storage_advice(spec, why)}", why)
         counts = ledger.counts()
         infra = sum(1 for r in ledger.rows(state="failed") if is_infra(r["state"], r["failure"]))
         ledger.close()

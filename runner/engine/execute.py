@@ -28,12 +28,12 @@ from runner.datasets.view import PreparedView
 from runner.engine.paths import RunPaths, finished_record
 from runner.engine.plan import PlannedRun
 from runner.errors import (
-    DaemonUnreachable,
-    DiskFullError,
+    BackendUnreachable,
     InfraError,
     MethodFailure,
+    StorageError,
     TrajectoryFormatError,
-    is_disk_full,
+    storage_problem,
 )
 from runner.results.vocabulary import EvalStatus
 
@@ -69,7 +69,7 @@ def launch_run(
     on_start=None,
 ) -> Launched | RunOutcome:
     """Configure the run and run its process to its end (a RunOutcome only when cancelled). A full disk
-    anywhere is a DiskFullError and any other OSError an InfraError (the machine's fault, not the method's);
+    anywhere is a StorageError and any other OSError an InfraError (the machine's fault, not the method's);
     the run's staging folder is removed either way, except when the Docker daemon went away mid-run (the
     next start may collect the finished container)."""
     with _os_errors_as_infra(run, paths):
@@ -110,7 +110,7 @@ def launch_run(
         )
         try:
             result = backend.execute(req, cancel, on_start)
-        except DaemonUnreachable:
+        except BackendUnreachable:
             raise  # the staging folder stays: the container may finish without the daemon
         except InfraError:
             shutil.rmtree(stage, ignore_errors=True)
@@ -151,7 +151,7 @@ def finish_attempt(
             raw.mkdir()
         elif failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
             shutil.rmtree(stage, ignore_errors=True)
-            raise DiskFullError(f"{run.key.id}: the disk is full ({failure}: {message})")
+            raise StorageError(f"{run.key.id}: the disk is full ({failure}: {message})")
         if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
             damaged = verify_view(view.root)
             if damaged:
@@ -233,8 +233,8 @@ def _os_errors_as_infra(run: PlannedRun, paths: RunPaths) -> Iterator[None]:
         yield
     except OSError as exc:
         paths.clear_staging()
-        if is_disk_full(exc):
-            raise DiskFullError(f"{run.key.id}: the disk is full ({exc})") from None
+        if why := storage_problem(exc):
+            raise StorageError(f"{run.key.id}: {why} ({exc})", why) from None
         raise InfraError(f"{run.key.id}: {exc}") from None
 
 

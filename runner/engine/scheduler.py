@@ -26,13 +26,13 @@ from runner.engine.plan import PlannedRun
 from runner.engine.preparer import ViewPreparer
 from runner.engine.spec import CampaignSpec
 from runner.errors import (
-    DaemonUnreachable,
+    BackendUnreachable,
     DatasetError,
-    DiskFullError,
     InfraError,
     LedgerLostError,
     SlamRunError,
-    is_disk_full,
+    StorageError,
+    storage_problem,
 )
 from runner.results.vocabulary import INFRA
 
@@ -78,7 +78,6 @@ class Scheduler:
         self._finishing = 0  # runs handed to the finishing threads and not recorded yet
         self._finisher: ThreadPoolExecutor | None = None
         self.started_at = self.ended_at = None
-        self.fatal: str | None = None  # why the campaign stopped by itself (a full disk)
         self.fatal_error: SlamRunError | None = None  # the error that stopped it (full disk, ledger lost)
         self.methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
 
@@ -127,15 +126,15 @@ class Scheduler:
         while (run := self._next()) is not None:
             try:
                 self._run_with_retries(run, lane)
-            except DiskFullError as exc:  # the run did not finish: it goes back to pending
-                self._stop_for_full_disk(run, lane, str(exc), requeue=True)
+            except StorageError as exc:  # the run did not finish: it goes back to pending
+                self._stop_for_storage(run, lane, exc, requeue=True)
             except LedgerLostError as exc:  # nothing can be recorded any more: stop starting runs
                 self.fatal_error = self.fatal_error or exc
                 self.request_stop()
                 self.on_event("requeued", run, lane, {"message": str(exc)})
             except Exception as exc:
-                if is_disk_full(exc):  # the ledger could not be written: the next start recovers the row
-                    self._stop_for_full_disk(run, lane, f"{run.key.id}: the disk is full ({exc})", requeue=False)
+                if why := storage_problem(exc):  # the ledger could not be written: the next start recovers the row
+                    self._stop_for_storage(run, lane, StorageError(f"{run.key.id}: {why} ({exc})", why), requeue=False)
                     continue
                 # a bug: keep the traceback, record it, let the other runs go on
                 self._record_infra(run, lane, traceback.format_exc())
@@ -145,19 +144,18 @@ class Scheduler:
         self.ledger.finish(run.key.id, "failed", {"failure": INFRA, "message": message[-2000:]})
         self.on_event("finished", run, lane, {"state": "failed", "failure": INFRA, "message": message})
 
-    def _stop_for_full_disk(self, run: PlannedRun, lane: Lane, message: str, requeue: bool) -> None:
+    def _stop_for_storage(self, run: PlannedRun, lane: Lane, error: StorageError, requeue: bool) -> None:
         """No new runs. A row the ledger cannot update stays `running`: the next start recovers it (imports
         the run if its folder is complete, else requeues it)."""
-        self.fatal = self.fatal or message
-        self.fatal_error = self.fatal_error or DiskFullError(message)
+        self.fatal_error = self.fatal_error or error
         self.request_stop()
         if requeue:
             try:
                 self.ledger.reset_to_pending(run.key.id)
-            except Exception as exc:  # noqa: BLE001 - only a full disk is expected here
-                if not is_disk_full(exc):
+            except Exception as exc:  # noqa: BLE001 - only a storage failure is expected here
+                if not storage_problem(exc):
                     raise
-        self.on_event("requeued", run, lane, {"message": message})
+        self.on_event("requeued", run, lane, {"message": str(error)})
 
     def _checked_view(self, run: PlannedRun, lane: Lane) -> PreparedView:
         """The run's prepared view, whole: one found missing or damaged (deleted cache, a method that wrote
@@ -168,8 +166,8 @@ class Scheduler:
         except DatasetError as exc:
             raise InfraError(f"{run.key.id}: its view cannot be prepared: {exc}") from None
         except OSError as exc:
-            if is_disk_full(exc):
-                raise DiskFullError(f"{run.key.id}: the disk is full while preparing its view ({exc})") from None
+            if why := storage_problem(exc):
+                raise StorageError(f"{run.key.id}: {why} while preparing its view ({exc})", why) from None
             raise InfraError(f"{run.key.id}: its view cannot be prepared: {exc}") from None
         if problem is not None:
             self.on_event("view", run, lane, {"message": f"{problem}; prepared again"})
@@ -203,9 +201,9 @@ class Scheduler:
                     campaign=self.spec.name,
                     on_start=lambda pid, t0: self.ledger.set_process(run.key.id, pid, t0),
                 )
-            except DiskFullError:
+            except StorageError:
                 raise
-            except DaemonUnreachable as exc:  # no run can start: stop; the next start collects or redoes it
+            except BackendUnreachable as exc:  # no run can start: stop; the next start collects or redoes it
                 self.fatal_error = self.fatal_error or exc
                 self.request_stop()
                 self.ledger.reset_to_pending(run.key.id)
@@ -252,8 +250,8 @@ class Scheduler:
             )
             self.ledger.finish(run.key.id, outcome.state, outcome.values)
             self.on_event("finished", run, lane, {"state": outcome.state, **outcome.values})
-        except DiskFullError as exc:
-            self._stop_for_full_disk(run, lane, str(exc), requeue=True)
+        except StorageError as exc:
+            self._stop_for_storage(run, lane, exc, requeue=True)
         except LedgerLostError as exc:
             self.fatal_error = self.fatal_error or exc
             self.request_stop()
@@ -267,7 +265,7 @@ class Scheduler:
                 return
             self._record_infra(run, lane, str(exc))
         except Exception as exc:
-            if is_disk_full(exc):
-                self._stop_for_full_disk(run, lane, f"{run.key.id}: the disk is full ({exc})", requeue=False)
+            if why := storage_problem(exc):
+                self._stop_for_storage(run, lane, StorageError(f"{run.key.id}: {why} ({exc})", why), requeue=False)
                 return
             self._record_infra(run, lane, traceback.format_exc())
