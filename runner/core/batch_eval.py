@@ -1,6 +1,6 @@
-"""TUM-Mono metrics of many trajectory files against one ground truth, on every core.
+"""Metrics of many trajectory files against one ground truth, on every core.
 
-The files are cut into chunks that worker processes read and evaluate (batched reading, see
+The files are cut into chunks that worker processes read and evaluate (batched reading of TUM files, see
 trajectory.read_tum_many); results come back in input order, each file's error as that file's result.
 One job runs in this process. The numbers are the same whatever the number of jobs.
 """
@@ -10,50 +10,106 @@ from __future__ import annotations
 import os
 from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
 from multiprocessing import get_context
 from pathlib import Path
 
+import numpy as np
+
+from runner.core import metrics
 from runner.core.evaluation import tum_mono_file
-from runner.core.trajectory import Trajectory, read_tum_many
-from runner.errors import TrajectoryFormatError
+from runner.core.trajectory import Trajectory, read_kitti, read_tum_many
+from runner.errors import MetricError, TrajectoryFormatError
 from runner.results.vocabulary import EVALUATE_FIELDS
 
-_GT: Trajectory | None = None  # the ground truth in a worker process
+METRICS = ("tum-mono", "ate", "rpe", "kitti")
 
 
-def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory) -> list[dict]:
-    out = []
-    for path, traj in zip(paths, read_tum_many(paths), strict=True):
-        if isinstance(traj, TrajectoryFormatError):
-            d = {"status": "unreadable", "detail": str(traj)}
-        else:
-            d = tum_mono_file(gt, traj).to_dict()
-        detail = d.get("detail") if d["status"] != "ok" else None
-        out.append(
-            {"file": str(path), **{k: d.get(k) for k in EVALUATE_FIELDS}, **({"detail": detail} if detail else {})}
+@dataclass(frozen=True)
+class Options:
+    """Which metric, and how: the alignment, RPE's step, the association tolerance; estimates as TUM files, or
+    as KITTI pose files whose rows are the frames at `times`."""
+
+    metric: str = "tum-mono"
+    alignment: str = "sim3"
+    delta: float = 1.0
+    delta_unit: str = "frames"
+    tolerance_s: float = metrics.DEFAULT_TOLERANCE_S
+    est_format: str = "tum"
+    times: tuple[float, ...] | None = None
+
+
+def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
+    """One estimate's figures for `opts.metric` (status ok), or its status and why not."""
+    if opts.metric == "tum-mono":
+        d = tum_mono_file(gt, traj).to_dict()
+        return {k: d.get(k) for k in EVALUATE_FIELDS} | (
+            {"detail": d["detail"]} if d["status"] != "ok" and d["detail"] else {}
         )
+    try:
+        if opts.metric == "ate":
+            res = metrics.ate(gt, traj, opts.alignment, opts.tolerance_s)
+        elif opts.metric == "rpe":
+            res = metrics.rpe(gt, traj, opts.delta, opts.delta_unit, opts.alignment, opts.tolerance_s)
+        elif opts.metric == "kitti":
+            res = metrics.kitti(gt, traj, opts.alignment, tolerance_s=opts.tolerance_s)
+        else:
+            raise MetricError(f"unknown metric {opts.metric!r}; known: {', '.join(METRICS)}")
+    except MetricError as exc:
+        return {"status": "failed", "n_poses": len(traj), "detail": str(exc)}
+    return {"status": "ok", "n_poses": len(traj), **res.to_dict()}
+
+
+def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | TrajectoryFormatError]:
+    if opts.est_format == "tum":
+        return read_tum_many(paths)
+    out: list[Trajectory | TrajectoryFormatError] = []
+    for p in paths:
+        try:
+            out.append(read_kitti(p, np.asarray(opts.times)))
+        except TrajectoryFormatError as exc:
+            out.append(exc)
     return out
 
 
-def _init(gt: Trajectory) -> None:
-    global _GT
-    _GT = gt
+def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory, opts: Options = Options()) -> list[dict]:
+    out = []
+    for path, traj in zip(paths, _read(paths, opts), strict=True):
+        if isinstance(traj, TrajectoryFormatError):
+            d = {"status": "unreadable", "detail": str(traj)}
+            if opts.metric == "tum-mono":  # every figure present, null
+                d = dict.fromkeys(EVALUATE_FIELDS) | d
+        else:
+            d = evaluate_one(gt, traj, opts)
+        out.append({"file": str(path), **d})
+    return out
+
+
+_GT: Trajectory | None = None  # the ground truth in a worker process
+_OPTS = Options()
+
+
+def _init(gt: Trajectory, opts: Options) -> None:
+    global _GT, _OPTS
+    _GT, _OPTS = gt, opts
 
 
 def _chunk(paths: list[str]) -> list[dict]:
-    return evaluate_one_chunk(paths, _GT)
+    return evaluate_one_chunk(paths, _GT, _OPTS)
 
 
-def evaluate_files(gt: Trajectory, paths: Sequence[str | Path], jobs: int | None = None) -> Iterator[dict]:
+def evaluate_files(
+    gt: Trajectory, paths: Sequence[str | Path], jobs: int | None = None, opts: Options = Options()
+) -> Iterator[dict]:
     """One result dict per file, in input order; `jobs` worker processes (default: every core)."""
     paths = [str(p) for p in paths]
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(paths) or 1))
     if jobs == 1:
-        yield from evaluate_one_chunk(paths, gt)
+        yield from evaluate_one_chunk(paths, gt, opts)
         return
     size = max(8, min(256, len(paths) // (jobs * 4) or 1))
     chunks = [paths[i : i + size] for i in range(0, len(paths), size)]
     ctx = get_context("fork")
-    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init, initargs=(gt,)) as pool:
+    with ProcessPoolExecutor(jobs, mp_context=ctx, initializer=_init, initargs=(gt, opts)) as pool:
         for results in pool.map(_chunk, chunks):
             yield from results

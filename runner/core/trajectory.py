@@ -185,6 +185,53 @@ def read_4x4_matrices(path: str | Path, timestamps: np.ndarray | None = None) ->
     return from_matrices(np.asarray(timestamps, float), mats)
 
 
+def read_euroc_csv(path: str | Path) -> Trajectory:
+    """Read an EuRoC/ASL state csv (`#timestamp` in nanoseconds, p_RS_R x y z, q_RS w x y z, then velocities and
+    biases, ignored): the poses of the body (IMU) frame S in the reference frame R, at times in seconds."""
+    text = _read_text(path)
+    stamps, rows = [], []
+    for n, line in enumerate(text.splitlines(), start=1):
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        cells = [c.strip() for c in line.split(",")]
+        if len(cells) < 8:
+            raise TrajectoryFormatError(
+                f"{path}:{n}: {len(cells)} columns; expected at least 8 (#timestamp [ns], p_RS_R_x, p_RS_R_y, "
+                "p_RS_R_z, q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...)"
+            )
+        if not cells[0].isdigit():
+            raise TrajectoryFormatError(f"{path}:{n}: timestamp {cells[0]!r} is not a whole number of nanoseconds")
+        try:
+            values = [float(c) for c in cells[1:8]]
+        except ValueError:
+            raise TrajectoryFormatError(f"{path}:{n}: a pose value is not a number: {line[:80]!r}") from None
+        stamps.append(int(cells[0]))
+        rows.append(values)
+    if not rows:
+        raise TrajectoryFormatError(f"{path}: no pose row (an EuRoC state csv has one per line after its header)")
+    ns = np.array(stamps, dtype=np.int64)
+    t = (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000).astype(float) * 1e-9
+    data = np.array(rows)
+    return _normalise(np.column_stack([t, data[:, 0:3], data[:, 4:7], data[:, 3]]), str(path))
+
+
+def read_times(path: str | Path) -> np.ndarray:
+    """Frame times in seconds from a times file: one number per line (KITTI), or `id time [exposure]` rows
+    (TUM-Mono): the last column of one, the second of the other."""
+    text = _read_text(path)
+    out = []
+    for n, line in enumerate(text.splitlines(), start=1):
+        cells = line.split()
+        if not cells or cells[0].startswith("#"):
+            continue
+        try:
+            out.append(float(cells[0] if len(cells) == 1 else cells[1]))
+        except ValueError:
+            raise TrajectoryFormatError(f"{path}:{n}: {line[:60]!r} is not a time in seconds") from None
+    return np.array(out)
+
+
 def write_tum(path: str | Path, traj: Trajectory) -> None:
     """Write a TUM file with full precision; `read_tum` reads it back exactly."""
     data = np.column_stack([traj.timestamps, traj.positions, traj.quaternions])
