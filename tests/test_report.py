@@ -94,12 +94,11 @@ def test_stats_cli_json(tmp_path, shared_data, capsys):
     assert set(out["metrics"]["e_t"]) >= set(ref["metrics"]["e_t"])
 
 
-def test_report_renders_in_chromium(tmp_path):
+def render_in_chromium(index, tmp_path):
+    """Open the report in headless Chromium: every figure must decode and lay out; returns a screenshot."""
     chromium = shutil.which("chromium") or shutil.which("chromium-browser")
     if chromium is None:
         pytest.skip(reason="Chromium not installed (apt-get install chromium); .ci/run installs it")
-    fake_results(tmp_path).to_csv(tmp_path / "results.csv", index=False)
-    index = write_report(tmp_path)
     flags = [
         "--headless",
         "--no-sandbox",
@@ -119,7 +118,7 @@ def test_report_renders_in_chromium(tmp_path):
     ).stdout
     n_img = index.read_text().count("<img")
     assert f'data-images-loaded="{n_img}/{n_img}"' in dom  # every figure decoded and laid out
-    shot = tmp_path / "report" / "screenshot.png"
+    shot = index.parent / "screenshot.png"
     subprocess.run(
         [chromium, *flags, "--window-size=1200,3000", f"--screenshot={shot}", index.as_uri()],
         capture_output=True,
@@ -128,3 +127,43 @@ def test_report_renders_in_chromium(tmp_path):
     assert shot.exists() and shot.stat().st_size > 10_000
     if os.environ.get("SLAMRUN_KEEP_SHOT"):  # to look at the rendered report yourself
         shutil.copy(shot, os.environ["SLAMRUN_KEEP_SHOT"])
+    return shot
+
+
+def test_report_renders_in_chromium(tmp_path):
+    fake_results(tmp_path).to_csv(tmp_path / "results.csv", index=False)
+    render_in_chromium(write_report(tmp_path), tmp_path)
+
+
+def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tiny_dataset):
+    """A campaign whose dataset asks for ATE and RPE beside TUM-Mono's metrics: the results carry them, the
+    report has their table with letters and, per sequence, each method's best, median and worst path over the
+    ground truth, rendered in a real browser."""
+    from runner.engine.campaign import run_campaign
+    from runner.engine.spec import load_spec
+    from tests.conftest import fake_method, write_spec
+
+    datasets = [
+        {"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a", "seq_b"], "metrics": ["tum-mono", "ate", "rpe"]}
+    ]
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [
+            fake_method(label="steady", extra=["--noise", "0.002"]),
+            fake_method(label="shaky", extra=["--noise", "0.02"]),
+        ],
+        datasets=datasets,
+        trials=3,
+        report=True,
+    )
+    res = run_campaign(load_spec(spec), on_event=None)
+    df = pd.read_csv(res.results_csv)
+    assert df.status.eq("done").all() and df.ate_rmse.notna().all() and df.rpe_t_rmse.notna().all()
+    medians = df.groupby("method").ate_rmse.median()
+    assert medians["steady"] < medians["shaky"]
+    index = write_report(res.results)
+    table = pd.read_csv(res.results / "report" / "tables" / "trajectory_metrics.csv")
+    assert {"ate_rmse", "rpe_t_rmse", "rpe_r_rmse"} <= set(table.columns)
+    assert (res.results / "report" / "figures" / "trajectories_seq_a.png").exists()
+    render_in_chromium(index, tmp_path)

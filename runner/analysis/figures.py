@@ -94,28 +94,40 @@ def boxplot(st: StudyStats, metric: str, folder: Path) -> Path:
     return save(fig, folder, f"box_{metric}")
 
 
-def trajectories(runs: list[tuple[str, object, object]], gt, folder: Path, name: str) -> Path:
-    """Estimated trajectories (aligned to the start segment) against the ground-truth segments, top view."""
+def trajectories(runs: list[tuple[str, str, object]], gt, full, folder: Path, name: str, metric: str) -> Path:
+    """Per method, its best, median and worst run by `metric` over the ground truth, top view: aligned as the
+    metric aligns them (ATE: a Sim(3) over every pose with ground truth; e_align: the start segment's Sim(3)).
+    `full` is the whole ground-truth path where the sequence has one (groundtruth_full.txt), else None."""
     from runner.core.alignment import align_sim3
     from runner.core.evaluation import associate
 
-    fig, ax = plt.subplots(figsize=(5.5, 5))
+    methods = list(dict.fromkeys(r[0] for r in runs))
+    fig, axes = plt.subplots(1, len(methods), figsize=(4.2 * len(methods), 4.4), squeeze=False)
     valid = np.isfinite(gt.positions).all(axis=1)
     n = len(gt)
-    for seg, color in ((slice(0, n // 2), "k"), (slice(n // 2, n), "0.4")):
-        idx = np.flatnonzero(valid[seg]) + (seg.start or 0)
-        ax.plot(gt.positions[idx, 0], gt.positions[idx, 1], ".", color=color, ms=3)
-    colors = _colors([r[0] for r in runs])
-    for label, traj, _ in runs:
-        match = associate(gt.timestamps, traj.timestamps)
-        start = (match >= 0) & (match < n // 2)
-        start &= np.isfinite(gt.positions[np.maximum(match, 0)]).all(axis=1)
-        if start.sum() < 3:
-            continue
-        sim = align_sim3(traj.positions[start], gt.positions[match[start]])
-        p = sim.apply(traj.positions)
-        ax.plot(p[:, 0], p[:, 1], "-", lw=1.2, color=colors[label], label=label)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.legend(fontsize=8)
-    ax.set_title(f"{name}: estimates aligned to the start segment; black/grey: ground-truth segments", fontsize=8)
+    styles = {"best": ("-", 1.4), "median": ("--", 1.1), "worst": (":", 1.1)}
+    for ax, method in zip(axes[0], methods, strict=True):
+        if full is not None:
+            ax.plot(full.positions[:, 0], full.positions[:, 1], "-", color="0.75", lw=3, label="ground truth")
+        for seg, color in ((slice(0, n // 2), "k"), (slice(n // 2, n), "0.4")):
+            idx = np.flatnonzero(valid[seg]) + (seg.start or 0)
+            ax.plot(gt.positions[idx, 0], gt.positions[idx, 1], ".", color=color, ms=2.5)
+        for label, which, traj in runs:
+            if label != method:
+                continue
+            match = associate(gt.timestamps, traj.timestamps)
+            use = (match >= 0) & valid[np.maximum(match, 0)]
+            if metric == "e_align":
+                use &= match < n // 2
+            if use.sum() < 3:
+                continue
+            sim = align_sim3(traj.positions[use], gt.positions[match[use]])
+            p = sim.apply(traj.positions)
+            style, lw = styles[which]
+            ax.plot(p[:, 0], p[:, 1], style, lw=lw, color="C0", label=which)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.legend(fontsize=7)
+        ax.set_title(f"{method}", fontsize=9)
+    how = "Sim(3) over all poses (ATE)" if metric != "e_align" else "the start segment's Sim(3)"
+    fig.suptitle(f"{name}: best, median and worst run by {metric}, aligned by {how}; dots: ground truth", fontsize=8)
     return save(fig, folder, f"trajectories_{name}")

@@ -7,7 +7,7 @@ from pathlib import Path
 import pandas as pd
 
 from runner.errors import SlamRunError
-from runner.results.vocabulary import STUDY_METRICS
+from runner.results.vocabulary import STUDY_METRICS, TRAJECTORY_STATS_METRICS
 
 
 def load_results(path: Path) -> pd.DataFrame:
@@ -46,11 +46,16 @@ def evaluated(df: pd.DataFrame, metrics: list[str]) -> pd.DataFrame:
 
 
 def metrics_for(df: pd.DataFrame) -> list[str]:
-    """The study's metrics that this table has (e_s' if present, else e_s)."""
+    """The metrics this table has values of: the study's six (e_s' if present, else e_s), then the ATE, RPE and
+    KITTI figures of datasets that ask for them."""
+
+    def has(m: str) -> bool:
+        return m in df.columns and bool(df[m].notna().any())
+
     out = []
     for m in STUDY_METRICS:
-        if m in df.columns:
+        if has(m):
             out.append(m)
-        elif m == "e_s_sym" and "e_s" in df.columns:
+        elif m == "e_s_sym" and has("e_s"):
             out.append("e_s")
-    return out
+    return out + [m for m in TRAJECTORY_STATS_METRICS if has(m)]

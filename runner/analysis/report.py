@@ -14,7 +14,7 @@ from runner.analysis import figures, tables
 from runner.analysis.load import evaluated, load_results, metrics_for
 from runner.analysis.stats import study_statistics
 from runner.analysis.summary import method_summary
-from runner.results.vocabulary import LABELS, METHOD_FAILURES
+from runner.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS
 
 RUNS_COLUMNS = {
     "runs": "runs",
@@ -61,17 +61,32 @@ def write_report(
         (out / "statistics.json").write_text(json.dumps(st.to_json(), indent=1))
         acc = [m for m in ("e_t", "e_r", "e_s_sym", "e_s") if m in metrics][:3]
         seg = [m for m in ("e_start", "e_end", "e_rmse") if m in metrics]
-        t3 = tables.medians_with_letters(st, acc)
-        t4 = tables.medians_with_letters(st, seg)
-        tables.write_all(t3, tab_dir, "table3_drift", "Medians of the drift metrics, with letter groups")
-        tables.write_all(t4, tab_dir, "table4_segments", "Medians of the segment alignment errors, with letter groups")
+        trajectory = [m for m in TRAJECTORY_STATS_METRICS if m in metrics]
         note = (
             f"{len(ok)} evaluated runs, {st.n_outliers} multivariate outliers removed (squared Mahalanobis "
             f"distance over {len(metrics)} metrics above {st.cutoff:.4f}, the chi-square {level} quantile); "
             f"letters: pairwise Wilcoxon rank-sum tests, {adjust} adjustment, alpha {alpha}."
         )
-        sections.append(("Drift (Table 3 layout)", f"<p>{html.escape(note)}</p>" + tables.to_html(t3)))
-        sections.append(("Segment errors (Table 4 layout)", tables.to_html(t4)))
+        sections.append(("Statistics", f"<p>{html.escape(note)}</p>"))
+        for chosen, name, caption, title in (
+            (acc, "table3_drift", "Medians of the drift metrics, with letter groups", "Drift (Table 3 layout)"),
+            (
+                seg,
+                "table4_segments",
+                "Medians of the segment alignment errors, with letter groups",
+                "Segment errors (Table 4 layout)",
+            ),
+            (
+                trajectory,
+                "trajectory_metrics",
+                "Medians of ATE, RPE and KITTI's errors, with letter groups",
+                "ATE, RPE and KITTI's errors",
+            ),
+        ):
+            if chosen:
+                table = tables.medians_with_letters(st, chosen)
+                tables.write_all(table, tab_dir, name, caption)
+                sections.append((title, tables.to_html(table)))
         # the same procedure per direction: motion bias can change the ranking
         for direction in ("forward", "backward"):
             part = ok[ok.direction == direction] if "direction" in ok.columns else ok.iloc[0:0]
@@ -79,7 +94,7 @@ def write_report(
                 continue
             sd = study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha)
             (out / f"statistics_{direction}.json").write_text(json.dumps(sd.to_json(), indent=1))
-            td = tables.medians_with_letters(sd, acc)
+            td = tables.medians_with_letters(sd, acc or trajectory)
             tables.write_all(td, tab_dir, f"table3_drift_{direction}", f"Drift medians, {direction} runs only")
             sections.append((f"Drift, {direction} runs only", tables.to_html(td)))
     else:
@@ -117,28 +132,37 @@ def write_report(
 
 
 def _trajectory_figures(df: pd.DataFrame, folder: Path, n_sequences: int) -> list[Path]:
-    """Best evaluated forward run of each method for the first sequences, against the ground truth."""
+    """For the first sequences, each method's best, median and worst evaluated run (by ATE where the campaign
+    has it, else e_align), drawn over the ground truth."""
     from runner.core.trajectory import read_tum
     from runner.datasets.tum_mono import open_sequence
     from runner.errors import SlamRunError
 
     out = []
-    if "run_dir" not in df.columns or "e_align" not in df.columns:
+    metric = next((m for m in ("ate_rmse", "e_align") if m in df.columns and df[m].notna().any()), None)
+    if "run_dir" not in df.columns or metric is None:
         return out
-    ok = df.dropna(subset=["e_align"])
+    ok = df[df.status == "done"].dropna(subset=[metric]) if "status" in df.columns else df.dropna(subset=[metric])
     for sequence in sorted(ok.sequence.unique())[:n_sequences]:
-        runs, gt = [], None
+        runs, gt, full = [], None, None
         for method, g in ok[ok.sequence == sequence].groupby("method"):
-            best = g.sort_values("e_align").iloc[0]
-            run_dir = Path(best.run_dir)
-            try:
-                info = json.loads((run_dir / "run.json").read_text())
-                gt = gt or open_sequence(info["sequence_dir"]).groundtruth()
-                runs.append((method, read_tum(run_dir / "trajectory.txt"), best))
-            except (OSError, KeyError, ValueError, SlamRunError):
-                continue
+            g = g.sort_values(metric)
+            picks = {"best": g.iloc[0], "median": g.iloc[(len(g) - 1) // 2], "worst": g.iloc[-1]}
+            for which, row in picks.items():
+                if which != "best" and row.run_dir == picks["best"].run_dir:
+                    continue  # a method with one run: it is all three
+                run_dir = Path(row.run_dir)
+                try:
+                    if gt is None:
+                        folder_of_sequence = Path(json.loads((run_dir / "run.json").read_text())["sequence_dir"])
+                        gt = open_sequence(folder_of_sequence).groundtruth()
+                        full_path = folder_of_sequence / "groundtruth_full.txt"
+                        full = read_tum(full_path) if full_path.is_file() else None
+                    runs.append((method, which, read_tum(run_dir / "trajectory.txt")))
+                except (OSError, KeyError, ValueError, SlamRunError):
+                    continue
         if runs and gt is not None:
-            out.append(figures.trajectories(runs, gt, folder, sequence))
+            out.append(figures.trajectories(runs, gt, full, folder, sequence, metric))
     return out
 
 

@@ -21,6 +21,7 @@ import numpy as np
 from methods.base import Method
 from runner.backends.base import Backend, ExecRequest, ExecResult, disk_reserve_bytes, folder_bytes
 from runner.backends.logcap import tail
+from runner.core import metrics
 from runner.core.evaluation import ASSOCIATION_TOLERANCE_S, tum_mono
 from runner.core.trajectory import Trajectory, write_tum
 from runner.datasets.cache import verify_view
@@ -31,11 +32,12 @@ from runner.errors import (
     BackendUnreachable,
     InfraError,
     MethodFailure,
+    MetricError,
     StorageError,
     TrajectoryFormatError,
     storage_problem,
 )
-from runner.results.vocabulary import EvalStatus
+from runner.results.vocabulary import TUM_MONO_METRICS, EvalStatus
 
 
 @dataclass(frozen=True)
@@ -164,21 +166,10 @@ def finish_attempt(
             write_tum(RunPaths.trajectory(stage), traj)
             values["n_poses"] = len(traj)
             if groundtruth is not None:
-                ev = tum_mono(groundtruth, traj)
-                values["eval_status"] = ev.status.value
-                if ev.status is EvalStatus.ok:
-                    values.update(
-                        e_t=ev.e_t,
-                        e_r=ev.e_r,
-                        e_s=ev.e_s,
-                        e_s_sym=ev.e_s_sym,
-                        e_align=ev.e_align,
-                        e_start=ev.e_start,
-                        e_end=ev.e_end,
-                        e_rmse=ev.e_rmse,
-                    )
-                elif not values["message"]:
-                    values["message"] = f"evaluation {ev.status.value}: {ev.detail}"
+                figures, detail = evaluate(groundtruth, traj, run.metrics, run.alignment)
+                values.update(figures)
+                if detail and not values["message"]:
+                    values["message"] = detail
         if failure is None and values.get("eval_status") == EvalStatus.incomplete.value:
             failure = "lost"  # too few poses in a segment to evaluate: the method did not track the sequence
             values.update(failure=failure, message=f"too few poses to evaluate ({values['message']})")
@@ -225,6 +216,38 @@ def finish_attempt(
         os.rename(stage, final)
         values["run_dir"] = str(final)
         return RunOutcome(state, values)
+
+
+def evaluate(gt: Trajectory, traj: Trajectory, wanted: tuple[str, ...], alignment: str) -> tuple[dict, str]:
+    """A finished run's metrics (the dataset's `metrics:`) and eval_status, and why a metric is missing. TUM-Mono's
+    figures or ATE/RPE that cannot be computed make the evaluation incomplete; KITTI's segments on a path shorter
+    than 100 m are the dataset's limit, only noted."""
+    values: dict = {}
+    status, notes = EvalStatus.ok, []
+    if "tum-mono" in wanted:
+        ev = tum_mono(gt, traj)
+        status = ev.status
+        if ev.status is EvalStatus.ok:
+            values.update({k: getattr(ev, k) for k in TUM_MONO_METRICS} | {"e_s_sym": ev.e_s_sym})
+        else:
+            notes.append(f"evaluation {ev.status.value}: {ev.detail}")
+    for name in (m for m in wanted if m != "tum-mono"):
+        try:
+            if name == "ate":
+                a = metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).translation
+                values.update(ate_rmse=a.rmse, ate_mean=a.mean, ate_median=a.median, ate_max=a.max)
+            elif name == "rpe":
+                r = metrics.rpe(gt, traj, 1, "frames", alignment, ASSOCIATION_TOLERANCE_S)
+                values.update(rpe_t_rmse=r.translation.rmse, rpe_r_rmse=r.rotation_deg.rmse)
+            elif name == "kitti":
+                k = metrics.kitti(gt, traj, alignment, tolerance_s=ASSOCIATION_TOLERANCE_S)
+                values.update(kitti_t_pct=k.t_pct, kitti_r_deg_m=k.r_deg_per_m)
+        except MetricError as exc:
+            notes.append(f"{name}: {exc}")
+            if name != "kitti" and status is EvalStatus.ok:
+                status = EvalStatus.incomplete
+    values["eval_status"] = status.value
+    return values, "; ".join(notes)
 
 
 @contextmanager

@@ -37,6 +37,9 @@ def results_frame(ledger: Ledger) -> pd.DataFrame:
     if df.empty:
         return pd.DataFrame(columns=list(COLUMNS))
     df = df.rename(columns={"method": "method_name", "state": "status"}).rename(columns={"label": "method"})
+    for col in COLUMNS:  # a ledger read read-only from an earlier version lacks the newer columns
+        if col not in df.columns:
+            df[col] = None
     for col in METRIC_COLUMNS + RESOURCE_COLUMNS:
         df[col] = pd.to_numeric(df[col], errors="coerce")
     return df[list(COLUMNS)]

@@ -124,6 +124,10 @@ class Ledger:
         self._inode = os.stat(self.path).st_ino
         with self._lock:
             self._db.execute(f"CREATE TABLE IF NOT EXISTS runs (key TEXT PRIMARY KEY, {cols})")
+            have = {row[1] for row in self._db.execute("PRAGMA table_info(runs)")}
+            for c in ALL_COLUMNS:  # a ledger of an earlier version gets the columns added since
+                if c not in have:
+                    self._db.execute(f"ALTER TABLE runs ADD COLUMN {c} {_coltype(c)}")
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT)")
             self._db.execute("CREATE INDEX IF NOT EXISTS runs_state ON runs(active, state)")
 

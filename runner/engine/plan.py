@@ -50,6 +50,8 @@ class PlannedRun:
     sequence_dir: Path
     profile: Profile
     timeout_s: float
+    metrics: tuple[str, ...] = ("tum-mono",)  # the dataset's metrics
+    alignment: str = "sim3"
 
 
 def settings_hash(m: MethodSpec) -> str:
@@ -76,7 +78,15 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
                     for trial in range(trials):
                         key = RunKey(m.run_label, seq, direction, trial, h, data)
                         run = PlannedRun(
-                            key, mi, m.name, ds.name, ds.path / seq, method.profile, m.timeout_s or spec.timeout_s
+                            key,
+                            mi,
+                            m.name,
+                            ds.name,
+                            ds.path / seq,
+                            method.profile,
+                            m.timeout_s or spec.timeout_s,
+                            tuple(ds.metrics),
+                            ds.alignment,
                         )
                         runs.append(((trial, mi, seq, direction.value), run))
     runs.sort(key=lambda r: r[0])

@@ -49,6 +49,27 @@ class DatasetSpec(Strict):
     path: Path = Field(description="Folder holding one folder per sequence.")
     sequences: list[str] = Field(min_length=1, description="Sequence folder names, e.g. sequence_01.")
     synthetic: SynthSpec | None = Field(None, description="Generate missing sequences with `slamrun synth`.")
+    metrics: list[Literal["tum-mono", "ate", "rpe", "kitti"]] = Field(
+        default_factory=lambda: ["tum-mono"],
+        min_length=1,
+        description="Metrics of each run against the ground truth: TUM-Mono's six (the default for TUM-Mono "
+        "sequences), ATE, RPE (one frame apart), KITTI's segment errors.",
+    )
+    alignment: str = Field(
+        "sim3", description="Alignment before ATE, RPE and KITTI's metric: sim3 (monocular), se3, first:N, ..."
+    )
+
+    @field_validator("alignment")
+    @classmethod
+    def _known_alignment(cls, v: str) -> str:
+        from runner.core.metrics import Alignment
+        from runner.errors import MetricError
+
+        try:
+            Alignment.parse(v)
+        except MetricError as exc:
+            raise ValueError(str(exc)) from None
+        return v
 
 
 class MethodSpec(Strict):
