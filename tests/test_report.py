@@ -160,6 +160,7 @@ def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tin
     res = run_campaign(load_spec(spec), on_event=None)
     df = pd.read_csv(res.results_csv)
     assert df.status.eq("done").all() and df.ate_rmse.notna().all() and df.rpe_t_rmse.notna().all()
+    assert df.coverage.eq(1.0).all()  # the fake method gives every frame a pose
     medians = df.groupby("method").ate_rmse.median()
     assert medians["steady"] < medians["shaky"]
     index = write_report(res.results)

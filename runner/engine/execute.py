@@ -165,6 +165,7 @@ def finish_attempt(
         if traj is not None and len(traj):
             write_tum(RunPaths.trajectory(stage), traj)
             values["n_poses"] = len(traj)
+            values["coverage"] = metrics.coverage(traj, view.original_timestamps())
             if groundtruth is not None:
                 figures, detail = evaluate(groundtruth, traj, run.metrics, run.alignment)
                 values.update(figures)
