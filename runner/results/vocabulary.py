@@ -1,0 +1,104 @@
+"""The names of results, in one place: run states, failure kinds (and which are the method's), evaluation
+statuses, the metric and resource columns of the ledger and results.csv, and their labels in tables and figures.
+
+Every part of slamrun that writes or reads results (ledger, evaluation, batch evaluation, export, summaries,
+statistics, report, command line) takes its names from here, so a new metric or failure kind is added once.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+STATES = ("pending", "running", "done", "failed")
+
+# What a method did: data for the statistics and the success rate.
+METHOD_FAILURES = (
+    "not_initialized",  # never produced a pose
+    "lost",  # stopped tracking (or too few poses to evaluate)
+    "no_output",  # ended without a readable trajectory
+    "crashed",  # exited abnormally
+    "timeout",  # killed at the run's timeout
+    "oom",  # killed out of memory
+    "bad_timestamps",  # poses at times that are not the sequence's frame times
+    "output_limit",  # wrote more than max_output_mb, or filled the disk
+)
+INFRA = "infra"  # the machine's fault: retried, never counted in a rate
+FAILURES = (*METHOD_FAILURES, INFRA)
+
+
+def is_infra(state: str | None, failure: str | None) -> bool:
+    """A run that failed for infrastructure reasons (not a result of the method)."""
+    return state == "failed" and failure == INFRA
+
+
+def is_method_failure(state: str | None, failure: str | None) -> bool:
+    """A run that failed by the method's own behaviour."""
+    return state == "failed" and failure != INFRA
+
+
+class EvalStatus(StrEnum):
+    """Why a finished trajectory has (ok) or lacks metrics."""
+
+    ok = "ok"
+    empty = "empty"  # no pose at all
+    nan = "nan"  # a NaN or infinite value in the estimate
+    unassociated = "unassociated"  # a pose without a ground-truth row within the tolerance
+    incomplete = "incomplete"  # too few poses for a metric (a TUM-Mono segment, ATE, RPE)
+
+
+# TUM-Mono's figures as the benchmark defines them (docs/tum-mono.md)
+TUM_MONO_METRICS = ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse")
+# ATE, RPE and KITTI's segment errors as a campaign records them
+ATE_COLUMNS = ("ate_rmse", "ate_mean", "ate_median", "ate_max")
+RPE_COLUMNS = ("rpe_t_rmse", "rpe_r_rmse")
+KITTI_COLUMNS = ("kitti_t_pct", "kitti_r_deg_m")
+
+METRIC_COLUMNS = (
+    *TUM_MONO_METRICS[:3],
+    "e_s_sym",
+    *TUM_MONO_METRICS[3:],
+    "n_poses",
+    *ATE_COLUMNS,
+    *RPE_COLUMNS,
+    *KITTI_COLUMNS,
+    "coverage",  # share of the sequence's frames with a pose
+)
+RESOURCE_COLUMNS = (
+    "wall_s",
+    "fps",
+    "cpu_mean_pct",
+    "cpu_peak_pct",
+    "ram_peak_mb",
+    "gpu_mem_peak_mb",
+    "gpu_util_mean_pct",
+    "n_frames",
+)
+
+# `slamrun evaluate --metric tum-mono`: the fields of each file's result
+EVALUATE_FIELDS = ("status", *TUM_MONO_METRICS, "n_poses")
+
+# The statistics: the study's six (e_s' for scale), then the trajectory metrics of datasets that ask for them
+STUDY_METRICS = ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "e_rmse")
+TRAJECTORY_STATS_METRICS = ("ate_rmse", "rpe_t_rmse", "rpe_r_rmse", "kitti_t_pct", "kitti_r_deg_m")
+# The per-method summary's medians (terminal table, status, report)
+SUMMARY_METRICS = ("e_t", "e_r", "e_s_sym", "e_align", "e_rmse", "ate_rmse", "rpe_t_rmse")
+
+LABELS = {
+    "e_t": "translation drift e_t",
+    "e_r": "rotation drift e_r (deg)",
+    "e_s": "scale drift e_s",
+    "e_s_sym": "scale drift e_s'",
+    "e_align": "alignment error e_align",
+    "e_start": "start-segment RMSE",
+    "e_end": "end-segment RMSE",
+    "e_rmse": "RMSE (both segments)",
+    "ate_rmse": "ATE RMSE (m)",
+    "ate_mean": "ATE mean (m)",
+    "ate_median": "ATE median (m)",
+    "ate_max": "ATE max (m)",
+    "rpe_t_rmse": "RPE translation RMSE (m)",
+    "rpe_r_rmse": "RPE rotation RMSE (deg)",
+    "kitti_t_pct": "KITTI translation error (%)",
+    "kitti_r_deg_m": "KITTI rotation error (deg/m)",
+    "coverage": "frames with a pose",
+}
