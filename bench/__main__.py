@@ -298,6 +298,7 @@ def bench_datasets(tmp: Path) -> None:
 
     from runner.core.camera import rectification_maps, rectified_pinhole
     from runner.datasets.cache import prepare
+    from runner.datasets.layouts import open_sequence
     from runner.datasets.synth import (
         Renderer,
         camera_path,
@@ -307,7 +308,6 @@ def bench_datasets(tmp: Path) -> None:
         make_scene,
         make_texture,
     )
-    from runner.datasets.tum_mono import open_sequence
     from runner.datasets.view import Direction, Profile
 
     print("datasets: synthetic rendering (one core) and rectified preparation 1280x1024 -> 640x480")

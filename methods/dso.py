@@ -42,13 +42,19 @@ class Dso(UpstreamMethod):
             f"preset={p.preset}",
             "nogui=1",
         ]
-        if p.photometric:
+        if self.photometric(view):
             argv += [f"gamma={view.path(view.pcalib)}", f"vignette={view.path(view.vignette)}"]
         return argv
 
+    def photometric(self, view: PreparedView) -> bool:
+        """mode=0 with the view's photometric calibration when asked for and the dataset has one (TUM-Mono);
+        mode=1 otherwise (EuRoC, KITTI, TUM RGB-D, TUM-VI carry none)."""
+        return self.params.photometric and view.photometric
+
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params
-        argv = [self.exe(), *self.dataset_args(view), "nolog=1", "quiet=1", "mode=0" if p.photometric else "mode=1"]
+        mode = "mode=0" if self.photometric(view) else "mode=1"
+        argv = [self.exe(), *self.dataset_args(view), "nolog=1", "quiet=1", mode]
         if p.single_thread:
             argv.append("nomt=1")
         return argv + self.extra_args(view, workdir)

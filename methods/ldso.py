@@ -34,7 +34,7 @@ class Ldso(Dso):
         return [
             self.exe(),
             *self.dataset_args(view),
-            "mode=0" if p.photometric else "mode=1",
+            "mode=0" if self.photometric(view) else "mode=1",
             "nolog=1",
             "quiet=1",
             f"loopclosing={int(p.loop_closure)}",

@@ -135,7 +135,7 @@ def _trajectory_figures(df: pd.DataFrame, folder: Path, n_sequences: int) -> lis
     """For the first sequences, each method's best, median and worst evaluated run (by ATE where the campaign
     has it, else e_align), drawn over the ground truth."""
     from runner.core.trajectory import read_tum
-    from runner.datasets.tum_mono import open_sequence
+    from runner.datasets.layouts import open_sequence
     from runner.errors import SlamRunError
 
     out = []

@@ -167,18 +167,9 @@ def _print_summary(campaign: str, results: Path, csv: Path) -> None:
         return
     summ = method_summary(df)
     t = Table(title=f"{campaign}: per method")
-    cols = [
-        "method",
-        "runs",
-        "done",
-        "failed",
-        "success_pct",
-        "median_e_t",
-        "median_e_r",
-        "median_e_s_sym",
-        "median_e_align",
-        "median_fps",
-    ]
+    medians = [f"median_{m}" for m in ("e_t", "e_r", "e_s_sym", "e_align", "ate_rmse", "rpe_t_rmse")]
+    medians = [c for c in medians if summ[c].notna().any()] or medians[:4]  # the metrics this campaign has
+    cols = ["method", "runs", "done", "failed", "success_pct", *medians, "median_fps"]
     fails = [k for k in FAILURES if summ[k].sum() > 0]
     for c in cols + fails:
         t.add_column(c.replace("median_", "med "), justify="right" if c != "method" else "left")
@@ -235,7 +226,9 @@ def cmd_validate(args) -> int:
     spec = load_spec(args.spec)
     for warning in check_sequences(spec, skip_ungenerated=True):
         console.print(f"warning: {warning}")
-    todo = sum(1 for d in spec.datasets if d.synthetic for s in d.sequences if not (d.path / s / "times.txt").exists())
+    from runner.datasets.layouts import holds_sequence
+
+    todo = sum(1 for d in spec.datasets if d.synthetic for s in d.sequences if not holds_sequence(d.path / s))
     later = f" ({todo} synthetic sequence(s) generated on first use)" if todo else ""
     console.print(f"{args.spec}: valid, {len(plan(spec))} runs{later}")
     return 0

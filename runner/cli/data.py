@@ -18,12 +18,19 @@ def add_commands(sub) -> None:
     dl.add_argument("--sequences", default="1-50", help="numbers and ranges, e.g. 1-5,7")
     dl.add_argument("--url", help="base address of the sequence zips (default: the dataset's site)")
     dl.set_defaults(func=cmd_download)
-    sy = sub.add_parser("synth", help="write a synthetic sequence in the TUM-Mono layout")
+    sy = sub.add_parser("synth", help="write a synthetic sequence in a dataset's layout")
     sy.add_argument("out", type=Path, help="the sequence folder to write")
     sy.add_argument("--frames", type=int, default=300, help="number of frames")
     sy.add_argument("--seed", type=int, default=0, help="random seed of the scene and its texture")
     sy.add_argument("--size", default="640x480", help="image size WIDTHxHEIGHT")
     sy.add_argument("--scene", choices=["indoor", "outdoor"], default="indoor", help="room or courtyard scale")
+    sy.add_argument(
+        "--layout",
+        choices=["tum-mono", "euroc", "kitti", "tum-rgbd", "tum-vi"],
+        default="tum-mono",
+        help="the dataset layout to write (kitti: OUT is sequences/NN, its poses go to poses/NN.txt beside "
+        "sequences/; tum-rgbd: OUT's name holds freiburg1, 2 or 3, whose published camera it uses)",
+    )
     sy.set_defaults(func=cmd_synth)
 
 
@@ -56,6 +63,6 @@ def cmd_synth(args) -> int:
 
     w, h = (int(v) for v in args.size.lower().split("x"))
     t0 = time.monotonic()
-    out = generate(args.out, frames=args.frames, seed=args.seed, size=(w, h), scene_kind=args.scene)
-    console.print(f"{out}: {args.frames} frames in {time.monotonic() - t0:.1f} s")
+    out = generate(args.out, args.frames, args.seed, (w, h), args.scene, args.layout)
+    console.print(f"{out}: {args.frames} frames, {args.layout} layout, in {time.monotonic() - t0:.1f} s")
     return 0

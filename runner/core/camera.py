@@ -96,9 +96,37 @@ class FovCamera:
         return " ".join(f"{v:.12g}" for v in rel)
 
 
+class _DistortedPinhole:
+    """What every distorted camera model shares: its pinhole part, projection and unprojection."""
+
+    pinhole: PinholeCamera
+
+    @property
+    def width(self) -> int:
+        return self.pinhole.width
+
+    @property
+    def height(self) -> int:
+        return self.pinhole.height
+
+    def distort(self, xy: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def undistort(self, xy: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def project(self, points_cam: np.ndarray) -> np.ndarray:
+        """3-D points in the camera frame (N, 3), z forward → pixels (N, 2)."""
+        return self.pinhole.project(self.distort(points_cam[:, :2] / points_cam[:, 2:3]))
+
+    def unproject(self, uv: np.ndarray) -> np.ndarray:
+        """Pixels → undistorted normalised image-plane points (rays with z = 1)."""
+        return self.undistort(self.pinhole.unproject(uv))
+
+
 @dataclass(frozen=True)
-class RadTanCamera:
-    """Pinhole with OpenCV radial-tangential distortion k1 k2 p1 p2 k3."""
+class RadTanCamera(_DistortedPinhole):
+    """Pinhole with OpenCV radial-tangential distortion k1 k2 p1 p2 k3 (EuRoC, TUM RGB-D)."""
 
     pinhole: PinholeCamera
     k1: float = 0.0
@@ -124,10 +152,49 @@ class RadTanCamera:
 
 
 @dataclass(frozen=True)
+class EquidistantCamera(_DistortedPinhole):
+    """Pinhole with the equidistant (Kannala-Brandt) fisheye distortion k1..k4 of OpenCV's fisheye module and
+    Kalibr's `equidistant` model (TUM-VI): r_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)."""
+
+    pinhole: PinholeCamera
+    k1: float = 0.0
+    k2: float = 0.0
+    k3: float = 0.0
+    k4: float = 0.0
+
+    def _radius(self, theta: np.ndarray) -> np.ndarray:
+        t2 = theta * theta
+        return theta * (1 + t2 * (self.k1 + t2 * (self.k2 + t2 * (self.k3 + t2 * self.k4))))
+
+    def distort(self, xy: np.ndarray) -> np.ndarray:
+        r = np.linalg.norm(xy, axis=1)
+        theta = np.arctan(r)
+        factor = np.where(r > 1e-12, self._radius(theta) / np.maximum(r, 1e-12), 1.0)
+        return xy * factor[:, None]
+
+    def undistort(self, xy: np.ndarray, iterations: int = 20) -> np.ndarray:
+        """Newton's method on theta; points at or beyond 90 degrees off-axis have no pinhole image: NaN."""
+        r_d = np.linalg.norm(xy, axis=1)
+        theta = np.minimum(r_d, math.pi / 2)
+        for _ in range(iterations):
+            t2 = theta * theta
+            f = self._radius(theta) - r_d
+            df = 1 + t2 * (3 * self.k1 + t2 * (5 * self.k2 + t2 * (7 * self.k3 + t2 * 9 * self.k4)))
+            theta = theta - f / df
+        with np.errstate(invalid="ignore"):
+            r_u = np.where((theta >= 0) & (theta < math.pi / 2 - 1e-6), np.tan(theta), np.nan)
+        factor = np.where(r_d > 1e-12, r_u / np.maximum(r_d, 1e-12), 1.0)
+        return xy * factor[:, None]
+
+
+CameraModel = FovCamera | RadTanCamera | EquidistantCamera
+
+
+@dataclass(frozen=True)
 class CameraFile:
     """A parsed TUM-Mono camera.txt: the input camera and the requested output rectification."""
 
-    camera: FovCamera
+    camera: CameraModel  # FOV for TUM-Mono; other datasets' readers give their own model
     output_mode: str  # crop | full | none | explicit
     out_width: int
     out_height: int
@@ -191,8 +258,10 @@ def write_camera_txt(path: str | Path, cam: FovCamera, mode: str = "crop", out_s
     Path(path).write_text(f"{cam.camera_txt_line()}\n{cam.width} {cam.height}\n{mode}\n{out_size[0]} {out_size[1]}\n")
 
 
-def rectified_pinhole(cam: FovCamera, mode: str, out_width: int, out_height: int) -> PinholeCamera:
+def rectified_pinhole(cam: CameraModel, mode: str, out_width: int, out_height: int) -> PinholeCamera:
     """The pinhole camera of the rectified output (`crop`: only valid pixels; `full`: the whole view)."""
+    if not isinstance(cam, FovCamera):
+        return _rectified_numeric(cam, mode, out_width, out_height)
     if mode == "none":
         return PinholeCamera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
     if cam.omega == 0:
@@ -233,7 +302,40 @@ def rectified_pinhole(cam: FovCamera, mode: str, out_width: int, out_height: int
     raise ValueError(f"unknown rectification mode {mode!r}; expected crop, full or none")
 
 
-def rectification_maps(src: FovCamera, dst: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
+def _rectified_numeric(cam: CameraModel, mode: str, out_width: int, out_height: int) -> PinholeCamera:
+    """The rectified pinhole of any model from its undistorted image border: `full` spans the whole border,
+    `crop` keeps the largest centred rectangle inside it (only valid pixels), `none` keeps the intrinsics."""
+    p = cam.pinhole
+    if mode == "none":
+        return PinholeCamera(out_width, out_height, p.fx, p.fy, p.cx, p.cy)
+    n = 400
+    u, v = np.linspace(0, cam.width - 1, n), np.linspace(0, cam.height - 1, n)
+    top, bottom = (
+        cam.unproject(np.column_stack([u, np.zeros(n)])),
+        cam.unproject(np.column_stack([u, np.full(n, cam.height - 1.0)])),
+    )
+    left, right = (
+        cam.unproject(np.column_stack([np.zeros(n), v])),
+        cam.unproject(np.column_stack([np.full(n, cam.width - 1.0), v])),
+    )
+    if mode == "full":
+        und = np.concatenate([top, bottom, left, right])
+        und = und[np.isfinite(und).all(axis=1)]
+        (xmin, ymin), (xmax, ymax) = und.min(axis=0), und.max(axis=0)
+    elif mode == "crop":
+        xmin, xmax = np.nanmax(left[:, 0]), np.nanmin(right[:, 0])
+        ymin, ymax = np.nanmax(top[:, 1]), np.nanmin(bottom[:, 1])
+    else:
+        raise ValueError(f"unknown rectification mode {mode!r}; expected crop, full or none")
+    # one focal length for both axes (square pixels): the larger for crop (all inside), the smaller for full
+    fx, fy = (out_width - 1) / (xmax - xmin), (out_height - 1) / (ymax - ymin)
+    f = max(fx, fy) if mode == "crop" else min(fx, fy)
+    cx = (out_width - 1) / 2 - f * (xmin + xmax) / 2
+    cy = (out_height - 1) / 2 - f * (ymin + ymax) / 2
+    return PinholeCamera(out_width, out_height, float(f), float(f), float(cx), float(cy))
+
+
+def rectification_maps(src: CameraModel, dst: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:
     """float32 maps for cv2.remap: for each output pixel, where to sample the input image."""
     u, v = np.meshgrid(np.arange(dst.width, dtype=float), np.arange(dst.height, dtype=float))
     xy = dst.unproject(np.column_stack([u.ravel(), v.ravel()]))

@@ -18,8 +18,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from runner.core.camera import rectification_maps, rectified_pinhole
-from runner.datasets.tum_mono import Sequence, open_sequence
+from runner.core.camera import rectification_maps, rectified_pinhole, write_camera_txt
+from runner.datasets.layouts import open_sequence
+from runner.datasets.sequence import Sequence
 from runner.datasets.view import Direction, PreparedView, Profile
 from runner.errors import DatasetError
 
@@ -30,17 +31,17 @@ FRAME_FORMATS = ("png", "pgm")  # rectified frames: png is compact, pgm is faste
 
 
 def view_key(seq: Sequence, direction: Direction, profile: Profile, frame_format: str = "png") -> str:
-    """Content-addressed key: the small files in full, the images by name, size and modification time."""
+    """Content-addressed key: the small files in full, the frames by name and their container's size and time."""
     h = hashlib.sha256()
-    fmt = frame_format if profile is Profile.rectified else "-"
-    h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}|{fmt}".encode())
-    for name in ("times.txt", "camera.txt", "pcalib.txt"):
-        p = seq.root / name
+    fmt = frame_format if profile is Profile.rectified or not seq.fov else "-"
+    layout = "" if seq.layout == "tum-mono" else f"|{seq.layout}"
+    h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}|{fmt}{layout}".encode())
+    for p in seq.key_files:
         h.update(p.read_bytes() if p.exists() else b"-")
-    for p in [seq.zip_path, seq.vignette] if seq.zip_path else [seq.root / "images", seq.vignette]:
-        if p is not None and p.exists():
-            st = p.stat()
-            h.update(f"{p.name}|{st.st_size}|{st.st_mtime_ns}".encode())
+    h.update(seq.frames_stamp().encode())
+    if seq.vignette is not None and seq.vignette.exists():
+        st = seq.vignette.stat()
+        h.update(f"{seq.vignette.name}|{st.st_size}|{st.st_mtime_ns}".encode())
     h.update("|".join(seq.frame_names).encode())
     return f"{seq.name}-{direction.value}-{profile.value}-{h.hexdigest()[:12]}"
 
@@ -237,19 +238,22 @@ def _build(
     images.mkdir()
 
     cam = seq.camera
-    if profile is Profile.native:
+    if profile is Profile.native and seq.fov:  # the original frames and the FOV (or pinhole) calibration
         ext = Path(seq.frame_names[0]).suffix.lower()
         names = [f"{i:06d}{ext}" for i in range(n)]
         inverse = {orig: i for i, orig in enumerate(order)}
         if mirror is None or not _link_reversed(mirror, images, names):
             for j, (_, data) in enumerate(seq.read_bytes()):
                 (images / names[inverse[j]]).write_bytes(data)
-        shutil.copyfile(seq.root / "camera.txt", out / PreparedView.camera)
-        for opt in ("pcalib.txt", "vignette.png"):
-            if (seq.root / opt).exists():
-                shutil.copyfile(seq.root / opt, out / opt)
+        if seq.camera_txt is not None:
+            shutil.copyfile(seq.camera_txt, out / PreparedView.camera)
+        else:
+            write_camera_txt(out / PreparedView.camera, cam.camera, cam.output_mode, (cam.out_width, cam.out_height))
+        for opt in (seq.pcalib, seq.vignette):
+            if opt is not None and opt.exists():
+                shutil.copyfile(opt, out / opt.name)
         width, height, pinhole = cam.camera.width, cam.camera.height, None
-    else:
+    else:  # rectified; also the native view of a camera model that methods' calibration files cannot express
         mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
         dst = rectified_pinhole(cam.camera, mode, cam.out_width, cam.out_height)
         map_x, map_y = rectification_maps(cam.camera, dst)
@@ -313,6 +317,8 @@ def _build(
         "pinhole": list(pinhole) if pinhole else None,
         "format_version": VIEW_FORMAT_VERSION,
         "frame_suffix": Path(names[0]).suffix,
+        "photometric": profile is Profile.native and seq.fov and seq.photometric,
+        "layout": seq.layout,
     }
     (out / "view.json").write_text(json.dumps(meta, indent=1))
 

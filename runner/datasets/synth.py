@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from runner.core.camera import FovCamera, PinholeCamera, write_camera_txt
-from runner.datasets.generated import target_problem, write_marker
+from runner.core.camera import EquidistantCamera, FovCamera, PinholeCamera, RadTanCamera, write_camera_txt
+from runner.datasets.generated import SYNTH_MARKER, target_problem, write_marker
 from runner.errors import DatasetError
 
 GAMMA = 1.25  # response G(x) = 255 (x/255)^(1/GAMMA); pcalib holds G^-1
@@ -77,7 +77,11 @@ def make_texture(rng: np.random.Generator, size: int = 2048) -> np.ndarray:
 
 def camera_path(scene: Scene, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Camera-to-world rotations (n, 3, 3) and positions (n, 3): one smooth loop around the boxes."""
-    phase = 2 * np.pi * np.arange(n) / max(n - 1, 1)
+    return camera_path_at(scene, 2 * np.pi * np.arange(n) / max(n - 1, 1))
+
+
+def camera_path_at(scene: Scene, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The loop's camera-to-world rotations and positions at `phase` (0 at the first frame, 2 pi at the last)."""
     a, b = scene.path_radii
     pos = np.column_stack([a * np.cos(phase), b * np.sin(phase), scene.cam_height + 0.1 * a / 2.3 * np.sin(3 * phase)])
     target = scene.look_at + np.column_stack([0.3 * np.sin(2 * phase), 0.3 * np.cos(phase), 0.2 * np.sin(phase)])
@@ -270,58 +274,296 @@ def inverse_response() -> np.ndarray:
     return 255.0 * (np.arange(256) / 255.0) ** GAMMA
 
 
+LAYOUTS = ("tum-mono", "euroc", "kitti", "tum-rgbd", "tum-vi")
+
+
 def generate(
-    out: str | Path, frames: int = 300, seed: int = 0, size: tuple[int, int] = (640, 480), scene_kind: str = "indoor"
+    out: str | Path,
+    frames: int = 300,
+    seed: int = 0,
+    size: tuple[int, int] = (640, 480),
+    scene_kind: str = "indoor",
+    layout: str = "tum-mono",
 ) -> Path:
-    """Write a TUM-Mono sequence folder at `out` (written to a temporary folder, then renamed). `out` must not
-    exist, be empty, or be a sequence slamrun generated (DatasetError otherwise: nothing of a user's is replaced)."""
+    """Write a synthetic sequence folder at `out` in a dataset's layout (written to a temporary folder, then
+    renamed). `out` must not exist, be empty, or be a sequence slamrun generated (DatasetError otherwise: nothing of
+    a user's is replaced). KITTI's ground truth goes to `poses/<name>.txt` beside the sequences' folder, written
+    only where no such file exists or slamrun wrote it."""
     out = Path(out)
+    if layout not in LAYOUTS:
+        raise DatasetError(f"unknown layout {layout!r}; known: {', '.join(LAYOUTS)}")
     problem = target_problem(out)
     if problem:
         raise DatasetError(problem)
+    kitti_poses = out.parent.parent / "poses" / f"{out.name}.txt"
+    if layout == "kitti" and kitti_poses.exists() and not (out / SYNTH_MARKER).is_file():
+        raise DatasetError(f"{kitti_poses} exists and slamrun did not write it; move it away to generate {out}")
     tmp = out.with_name(out.name + ".tmp-synth")
     if tmp.exists():
         import shutil
 
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
-    write_marker(tmp, {"frames": frames, "seed": seed, "size": list(size), "scene": scene_kind})
-    rng = np.random.default_rng(seed)
-    scene = make_scene(scene_kind, rng)
-    texture = make_texture(rng)
-    cam = default_camera(*size)
-    renderer = Renderer(scene, texture, fov_rays(cam), (cam.height, cam.width))
-    rots, positions = camera_path(scene, frames)
-    vignette = vignette_image(cam)
-    t = 1.0 + np.arange(frames) / FPS
-    exposure = 8.0 * (1.0 + 0.25 * np.sin(2 * np.pi * np.arange(frames) / 97.0))
-    with zipfile.ZipFile(tmp / "images.zip", "w", zipfile.ZIP_STORED) as zf:
-        for i in range(frames):
-            irr = renderer.render(rots[i], positions[i]) * vignette * np.float32(exposure[i] / 8.0)
-            ok, jpg = cv2.imencode(".jpg", response(irr), [cv2.IMWRITE_JPEG_QUALITY, 95])
-            entry = zipfile.ZipInfo(f"{i:05d}.jpg", date_time=(1980, 1, 1, 0, 0, 0))  # deterministic bytes
-            zf.writestr(entry, jpg.tobytes())
-    with open(tmp / "times.txt", "w") as f:
-        for i in range(frames):
-            f.write(f"{i:05d} {t[i]:.6f} {exposure[i]:.6f}\n")
-    out_size = (640, 480) if size[0] >= 640 and size[1] >= 480 else size  # TUM-Mono's output size
-    write_camera_txt(tmp / "camera.txt", cam, "crop", out_size)
-    (tmp / "pcalib.txt").write_text(" ".join(f"{v:.9g}" for v in inverse_response()) + "\n")
-    cv2.imwrite(str(tmp / "vignette.png"), np.rint(vignette / vignette.max() * 65535).astype(np.uint16))
-    quats = Rotation.from_matrix(rots).as_quat()
-    gt = np.column_stack([t, positions, quats])
-    buf = io.StringIO()
-    np.savetxt(buf, gt, fmt="%.9f")
-    (tmp / "groundtruth_full.txt").write_text(buf.getvalue())
-    n_seg = max(int(math.floor(GT_FRACTION * frames)), 3)
-    gt_sync = gt.copy()
-    gt_sync[n_seg : frames - n_seg, 1:] = np.nan
-    buf = io.StringIO()
-    np.savetxt(buf, gt_sync, fmt="%.9f")
-    (tmp / "groundtruthSync.txt").write_text(buf.getvalue().replace("nan", "NaN"))
+    write_marker(tmp, {"frames": frames, "seed": seed, "size": list(size), "scene": scene_kind, "layout": layout})
+    writer = {
+        "tum-mono": _write_tum_mono,
+        "euroc": _write_euroc,
+        "kitti": _write_kitti,
+        "tum-rgbd": _write_tum_rgbd,
+        "tum-vi": _write_tum_vi,
+    }[layout]
+    writer(tmp, Synth(frames, seed, size, scene_kind, out.name))
     if out.exists():  # empty, or generated by slamrun (checked above)
         import shutil
 
         shutil.rmtree(out)
     tmp.rename(out)
+    if layout == "kitti":  # KITTI keeps its ground truth beside the sequences: poses/NN.txt
+        kitti_poses.parent.mkdir(parents=True, exist_ok=True)
+        (tmp.parent / f".{out.name}.poses.tmp").replace(kitti_poses)
     return out
+
+
+@dataclass(frozen=True)
+class Synth:
+    """What every layout's writer renders from: the scene, its texture and the camera's loop."""
+
+    frames: int
+    seed: int
+    size: tuple[int, int]
+    scene_kind: str
+    name: str
+
+    @property
+    def scene(self) -> Scene:
+        return make_scene(self.scene_kind, np.random.default_rng(self.seed))
+
+    def renderer(self, cam) -> tuple[Scene, Renderer]:
+        rng = np.random.default_rng(self.seed)
+        scene = make_scene(self.scene_kind, rng)
+        return scene, Renderer(scene, make_texture(rng), camera_rays(cam), (cam.height, cam.width))
+
+    def poses_at(self, scene: Scene, fraction: np.ndarray) -> np.ndarray:
+        """Camera-to-world 4x4 poses at `fraction` of the loop (0: first frame, 1: last)."""
+        rots, positions = camera_path_at(scene, 2 * np.pi * np.asarray(fraction, float))
+        t = np.tile(np.eye(4), (len(rots), 1, 1))
+        t[:, :3, :3], t[:, :3, 3] = rots, positions
+        return t
+
+    def images(self, cam, exposure: np.ndarray | None = None, vignette: np.ndarray | None = None):
+        """(index, 8-bit frame) for every frame: rendered, then through the response curve when `exposure` is
+        given (TUM-Mono's photometric model), else linear."""
+        scene, renderer = self.renderer(cam)
+        rots, positions = camera_path(scene, self.frames)
+        for i in range(self.frames):
+            irr = renderer.render(rots[i], positions[i])
+            if exposure is None:
+                yield i, np.clip(np.rint(irr), 0, 255).astype(np.uint8)
+            else:
+                yield i, response(irr * vignette * np.float32(exposure[i] / 8.0))
+
+
+def loop_fraction(times: np.ndarray, frame_times: np.ndarray) -> np.ndarray:
+    """Where on the loop (0: first frame, 1: last) the camera is at `times`, frame i being at i / (n - 1): piecewise
+    linear between the frames' own (irregular) times, extended linearly beyond them."""
+    n = len(frame_times)
+    k = np.clip(np.searchsorted(frame_times, times) - 1, 0, n - 2)
+    step = (times - frame_times[k]) / (frame_times[k + 1] - frame_times[k])
+    return (k + step) / (n - 1)
+
+
+def camera_rays(cam) -> np.ndarray:
+    """One ray (x, y, 1) per pixel of any camera model, row by row."""
+    u, v = np.meshgrid(np.arange(cam.width, dtype=float), np.arange(cam.height, dtype=float))
+    xy = cam.unproject(np.column_stack([u.ravel(), v.ravel()]))
+    return np.column_stack([xy, np.ones(len(xy))])
+
+
+def _tum_rows(t: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    quats = Rotation.from_matrix(poses[:, :3, :3]).as_quat()
+    return np.column_stack([t, poses[:, :3, 3], quats])
+
+
+def _savetxt(path: Path, rows: np.ndarray, fmt: str = "%.9f", header: str = "") -> None:
+    buf = io.StringIO()
+    np.savetxt(buf, rows, fmt=fmt, header=header, comments="")
+    path.write_text(buf.getvalue().replace("nan", "NaN"))
+
+
+def _write_tum_mono(tmp: Path, s: Synth) -> None:
+    frames = s.frames
+    cam = default_camera(*s.size)
+    vignette = vignette_image(cam)
+    t = 1.0 + np.arange(frames) / FPS
+    exposure = 8.0 * (1.0 + 0.25 * np.sin(2 * np.pi * np.arange(frames) / 97.0))
+    with zipfile.ZipFile(tmp / "images.zip", "w", zipfile.ZIP_STORED) as zf:
+        for i, img in s.images(cam, exposure, vignette):
+            ok, jpg = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+            entry = zipfile.ZipInfo(f"{i:05d}.jpg", date_time=(1980, 1, 1, 0, 0, 0))  # deterministic bytes
+            zf.writestr(entry, jpg.tobytes())
+    with open(tmp / "times.txt", "w") as f:
+        for i in range(frames):
+            f.write(f"{i:05d} {t[i]:.6f} {exposure[i]:.6f}\n")
+    out_size = (640, 480) if s.size[0] >= 640 and s.size[1] >= 480 else s.size  # TUM-Mono's output size
+    write_camera_txt(tmp / "camera.txt", cam, "crop", out_size)
+    (tmp / "pcalib.txt").write_text(" ".join(f"{v:.9g}" for v in inverse_response()) + "\n")
+    cv2.imwrite(str(tmp / "vignette.png"), np.rint(vignette / vignette.max() * 65535).astype(np.uint16))
+    rots, positions = camera_path(s.scene, frames)
+    gt = np.column_stack([t, positions, Rotation.from_matrix(rots).as_quat()])
+    _savetxt(tmp / "groundtruth_full.txt", gt)
+    n_seg = max(int(math.floor(GT_FRACTION * frames)), 3)
+    gt_sync = gt.copy()
+    gt_sync[n_seg : frames - n_seg, 1:] = np.nan
+    _savetxt(tmp / "groundtruthSync.txt", gt_sync)
+
+
+# EuRoC's cam0: the radial-tangential distortion and the camera-to-body transform of the real rig (MH_01's
+# sensor.yaml), the intrinsics scaled to the image size.
+EUROC_DISTORTION = (-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05)
+EUROC_T_BS = np.array(
+    [
+        [0.0148655429818, -0.999880929698, 0.00414029679422, -0.0216401454975],
+        [0.999557249008, 0.0149672133247, 0.025715529948, -0.064676986768],
+        [-0.0257744366974, 0.00375618835797, 0.999660727178, 0.00981073058949],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
+EUROC_START_NS = 1403636579763555584  # MH_01's first frame
+
+
+def _write_asl_frames(mav0: Path, s: Synth, cam, rate_hz: float, bits: int = 8) -> np.ndarray:
+    """mav0/cam0/data/<ns>.png and data.csv; returns the frames' times in nanoseconds."""
+    period_ns = int(round(1e9 / rate_hz))
+    ns = EUROC_START_NS + period_ns * np.arange(s.frames, dtype=np.int64) + (np.arange(s.frames) % 3) * 1000
+    data = mav0 / "cam0" / "data"
+    data.mkdir(parents=True)
+    for i, img in s.images(cam):
+        cv2.imwrite(str(data / f"{ns[i]}.png"), img.astype(np.uint16) * 257 if bits == 16 else img)
+    (mav0 / "cam0" / "data.csv").write_text(
+        "#timestamp [ns],filename\n" + "".join(f"{v},{v}.png\n" for v in ns.tolist())
+    )
+    return ns
+
+
+def _body_rows(s: Synth, ns_frames: np.ndarray, rate_hz: float, t_body_cam: np.ndarray, keep=None) -> str:
+    """ASL state rows (ns, p, q w-first, then zero velocities and biases) of the body at `rate_hz`, from a little
+    before the first frame to a little after the last, at times that are not the frames' own."""
+    period = int(round(1e9 / rate_hz))
+    ns = np.arange(ns_frames[0] - 5 * period + 1_700_000, ns_frames[-1] + 5 * period, period, dtype=np.int64)
+    frac = loop_fraction(ns.astype(float), ns_frames.astype(float))
+    cam = s.poses_at(s.scene, frac)
+    body = cam @ np.linalg.inv(t_body_cam)
+    q = Rotation.from_matrix(body[:, :3, :3]).as_quat()
+    rows = []
+    for k in range(len(ns)):
+        if keep is not None and not keep(frac[k]):
+            continue
+        x, y, z = body[k, :3, 3]
+        rows.append(f"{ns[k]},{x:.9f},{y:.9f},{z:.9f},{q[k, 3]:.9f},{q[k, 0]:.9f},{q[k, 1]:.9f},{q[k, 2]:.9f}")
+    return "".join(r + ",0,0,0,0,0,0,0,0,0\n" for r in rows)
+
+
+def _write_euroc(tmp: Path, s: Synth) -> None:
+    w, h = s.size
+    f = 0.61 * w
+    pinhole = PinholeCamera(w, h, f, f * 0.997, w / 2 - 8.8, h / 2 + 8.4)
+    cam = RadTanCamera(pinhole, *EUROC_DISTORTION)
+    mav0 = tmp / "mav0"
+    ns = _write_asl_frames(mav0, s, cam, rate_hz=20.0)
+    tbs = ", ".join(f"{v:.12g}" for v in EUROC_T_BS.ravel())
+    (mav0 / "cam0" / "sensor.yaml").write_text(
+        "# General sensor definitions.\nsensor_type: camera\ncomment: slamrun synth cam0 (EuRoC layout)\n\n"
+        f"# Sensor extrinsics wrt. the body-frame.\nT_BS:\n  cols: 4\n  rows: 4\n  data: [{tbs}]\n\n"
+        f"rate_hz: 20\nresolution: [{w}, {h}]\ncamera_model: pinhole\n"
+        f"intrinsics: [{pinhole.fx:.9g}, {pinhole.fy:.9g}, {pinhole.cx:.9g}, {pinhole.cy:.9g}] #fu, fv, cu, cv\n"
+        f"distortion_model: radial-tangential\ndistortion_coefficients: [{', '.join(map(str, EUROC_DISTORTION))}]\n"
+    )
+    gt = mav0 / "state_groundtruth_estimate0"
+    gt.mkdir()
+    header = "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], "
+    header += "v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], "
+    header += "b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], "
+    header += "b_a_RS_S_z [m s^-2]\n"
+    (gt / "data.csv").write_text(header + _body_rows(s, ns, 200.0, EUROC_T_BS))
+
+
+# TUM-VI's cam0 (room sequences, 512x512 equidistant) and its camera-to-IMU transform, as in its camchain.
+TUMVI_DISTORTION = (0.0034823894022493434, 0.0007150348452162257, -0.0020532361418706202, 0.00020293673591811182)
+TUMVI_T_CAM_IMU = np.array(
+    [
+        [-0.9995250378696743, 0.029615343885863205, -0.008522328211654736, 0.04727988224914392],
+        [0.0075019185074052044, -0.03439736061393144, -0.9993800792498829, -0.047443232143367084],
+        [-0.02989013031643309, -0.998969345370175, 0.03415885127385616, -0.0681999605066297],
+        [0.0, 0.0, 0.0, 1.0],
+    ]
+)
+
+
+def _write_tum_vi(tmp: Path, s: Synth) -> None:
+    w, h = s.size
+    f = 0.373 * w  # TUM-VI: 190.97 px on 512
+    pinhole = PinholeCamera(w, h, f, f, w / 2 - 1.07, h / 2 + 0.89)
+    cam = EquidistantCamera(pinhole, *TUMVI_DISTORTION)
+    mav0 = tmp / "mav0"
+    ns = _write_asl_frames(mav0, s, cam, rate_hz=20.0, bits=16)
+    (tmp / "dso").mkdir()
+    rows = "\n".join(f"    - [{', '.join(f'{v:.15g}' for v in r)}]" for r in TUMVI_T_CAM_IMU)
+    (tmp / "dso" / "camchain.yaml").write_text(
+        "cam0:\n  T_cam_imu:\n" + rows + "\n  camera_model: pinhole\n"
+        f"  distortion_coeffs: [{', '.join(map(str, TUMVI_DISTORTION))}]\n  distortion_model: equidistant\n"
+        f"  intrinsics: [{f:.9g}, {f:.9g}, {pinhole.cx:.9g}, {pinhole.cy:.9g}]\n  resolution: [{w}, {h}]\n"
+        "  rostopic: /cam0/image_raw\n"
+    )
+    mocap = mav0 / "mocap0"
+    mocap.mkdir()
+    seen = lambda frac: frac <= GT_FRACTION or frac >= 1 - GT_FRACTION  # noqa: E731  the room sees start and end
+    body = _body_rows(s, ns, 120.0, np.linalg.inv(TUMVI_T_CAM_IMU), keep=seen)
+    body = "".join(",".join(line.split(",")[:8]) + "\n" for line in body.splitlines())
+    header = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n"
+    (mocap / "data.csv").write_text(header + body)
+
+
+def _write_kitti(tmp: Path, s: Synth) -> None:
+    w, h = s.size
+    f = 0.55 * w
+    cam = PinholeCamera(w, h, f, f, w / 2 - 0.5, h / 2 - 0.5)
+    images = tmp / "image_0"
+    images.mkdir()
+    for i, img in s.images(cam):
+        cv2.imwrite(str(images / f"{i:06d}.png"), img)
+    t = np.arange(s.frames) * 0.1036  # about 10 Hz, KITTI's irregular-looking step
+    (tmp / "times.txt").write_text("".join(f"{v:e}\n" for v in t))
+
+    def p(tx: float) -> str:  # a 3x4 projection row-major, KITTI's %e style
+        return " ".join(f"{v:e}" for v in (f, 0, cam.cx, tx, 0, f, cam.cy, 0, 0, 0, 1, 0))
+
+    (tmp / "calib.txt").write_text(
+        f"P0: {p(0.0)}\nP1: {p(-0.54 * f)}\nP2: {p(0.0)}\nP3: {p(-0.54 * f)}\nTr: 1 0 0 0 0 1 0 0 0 0 1 0\n"
+    )
+    poses = s.poses_at(s.scene, np.arange(s.frames) / max(s.frames - 1, 1))
+    relative = np.linalg.inv(poses[0]) @ poses  # KITTI: camera poses in the first camera's frame
+    rows = relative[:, :3, :].reshape(len(relative), 12)
+    _savetxt(tmp.parent / f".{s.name}.poses.tmp", rows, fmt="%e")
+
+
+def _write_tum_rgbd(tmp: Path, s: Synth) -> None:
+    from runner.datasets.tum_rgbd import camera_for
+
+    cam = camera_for(Path(s.name)).camera
+    rgb = tmp / "rgb"
+    rgb.mkdir()
+    t = 1305031102.175304 + np.arange(s.frames) / 30.0 + (np.arange(s.frames) % 4) * 0.0011
+    names = [f"rgb/{v:.6f}.png" for v in t]
+    for i, img in s.images(cam):
+        cv2.imwrite(str(tmp / names[i]), cv2.cvtColor(img, cv2.COLOR_GRAY2BGR))
+    (tmp / "rgb.txt").write_text(
+        f"# color images\n# file: '{s.name}.bag'\n# timestamp filename\n"
+        + "".join(f"{v:.6f} {n}\n" for v, n in zip(t, names, strict=True))
+    )
+    t_gt = np.arange(t[0] - 0.05 + 0.0043, t[-1] + 0.05, 0.01)  # motion capture at 100 Hz, its own clock ticks
+    frac = loop_fraction(t_gt, t)
+    rows = _tum_rows(t_gt, s.poses_at(s.scene, frac))
+    (tmp / "groundtruth.txt").write_text(
+        f"# ground truth trajectory\n# file: '{s.name}.bag'\n# timestamp tx ty tz qx qy qz qw\n"
+        + "".join(f"{r[0]:.4f} " + " ".join(f"{v:.4f}" for v in r[1:]) + "\n" for r in rows)
+    )

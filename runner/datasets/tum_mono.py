@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import functools
 import zipfile
-from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -13,96 +11,28 @@ import numpy as np
 
 from runner.core.camera import CameraFile, read_camera_txt
 from runner.core.trajectory import Trajectory
+from runner.datasets.sequence import IMAGE_SUFFIXES, Sequence, check_regular
 from runner.errors import DatasetError
 
-IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
 REQUIRED = ("times.txt", "camera.txt", "pcalib.txt", "vignette.png")
-# The text files' size limit: far above any real sequence's (a times.txt of a million frames is 40 MB), far below
-# what would exhaust memory.
-MAX_TEXT_BYTES = 256 * 2**20
 TEXT_FILES = ("times.txt", "camera.txt", "pcalib.txt", "groundtruthSync.txt")
 
 
 def unusable_files(root: Path) -> list[str]:
     """The sequence's files that exist but cannot be read to an end: not regular files (a device such as
     /dev/zero, a pipe, a folder) or text files beyond MAX_TEXT_BYTES."""
-    problems = []
-    for name in (*REQUIRED, "images.zip", "groundtruthSync.txt"):
-        p = root / name
-        if not (p.exists() or p.is_symlink()):
-            continue
-        if not p.is_file():
-            problems.append(
-                f"{p}: not a regular file (a device, pipe, folder or broken link); expected the file itself"
-            )
-        elif name in TEXT_FILES and p.stat().st_size > MAX_TEXT_BYTES:
-            problems.append(f"{p}: {p.stat().st_size / 2**20:.0f} MB, more than a sequence's {name} can be")
-    return problems
+    names = (*REQUIRED, "images.zip", "groundtruthSync.txt")
+    return check_regular([root / n for n in names], {root / n for n in TEXT_FILES})
 
 
-@dataclass(frozen=True, eq=False)
-class Sequence:
-    """A validated sequence: frame names in order, their timestamps and exposures, its calibration."""
-
-    root: Path
-    frame_names: tuple[str, ...]
-    timestamps: np.ndarray
-    exposures_ms: np.ndarray | None
-    camera: CameraFile
-    zip_path: Path | None  # None when frames are in images/
-
-    @property
-    def name(self) -> str:
-        return self.root.name
-
-    @property
-    def n_frames(self) -> int:
-        return len(self.frame_names)
-
-    @property
-    def pcalib(self) -> Path | None:
-        p = self.root / "pcalib.txt"
-        return p if p.exists() else None
-
-    @property
-    def vignette(self) -> Path | None:
-        p = self.root / "vignette.png"
-        return p if p.exists() else None
-
-    @property
-    def groundtruth_path(self) -> Path | None:
-        p = self.root / "groundtruthSync.txt"
-        return p if p.exists() else None
-
-    def groundtruth(self) -> Trajectory | None:
-        """groundtruthSync.txt, NaN rows kept (they split the segments by row count)."""
-        p = self.groundtruth_path
-        if p is None:
-            return None
-        data = np.loadtxt(p, comments="#", ndmin=2)
-        if data.shape[1] != 8:
-            raise DatasetError(f"{p}: {data.shape[1]} columns, expected 'timestamp tx ty tz qx qy qz qw'")
-        if np.any(np.diff(data[:, 0]) <= 0):
-            raise DatasetError(f"{p}: timestamps are not strictly increasing")
-        return Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
-
-    def read_bytes(self) -> Iterator[tuple[str, bytes]]:
-        """(name, encoded bytes) of every frame, in order."""
-        if self.zip_path is not None:
-            with zipfile.ZipFile(self.zip_path) as zf:
-                for name in self.frame_names:
-                    yield name, zf.read(name)
-        else:
-            for name in self.frame_names:
-                yield name, (self.root / "images" / name).read_bytes()
-
-    def frames(self) -> Iterator[np.ndarray]:
-        """Decoded 8-bit grayscale frames, in order."""
-        for name, data in self.read_bytes():
-            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise DatasetError(f"{self.root}: frame {name} cannot be decoded")
-            yield img
+def read_groundtruth_sync(p: Path) -> Trajectory:
+    """groundtruthSync.txt, NaN rows kept (they split the segments by row count)."""
+    data = np.loadtxt(p, comments="#", ndmin=2)
+    if data.shape[1] != 8:
+        raise DatasetError(f"{p}: {data.shape[1]} columns, expected 'timestamp tx ty tz qx qy qz qw'")
+    if np.any(np.diff(data[:, 0]) <= 0):
+        raise DatasetError(f"{p}: timestamps are not strictly increasing")
+    return Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
 
 
 def open_sequence(root: str | Path) -> Sequence:
@@ -143,7 +73,23 @@ def open_sequence(root: str | Path) -> Sequence:
     if problems:
         raise DatasetError(f"{root}: invalid sequence:\n  " + "\n  ".join(problems))
     assert names is not None and timestamps is not None and camera is not None
-    return Sequence(root, tuple(names), timestamps, exposures, camera, zip_path)
+    gt = root / "groundtruthSync.txt"
+    return Sequence(
+        root,
+        tuple(names),
+        timestamps,
+        exposures,
+        camera,
+        zip_path,
+        images_dir=None if zip_path else root / "images",
+        layout="tum-mono",
+        pcalib=root / "pcalib.txt",
+        vignette=root / "vignette.png",
+        camera_txt=root / "camera.txt",
+        groundtruth_path=gt if gt.exists() else None,
+        key_files=(root / "times.txt", root / "camera.txt", root / "pcalib.txt"),
+        groundtruth_reader=(lambda: read_groundtruth_sync(gt)) if gt.exists() else None,
+    )
 
 
 def _frame_names(root: Path, problems: list[str]) -> tuple[list[str] | None, Path | None]:

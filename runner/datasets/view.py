@@ -45,6 +45,7 @@ class PreparedView:
     height: int
     pinhole: tuple[float, float, float, float] | None  # fx fy cx cy in pixels, for rectified views
     frame_suffix: str = ".png"  # frames are images/<6-digit index><suffix>
+    photometric: bool = True  # pcalib.txt and vignette.png are in the view (native views of TUM-Mono)
 
     images_dir = "images"
     times = "times.txt"
@@ -104,4 +105,5 @@ class PreparedView:
             height=meta["height"],
             pinhole=tuple(meta["pinhole"]) if meta["pinhole"] else None,
             frame_suffix=meta.get("frame_suffix", ".png"),
+            photometric=meta.get("photometric", meta["profile"] == Profile.native.value),
         )

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from runner.datasets.cache import whole_mirror, whole_view
-from runner.datasets.tum_mono import open_sequence
+from runner.datasets.layouts import holds_sequence, open_sequence
 from runner.datasets.view import Profile
 from runner.engine.ledger import Ledger
 from runner.engine.paths import RunPaths, finished_record
@@ -110,7 +110,7 @@ def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: Cam
     """0 when the view is prepared and whole, its estimated size when it must be prepared (1 when its frames
     will be links to its other direction's, prepared already), None when the sequence does not exist yet
     (synthetic, generated on first use)."""
-    if not (seq_dir / "times.txt").exists():
+    if not holds_sequence(seq_dir):
         return None
     try:
         seq = open_sequence(seq_dir)
@@ -123,7 +123,10 @@ def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: Cam
     if profile is Profile.rectified:
         per_pixel = 1.0 if spec.frame_format == "pgm" else 0.5  # PNG level 1 on camera images: about half
         return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * per_pixel)
+    if not seq.fov:  # its native view is rectified too
+        return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * 0.5)
     if seq.zip_path is not None:
         with zipfile.ZipFile(seq.zip_path) as zf:
             return sum(i.file_size for i in zf.infolist())
-    return sum(p.stat().st_size for p in (seq.root / "images").iterdir())
+    assert seq.images_dir is not None
+    return sum((seq.images_dir / name).stat().st_size for name in seq.frame_names)

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import methods
-from runner.datasets.tum_mono import sequence_identity
+from runner.datasets.layouts import sequence_identity
 from runner.datasets.view import Direction, Profile
 from runner.engine.spec import CampaignSpec, MethodSpec
 

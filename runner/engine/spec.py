@@ -16,6 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 import methods
 from runner.datasets.generated import target_problem
+from runner.datasets.layouts import holds_sequence
 from runner.datasets.view import Direction
 from runner.engine.folders import path_part_problem, results_folder_problem
 from runner.errors import SpecError
@@ -48,13 +49,28 @@ class DatasetSpec(Strict):
     name: str = Field(description="Dataset name, e.g. tum-mono.")
     path: Path = Field(description="Folder holding one folder per sequence.")
     sequences: list[str] = Field(min_length=1, description="Sequence folder names, e.g. sequence_01.")
-    synthetic: SynthSpec | None = Field(None, description="Generate missing sequences with `slamrun synth`.")
-    metrics: list[Literal["tum-mono", "ate", "rpe", "kitti"]] = Field(
-        default_factory=lambda: ["tum-mono"],
-        min_length=1,
-        description="Metrics of each run against the ground truth: TUM-Mono's six (the default for TUM-Mono "
-        "sequences), ATE, RPE (one frame apart), KITTI's segment errors.",
+    layout: Literal["tum-mono", "euroc", "kitti", "tum-rgbd", "tum-vi"] = Field(
+        "tum-mono",
+        description="The sequences' layout: TUM-Mono, EuRoC (ASL), KITTI odometry (sequences/NN), TUM RGB-D, TUM-VI; "
+        "each sequence folder must be of it (recognised from its files), and synthetic sequences are written in it.",
     )
+    synthetic: SynthSpec | None = Field(None, description="Generate missing sequences with `slamrun synth`.")
+    metrics: list[Literal["tum-mono", "ate", "rpe", "kitti"]] | None = Field(
+        None,
+        min_length=1,
+        description="Metrics of each run against the ground truth: TUM-Mono's six, ATE, RPE (one frame apart), "
+        "KITTI's segment errors. Default by layout: tum-mono for TUM-Mono; ate and rpe (and kitti for KITTI) for the "
+        "others.",
+    )
+
+    @model_validator(mode="after")
+    def _default_metrics(self):
+        if self.metrics is None:
+            from runner.datasets.layouts import DEFAULT_METRICS
+
+            self.metrics = list(DEFAULT_METRICS[self.layout])
+        return self
+
     alignment: str = Field(
         "sim3", description="Alignment before ATE, RPE and KITTI's metric: sim3 (monocular), se3, first:N, ..."
     )
@@ -311,8 +327,13 @@ def _file_problems(spec: CampaignSpec) -> list[str]:
                 continue
             for s, seq in enumerate(ds.sequences):
                 folder = ds.path / seq
-                if not (folder / "times.txt").is_file() and (why := target_problem(folder)):
+                if not holds_sequence(folder) and (why := target_problem(folder)):
                     problems.append(f"datasets[{d}].sequences[{s}]: {why}")
+                if ds.layout == "tum-rgbd" and not re.search(r"freiburg[123]", seq):
+                    problems.append(
+                        f"datasets[{d}].sequences[{s}]: {seq!r}: a synthetic TUM RGB-D sequence takes the camera "
+                        "of its name: name it with freiburg1, freiburg2 or freiburg3 (e.g. rgbd_dataset_freiburg1_room)"
+                    )
             continue
         if not ds.path.is_dir():
             problems.append(f"datasets[{d}].path: folder {ds.path} not found (download it: slamrun dataset download)")

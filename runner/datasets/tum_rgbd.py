@@ -1,0 +1,127 @@
+"""TUM RGB-D sequences (`rgbd_dataset_freiburgN_...`): `rgb.txt` (`timestamp rgb/<timestamp>.png` rows after `#`
+comments), the colour frames in `rgb/`, and `groundtruth.txt` (TUM format, motion capture at 100 Hz). The camera is
+one of the three the benchmark publishes, chosen by `freiburg1`, `freiburg2` or `freiburg3` in the folder's name.
+Ground truth is associated with the frames as TUM's tools do: the nearest pose within 0.02 s.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from runner.core.camera import CameraFile, FovCamera, PinholeCamera, RadTanCamera
+from runner.core.trajectory import Trajectory, read_tum
+from runner.datasets.sequence import (
+    IMAGE_SUFFIXES,
+    Sequence,
+    check_first_frame,
+    check_regular,
+    nearest_poses,
+    read_text,
+)
+from runner.errors import DatasetError, TrajectoryFormatError
+
+ASSOCIATION_S = 0.02
+WIDTH, HEIGHT = 640, 480
+# The benchmark's published intrinsics (fx fy cx cy) and OpenCV distortion (k1 k2 p1 p2 k3) of the colour camera
+CAMERAS = {
+    "freiburg1": ((517.3, 516.5, 318.6, 255.3), (0.2624, -0.9531, -0.0054, 0.0026, 1.1633)),
+    "freiburg2": ((520.9, 521.0, 325.1, 249.7), (0.2312, -0.7849, -0.0033, -0.0001, 0.9172)),
+    "freiburg3": ((535.4, 539.2, 320.1, 247.6), (0.0, 0.0, 0.0, 0.0, 0.0)),
+}
+
+
+def camera_for(root: Path) -> CameraFile:
+    """The published camera of the sequence, by `freiburgN` in its folder's name."""
+    found = re.search(r"freiburg[123]", root.name)
+    if found is None:
+        raise DatasetError(
+            f"{root}: unknown TUM RGB-D camera; the folder's name must hold freiburg1, freiburg2 or freiburg3 "
+            "(as the benchmark's rgbd_dataset_freiburgN_... folders do) to choose its published calibration"
+        )
+    (fx, fy, cx, cy), k = CAMERAS[found.group(0)]
+    if not any(k):
+        return CameraFile(FovCamera(WIDTH, HEIGHT, fx, fy, cx, cy, 0.0), "none", WIDTH, HEIGHT)
+    return CameraFile(RadTanCamera(PinholeCamera(WIDTH, HEIGHT, fx, fy, cx, cy), *k), "crop", WIDTH, HEIGHT)
+
+
+def open_tum_rgbd(root: str | Path) -> Sequence:
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: sequence folder not found")
+    listing, gt_path = root / "rgb.txt", root / "groundtruth.txt"
+    problems = check_regular([listing, gt_path], {listing, gt_path})
+    if problems:
+        raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
+    camera = None
+    try:
+        camera = camera_for(root)
+    except DatasetError as exc:
+        problems.append(str(exc))
+    names, times = [], None
+    if not listing.is_file():
+        problems.append(f"{listing}: missing; expected 'timestamp rgb/<file>.png' rows")
+    else:
+        names, times = _read_listing(listing, problems)
+    if names:
+        missing = [n for n in names if not (root / n).is_file()]
+        if missing:
+            problems.append(f"{root}: {len(missing)} frame(s) listed in rgb.txt missing (e.g. {missing[0]})")
+        elif camera is not None:
+            check_first_frame(root, root, names[0], (WIDTH, HEIGHT), problems)
+    if problems:
+        raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
+    assert camera is not None and times is not None
+
+    def groundtruth() -> Trajectory:
+        try:
+            gt = read_tum(gt_path)
+        except TrajectoryFormatError as exc:
+            raise DatasetError(str(exc)) from None
+        return nearest_poses(gt, times, ASSOCIATION_S)
+
+    return Sequence(
+        root,
+        tuple(names),
+        times,
+        None,
+        camera,
+        None,
+        images_dir=root,
+        layout="tum-rgbd",
+        groundtruth_path=gt_path if gt_path.is_file() else None,
+        key_files=(listing,),
+        groundtruth_reader=groundtruth if gt_path.is_file() else None,
+    )
+
+
+def _read_listing(path: Path, problems: list[str]) -> tuple[list[str], np.ndarray | None]:
+    names, stamps = [], []
+    for n, line in enumerate(read_text(path).splitlines(), start=1):
+        cells = line.split()
+        if not cells or cells[0].startswith("#"):
+            continue
+        if len(cells) != 2:
+            problems.append(f"{path}:{n}: {len(cells)} values; expected 'timestamp rgb/<file>.png'")
+            return [], None
+        try:
+            stamps.append(float(cells[0]))
+        except ValueError:
+            problems.append(f"{path}:{n}: {cells[0]!r} is not a time in seconds")
+            return [], None
+        name = cells[1]
+        if not name.lower().endswith(IMAGE_SUFFIXES) or ".." in Path(name).parts or Path(name).is_absolute():
+            problems.append(f"{path}:{n}: {name!r} is not an image path inside the sequence folder")
+            return [], None
+        names.append(name)
+    if not names:
+        problems.append(f"{path}: no frame listed")
+        return [], None
+    t = np.array(stamps)
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if len(bad):
+        problems.append(f"{path}: times not strictly increasing (frame {int(bad[0]) + 2})")
+        return [], None
+    return names, t
