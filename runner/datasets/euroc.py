@@ -22,6 +22,7 @@ from runner.datasets.sequence import (
     Sequence,
     check_first_frame,
     check_regular,
+    folder_sequence,
     interpolate_poses,
     read_text,
     transform_poses,
@@ -88,20 +89,7 @@ def _open(root: Path, layout: str) -> Sequence:
             raise DatasetError(str(exc)) from None
         return transform_poses(interpolate_poses(body, times, GT_MAX_GAP_S), t_body_cam)
 
-    return Sequence(
-        root,
-        tuple(names),
-        times,
-        None,
-        camera,
-        None,
-        images_dir=images,
-        layout=layout,
-        groundtruth_path=gt_path if gt_path.is_file() else None,
-        key_files=(csv, calib),
-        groundtruth_reader=groundtruth if gt_path.is_file() else None,
-        notes=notes,
-    )
+    return folder_sequence(root, layout, names, times, camera, images, (csv, calib), gt_path, groundtruth, notes)
 
 
 def _read_frame_list(csv: Path, problems: list[str]) -> tuple[list[str], np.ndarray | None]:

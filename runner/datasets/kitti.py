@@ -11,7 +11,14 @@ import numpy as np
 
 from runner.core.camera import CameraFile, FovCamera
 from runner.core.trajectory import Trajectory, from_matrices
-from runner.datasets.sequence import IMAGE_SUFFIXES, Sequence, check_first_frame, check_regular, read_text
+from runner.datasets.sequence import (
+    IMAGE_SUFFIXES,
+    Sequence,
+    check_first_frame,
+    check_regular,
+    folder_sequence,
+    read_text,
+)
 from runner.errors import DatasetError
 
 
@@ -53,19 +60,7 @@ def open_kitti(root: str | Path) -> Sequence:
     def groundtruth() -> Trajectory:
         return read_poses(gt_path, times)
 
-    return Sequence(
-        root,
-        tuple(names),
-        times,
-        None,
-        camera,
-        None,
-        images_dir=images,
-        layout="kitti",
-        groundtruth_path=gt_path if gt_path.is_file() else None,
-        key_files=(times_path, calib),
-        groundtruth_reader=groundtruth if gt_path.is_file() else None,
-    )
+    return folder_sequence(root, "kitti", names, times, camera, images, (times_path, calib), gt_path, groundtruth)
 
 
 def read_poses(path: Path, times: np.ndarray) -> Trajectory:

@@ -98,6 +98,37 @@ class Sequence:
         return f"{p.name}|{st.st_size}|{st.st_mtime_ns}"
 
 
+def folder_sequence(
+    root: Path,
+    layout: str,
+    names: list[str],
+    times: np.ndarray,
+    camera: CameraFile,
+    images_dir: Path,
+    key_files: tuple[Path, ...],
+    groundtruth_path: Path,
+    groundtruth_reader: Callable[[], Trajectory],
+    notes: tuple[str, ...] = (),
+) -> Sequence:
+    """A sequence whose frames are files of a folder, without photometric calibration (every layout but
+    TUM-Mono); its ground truth where the file exists."""
+    has_gt = groundtruth_path.is_file()
+    return Sequence(
+        root,
+        tuple(names),
+        times,
+        None,
+        camera,
+        None,
+        images_dir=images_dir,
+        layout=layout,
+        groundtruth_path=groundtruth_path if has_gt else None,
+        key_files=key_files,
+        groundtruth_reader=groundtruth_reader if has_gt else None,
+        notes=notes,
+    )
+
+
 def check_regular(paths: list[Path], text_files: set[Path]) -> list[str]:
     """The files among `paths` that exist but cannot be read to an end: not regular files (a device such as
     /dev/zero, a pipe, a folder) or text files beyond MAX_TEXT_BYTES."""

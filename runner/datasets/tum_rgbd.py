@@ -18,6 +18,7 @@ from runner.datasets.sequence import (
     Sequence,
     check_first_frame,
     check_regular,
+    folder_sequence,
     nearest_poses,
     read_text,
 )
@@ -82,19 +83,7 @@ def open_tum_rgbd(root: str | Path) -> Sequence:
             raise DatasetError(str(exc)) from None
         return nearest_poses(gt, times, ASSOCIATION_S)
 
-    return Sequence(
-        root,
-        tuple(names),
-        times,
-        None,
-        camera,
-        None,
-        images_dir=root,
-        layout="tum-rgbd",
-        groundtruth_path=gt_path if gt_path.is_file() else None,
-        key_files=(listing,),
-        groundtruth_reader=groundtruth if gt_path.is_file() else None,
-    )
+    return folder_sequence(root, "tum-rgbd", names, times, camera, root, (listing,), gt_path, groundtruth)
 
 
 def _read_listing(path: Path, problems: list[str]) -> tuple[list[str], np.ndarray | None]:
