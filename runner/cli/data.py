@@ -12,11 +12,15 @@ from runner.cli.console import console
 def add_commands(sub) -> None:
     ds = sub.add_parser("dataset", help="dataset tools")
     dsub = ds.add_subparsers()
-    dl = dsub.add_parser("download", help="download TUM-Mono sequences (resumable)")
-    dl.add_argument("name", choices=["tum-mono"], help="the dataset")
+    dl = dsub.add_parser("download", help="download dataset sequences (resumable, sizes checked)")
+    dl.add_argument("name", choices=["tum-mono", "euroc", "tum-rgbd", "tum-vi", "kitti"], help="the dataset")
     dl.add_argument("dest", type=Path, help="folder to download into")
-    dl.add_argument("--sequences", default="1-50", help="numbers and ranges, e.g. 1-5,7")
-    dl.add_argument("--url", help="base address of the sequence zips (default: the dataset's site)")
+    dl.add_argument(
+        "--sequences",
+        help="tum-mono: numbers and ranges (default 1-50); euroc: names (default all eleven, e.g. MH_01_easy); "
+        "tum-rgbd and tum-vi: names, comma-separated (e.g. freiburg1_xyz,freiburg2_desk; room1,room2)",
+    )
+    dl.add_argument("--url", help="base address of the archives (a mirror; default: the dataset's site)")
     dl.set_defaults(func=cmd_download)
     sy = sub.add_parser("synth", help="write a synthetic sequence in a dataset's layout")
     sy.add_argument("out", type=Path, help="the sequence folder to write")
@@ -37,9 +41,19 @@ def add_commands(sub) -> None:
 def cmd_download(args) -> int:
     from rich.progress import BarColumn, DownloadColumn, Progress, TextColumn, TransferSpeedColumn
 
-    from runner.datasets.download import TUM_MONO_URL, download_tum_mono, parse_sequences
+    from runner.datasets import download as dl
+    from runner.errors import DatasetError
 
-    numbers = parse_sequences(args.sequences)
+    if args.name == "kitti":
+        raise DatasetError(dl.KITTI_HOWTO)
+    if args.name == "tum-mono":
+        numbers = dl.parse_sequences(args.sequences or "1-50")
+    elif args.sequences:
+        names = [n.strip() for n in args.sequences.split(",") if n.strip()]
+    elif args.name == "euroc":
+        names = [s for seqs in dl.EUROC_SEQUENCES.values() for s in seqs]
+    else:
+        raise DatasetError(f"{args.name}: name the sequences to download with --sequences (they are many GB each)")
     with Progress(
         TextColumn("{task.description}"),
         BarColumn(),
@@ -53,7 +67,12 @@ def cmd_download(args) -> int:
             task = progress.add_task(name, total=None)
             return lambda done, total: progress.update(task, completed=done, total=total or None)
 
-        folders = download_tum_mono(args.dest, numbers, args.url or TUM_MONO_URL, factory, log=progress.console.print)
+        if args.name == "tum-mono":
+            folders = dl.download_tum_mono(
+                args.dest, numbers, args.url or dl.TUM_MONO_URL, factory, progress.console.print
+            )
+        else:
+            folders = dl.download_archives(args.name, args.dest, names, args.url, factory, progress.console.print)
     console.print(f"{len(folders)} sequence(s) in {args.dest}")
     return 0
 

@@ -1,12 +1,15 @@
-"""Download TUM-Mono sequences: resumable (HTTP Range), sizes verified, unpacked into DEST/sequence_XX/.
+"""Download sequences: resumable (HTTP Range), sizes verified (Content-Length), unpacked into DEST/<sequence>/.
 
-The dataset's address lives here only (TUM_MONO_URL), overridable with SLAMRUN_TUM_MONO_URL or --url.
-Each sequence is one zip (`sequence_XX.zip`) holding the folder `sequence_XX/`.
+TUM-Mono: one zip per sequence (`sequence_XX.zip` holding `sequence_XX/`). EuRoC, TUM RGB-D and TUM-VI: each
+sequence's archive as its authors publish it (a zip holding `mav0/`, a .tgz or a .tar holding the sequence's folder).
+The datasets' addresses live here only, each overridable with an environment variable or --url (a mirror). KITTI
+is not downloaded: its site asks each user to register and agree to its terms first.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import urllib.error
 import urllib.request
@@ -17,6 +20,22 @@ from pathlib import Path
 from runner.errors import DatasetError
 
 TUM_MONO_URL = os.environ.get("SLAMRUN_TUM_MONO_URL", "https://vision.in.tum.de/mono/dataset")
+EUROC_URL = os.environ.get("SLAMRUN_EUROC_URL", "http://robotics.ethz.ch/~asl-datasets/ijrr_euroc_mav_dataset")
+TUM_RGBD_URL = os.environ.get("SLAMRUN_TUM_RGBD_URL", "https://vision.in.tum.de/rgbd/dataset")
+TUM_VI_URL = os.environ.get("SLAMRUN_TUM_VI_URL", "https://vision.in.tum.de/tumvi/exported/euroc/512_16")
+KITTI_HOWTO = (
+    "KITTI odometry is not downloaded by slamrun: its site (https://www.cvlibs.net/datasets/kitti/eval_odometry.php) "
+    "asks each user to register and agree to its terms. Download data_odometry_gray.zip, data_odometry_calib.zip and "
+    "data_odometry_poses.zip there, unpack them into one folder (they share dataset/sequences/NN/ and add "
+    "dataset/poses/), and give a spec `layout: kitti` with `path: <folder>/dataset/sequences` and sequences such as "
+    '["00", "05"] (ground truth for 00-10).'
+)
+EUROC_SEQUENCES = {
+    "machine_hall": ["MH_01_easy", "MH_02_easy", "MH_03_medium", "MH_04_difficult", "MH_05_difficult"],
+    "vicon_room1": ["V1_01_easy", "V1_02_medium", "V1_03_difficult"],
+    "vicon_room2": ["V2_01_easy", "V2_02_medium", "V2_03_difficult"],
+}
+TUM_VI_ROOMS = {"corridor": 5, "magistrale": 6, "outdoors": 8, "room": 6, "slides": 3}
 CHUNK = 1 << 20
 
 
@@ -117,3 +136,111 @@ def unpack(archive: Path, dest: Path, name: str) -> Path:
     os.rename(inner, dest / name)
     shutil.rmtree(tmp, ignore_errors=True)
     return dest / name
+
+
+def remote_archives(dataset: str, names: list[str], base_url: str | None = None) -> list[tuple[str, str]]:
+    """(sequence folder name, archive address) of each named sequence of EuRoC, TUM RGB-D or TUM-VI; names are
+    checked against the dataset's sequences (TUM RGB-D: any rgbd_dataset_freiburg{1,2,3}_... name)."""
+    out = []
+    bad = []
+    for name in names:
+        if dataset == "euroc":
+            group = next((g for g, seqs in EUROC_SEQUENCES.items() if name in seqs), None)
+            if group is None:
+                bad.append(name)
+                continue
+            out.append((name, f"{(base_url or EUROC_URL).rstrip('/')}/{group}/{name}/{name}.zip"))
+        elif dataset == "tum-rgbd":
+            full = name if name.startswith("rgbd_dataset_") else f"rgbd_dataset_{name}"
+            found = re.fullmatch(r"rgbd_dataset_(freiburg[123])_[a-z0-9_]+", full)
+            if found is None:
+                bad.append(name)
+                continue
+            out.append((full, f"{(base_url or TUM_RGBD_URL).rstrip('/')}/{found.group(1)}/{full}.tgz"))
+        elif dataset == "tum-vi":
+            full = name if name.startswith("dataset-") else f"dataset-{name}_512_16"
+            found = re.fullmatch(r"dataset-([a-z]+)(\d+)_512_16", full)
+            if found is None or not 1 <= int(found.group(2)) <= TUM_VI_ROOMS.get(found.group(1), 0):
+                bad.append(name)
+                continue
+            out.append((full, f"{(base_url or TUM_VI_URL).rstrip('/')}/{full}.tar"))
+        else:
+            raise DatasetError(f"{dataset}: slamrun downloads tum-mono, euroc, tum-rgbd and tum-vi")
+    if bad:
+        known = {
+            "euroc": ", ".join(s for seqs in EUROC_SEQUENCES.values() for s in seqs),
+            "tum-rgbd": "rgbd_dataset_freiburg1_xyz, freiburg2_desk, ... (the benchmark's folder names)",
+            "tum-vi": ", ".join(f"{room}1-{n}" for room, n in TUM_VI_ROOMS.items())
+            + " (e.g. room1, dataset-room1_512_16)",
+        }[dataset]
+        raise DatasetError(f"--sequences: {', '.join(bad)}: not {dataset} sequences; known: {known}")
+    return out
+
+
+def download_archives(
+    dataset: str,
+    dest: Path,
+    names: list[str],
+    base_url: str | None = None,
+    progress_factory: Callable[[str], Callable[[int, int], None]] | None = None,
+    log: Callable[[str], None] = print,
+) -> list[Path]:
+    """Download and unpack EuRoC, TUM RGB-D or TUM-VI sequences into DEST/<sequence>/ (present ones skipped); each
+    unpacked folder must be a sequence of that layout."""
+    from runner.datasets.layouts import detect, holds_sequence
+
+    wanted = remote_archives(dataset, names, base_url)
+    dest.mkdir(parents=True, exist_ok=True)
+    done = []
+    for name, url in wanted:
+        folder = dest / name
+        if holds_sequence(folder):
+            log(f"{name}: present")
+            done.append(folder)
+            continue
+        archive = dest / url.rsplit("/", 1)[-1]
+        if not archive.exists():
+            fetch(url, archive, progress_factory(name) if progress_factory else None)
+        tmp = dest / f".{name}.unpack"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        try:
+            _extract(archive, tmp)
+            inner = tmp / name if (tmp / name).is_dir() else tmp  # EuRoC's zip holds mav0/ at its top
+            if not holds_sequence(inner) or detect(inner) != dataset:
+                archive.unlink()
+                raise DatasetError(f"{archive}: holds no {dataset} sequence {name} (deleted); is the address right?")
+            os.rename(inner, folder)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
+        archive.unlink()
+        done.append(folder)
+    return done
+
+
+def _extract(archive: Path, into: Path) -> None:
+    """A zip, .tgz or .tar, members kept inside `into` (no absolute paths, no `..`, no links out)."""
+    import tarfile
+
+    if archive.suffix == ".zip":
+        try:
+            with zipfile.ZipFile(archive) as zf:
+                bad = zf.testzip()
+                if bad:
+                    raise DatasetError(f"{archive}: member {bad} is corrupt; delete the file and download again")
+                for member in zf.namelist():
+                    if member.startswith("/") or ".." in Path(member).parts:
+                        raise DatasetError(f"{archive}: member {member!r} would land outside the folder; refused")
+                zf.extractall(into)
+        except zipfile.BadZipFile:
+            archive.unlink()
+            raise DatasetError(f"{archive}: not a zip file (deleted); run the same command again") from None
+        return
+    try:
+        with tarfile.open(archive) as tar:
+            tar.extractall(into, filter="data")
+    except tarfile.FilterError as exc:
+        raise DatasetError(f"{archive}: {exc}; refused") from None
+    except (tarfile.TarError, EOFError) as exc:
+        archive.unlink()
+        raise DatasetError(f"{archive}: not a readable archive ({exc}; deleted); run the same command again") from None
