@@ -53,3 +53,38 @@ def test_real_dso_forward_and_backward_through_docker(dso_image, tmp_path):
     assert "JakobEngel/dso@7b0c99f01d238f801c625beaff90240bcb007198" in record["image"]["sources"]
     images = json.loads((res.results / "images.json").read_text())  # beside the results too
     assert images["dso"]["id"] == record["image"]["id"] and images["dso"]["march"] == "x86-64-v2"
+
+
+def path_length(positions) -> float:
+    import numpy as np
+
+    finite = positions[np.isfinite(positions).all(axis=1)]
+    return float(np.linalg.norm(np.diff(finite, axis=0), axis=1).sum())
+
+
+def test_real_dso_on_the_euroc_and_kitti_layouts_through_docker(dso_image, tmp_path):
+    """DSO (without photometric calibration: mode=1) on a synthetic EuRoC sequence (rectified from its
+    radial-tangential camera) and a KITTI one (pinhole, poses without timestamps), forward and backward: every run
+    done, ATE under 2 % of the path's length."""
+    from runner.datasets.layouts import open_sequence
+
+    euroc = generate(tmp_path / "euroc" / "V1_synth", frames=200, seed=5, layout="euroc")
+    kitti = generate(tmp_path / "kitti" / "sequences" / "07", frames=200, seed=6, layout="kitti")
+    datasets = [
+        {"name": "euroc", "layout": "euroc", "path": str(euroc.parent), "sequences": [euroc.name]},
+        {"name": "kitti", "layout": "kitti", "path": str(kitti.parent), "sequences": [kitti.name]},
+    ]
+    spec = write_spec(
+        tmp_path, tmp_path, [{"name": "dso"}], datasets=datasets, backend="docker", lanes=1, timeout_s=600
+    )
+    res = run_campaign(load_spec(spec), log=lambda *a: None)
+    df = pd.read_csv(res.results_csv)
+    assert res.counts["done"] == 4, df[["dataset", "direction", "status", "failure", "message"]].to_string()
+    assert (df.eval_status == "ok").all() and df.ate_rmse.notna().all()
+    for name, folder in (("euroc", euroc), ("kitti", kitti)):
+        length = path_length(open_sequence(folder).groundtruth().positions)
+        runs = df[df.dataset == name]
+        assert (runs.ate_rmse / length < 0.02).all(), (name, length, runs[["direction", "ate_rmse"]].to_string())
+    for run_dir in df.run_dir:  # no photometric calibration in these datasets: DSO's mode=1, no gamma/vignette
+        argv = json.loads((Path(run_dir) / "run.json").read_text())["argv"]
+        assert "mode=1" in argv and not any(a.startswith(("gamma=", "vignette=")) for a in argv), argv

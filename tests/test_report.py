@@ -168,3 +168,22 @@ def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tin
     assert {"ate_rmse", "rpe_t_rmse", "rpe_r_rmse"} <= set(table.columns)
     assert (res.results / "report" / "figures" / "trajectories_seq_a.png").exists()
     render_in_chromium(index, tmp_path)
+
+
+def test_a_campaign_without_tum_mono_metrics_reports_its_own(tmp_path):
+    """EuRoC, KITTI, TUM RGB-D campaigns have ATE and RPE only: the motion-bias and per-sequence tables and the
+    figures use ATE, and no empty TUM-Mono figure is drawn."""
+    df = fake_results(tmp_path)
+    rng = np.random.default_rng(2)
+    done = df.status == "done"
+    df = df.drop(columns=[c for c in df.columns if c.startswith("e_")])
+    df.loc[done, "ate_rmse"] = rng.uniform(0.01, 0.1, int(done.sum()))
+    df.loc[done, "rpe_t_rmse"] = rng.uniform(0.001, 0.01, int(done.sum()))
+    df.to_csv(tmp_path / "results.csv", index=False)
+    write_report(tmp_path)
+    tables, figs = tmp_path / "report" / "tables", tmp_path / "report" / "figures"
+    bias = pd.read_csv(tables / "motion_bias.csv")
+    assert {"median ate_rmse forward", "median ate_rmse backward"} <= set(bias.columns)
+    assert (tables / "ate_rmse_per_sequence.csv").exists()
+    assert (figs / "cumulative_ate_rmse.png").exists() and (figs / "heatmap_ate_rmse.png").exists()
+    assert not list(figs.glob("cumulative_e_*.png"))

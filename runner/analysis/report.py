@@ -95,8 +95,9 @@ def write_report(
             sd = study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha)
             (out / f"statistics_{direction}.json").write_text(json.dumps(sd.to_json(), indent=1))
             td = tables.medians_with_letters(sd, acc or trajectory)
-            tables.write_all(td, tab_dir, f"table3_drift_{direction}", f"Drift medians, {direction} runs only")
-            sections.append((f"Drift, {direction} runs only", tables.to_html(td)))
+            what = "Drift" if acc else "ATE, RPE and KITTI's errors"
+            tables.write_all(td, tab_dir, f"table3_drift_{direction}", f"{what} medians, {direction} runs only")
+            sections.append((f"{what}, {direction} runs only", tables.to_html(td)))
     else:
         sections.append(("Statistics", "<p>Fewer than two methods with evaluated runs: no group comparison.</p>"))
 
@@ -104,23 +105,25 @@ def write_report(
     if not res.empty:
         tables.write_all(res, tab_dir, "table2_resources", "Mean resources per run")
         sections.append(("Resources (Table 2 layout)", tables.to_html(res)))
-    if "e_align" in df.columns and "direction" in df.columns:
-        mb = tables.motion_bias_table(df)
-        tables.write_all(mb, tab_dir, "motion_bias", "Forward vs backward e_align")
+    # the campaign's accuracy figure per run: TUM-Mono's e_align, else ATE (datasets without TUM-Mono's metrics)
+    main = next((m for m in ("e_align", "ate_rmse") if m in df.columns and df[m].notna().any()), None)
+    if main is not None and "direction" in df.columns:
+        mb = tables.motion_bias_table(df, main)
+        tables.write_all(mb, tab_dir, "motion_bias", f"Forward vs backward {main}")
         sections.append(("Motion bias: forward vs backward", tables.to_html(mb)))
-        seq = tables.per_sequence_table(df)
+        seq = tables.per_sequence_table(df, main)
         if not seq.empty:
-            tables.write_all(seq, tab_dir, "e_align_per_sequence", "Median e_align per method and sequence")
-            sections.append(("Median e_align per sequence", tables.to_html(seq)))
+            tables.write_all(seq, tab_dir, f"{main}_per_sequence", f"Median {main} per method and sequence")
+            sections.append((f"Median {main} per sequence", tables.to_html(seq)))
 
     figs: list[Path] = []
     if not ok.empty:
-        for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end"):
-            if m in ok.columns:
+        for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "ate_rmse", "rpe_t_rmse"):
+            if m in metrics:
                 figs.append(figures.cumulative(ok, m, fig_dir))
-        if "e_align" in ok.columns:
-            figs.append(figures.cumulative(ok, "e_align", fig_dir, "cumulative_e_align_motion_bias", bold_all=True))
-            figs.append(figures.heatmap(df, fig_dir))
+        if main is not None:
+            figs.append(figures.cumulative(ok, main, fig_dir, f"cumulative_{main}_motion_bias", bold_all=True))
+            figs.append(figures.heatmap(df, fig_dir, main))
     if st is not None:
         for m in metrics:
             figs.append(figures.boxplot(st, m, fig_dir))
