@@ -111,6 +111,10 @@ def write_report(
         mb = tables.motion_bias_table(df, main)
         tables.write_all(mb, tab_dir, "motion_bias", f"Forward vs backward {main}")
         sections.append(("Motion bias: forward vs backward", tables.to_html(mb)))
+        repro = tables.reproduction_table(df[df.status == "done"] if "status" in df else df, main)
+        if not repro.empty:
+            tables.write_all(repro, tab_dir, "reproduction", f"Reproduction: new runs vs published, {main}")
+            sections.append(("Reproduction: new runs vs published", tables.to_html(repro)))
         seq = tables.per_sequence_table(df, main)
         if not seq.empty:
             tables.write_all(seq, tab_dir, f"{main}_per_sequence", f"Median {main} per method and sequence")

@@ -64,6 +64,33 @@ def motion_bias_table(df: pd.DataFrame, metric: str = "e_align") -> pd.DataFrame
     return pd.DataFrame(rows)
 
 
+def reproduction_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """Imported labels (`source:method`, e.g. study:dso) beside the campaign's own runs of `method`: the medians of
+    `metric`, and whether they differ (Wilcoxon rank-sum, alpha 0.05)."""
+    rows = []
+    labels = set(df.method.dropna().astype(str))
+    for published in sorted(lab for lab in labels if ":" in lab):
+        own = published.split(":", 1)[1]
+        if own not in labels:
+            continue
+        new = df.loc[(df.method == own), metric].dropna().to_numpy(float)
+        old = df.loc[(df.method == published), metric].dropna().to_numpy(float)
+        p = stats.mannwhitneyu(new, old).pvalue if len(new) and len(old) else np.nan
+        rows.append(
+            {
+                "method": own,
+                "published as": published,
+                f"median {metric} (new)": np.median(new) if len(new) else np.nan,
+                f"median {metric} (published)": np.median(old) if len(old) else np.nan,
+                "n new": len(new),
+                "n published": len(old),
+                "p (rank-sum)": p,
+                "different at 0.05": bool(p < 0.05) if np.isfinite(p) else None,
+            }
+        )
+    return pd.DataFrame(rows)
+
+
 def per_sequence_table(df: pd.DataFrame, metric: str = "e_align") -> pd.DataFrame:
     """Median of a metric per method (rows) and sequence (columns)."""
     d = df.dropna(subset=[metric])

@@ -1,4 +1,5 @@
-"""slamrun stats and report: the study's statistics and the report of a results table."""
+"""slamrun stats, report and import: the study's statistics, the report of a results table, and published
+trajectories imported into a campaign's results."""
 
 from __future__ import annotations
 
@@ -21,6 +22,17 @@ def add_commands(sub) -> None:
     rp = sub.add_parser("report", help="write report/index.html with tables and figures")
     rp.add_argument("results", type=Path, help="a results directory")
     rp.set_defaults(func=cmd_report)
+    im = sub.add_parser("import", help="import published trajectories into a campaign as runs of a method label")
+    im.add_argument("sources", type=Path, nargs="+", help="folders, zips, or the first part of split zips (.zip.001)")
+    im.add_argument("--campaign", type=Path, required=True, help="the campaign's results directory")
+    im.add_argument("--as", dest="label", required=True, help="the method label of the imported runs, e.g. study:dso")
+    im.add_argument(
+        "--pattern",
+        help="regular expression with the named groups sequence, direction (fw|bw|forward|backward) and trial, "
+        "searched in each file's path (default: the study's <code>_<fw|bw>/sequence_SS_R.txt)",
+    )
+    im.add_argument("--format", default="tum", choices=["tum", "kitti", "euroc"], help="the files' trajectory format")
+    im.set_defaults(func=cmd_import)
 
 
 def cmd_stats(args) -> int:
@@ -47,4 +59,29 @@ def cmd_report(args) -> int:
     from runner.analysis.report import write_report
 
     console.print(f"report: {write_report(args.results)}")
+    return 0
+
+
+def cmd_import(args) -> int:
+    from runner.engine.export import export
+    from runner.engine.importer import check_campaign_folder, import_trajectories
+    from runner.engine.ledger import Ledger, ResultsLock
+
+    check_campaign_folder(args.campaign)  # before the lock file: never write into a folder that is not a campaign's
+    with ResultsLock(args.campaign):  # not while a campaign writes the same ledger
+        report = import_trajectories(args.campaign, args.sources, args.label, args.pattern, args.format)
+        ledger = Ledger(args.campaign / "ledger.sqlite")
+        try:
+            export(ledger, args.campaign)
+        finally:
+            ledger.close()
+    console.print(
+        f"{args.label}: {len(report.imported)} run(s) imported, {len(report.unchanged)} unchanged (imported before), "
+        f"{len(report.kept)} kept (a run of that key exists from another file: not overwritten), "
+        f"{len(report.skipped)} skipped"
+    )
+    for line in report.skipped[:10]:
+        console.print(f"  skipped: {line}")
+    for line in report.kept[:10]:
+        console.print(f"  kept: {line}")
     return 0

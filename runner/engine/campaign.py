@@ -17,6 +17,7 @@ from runner.datasets.cache import prepare, remove_damaged
 from runner.datasets.layouts import GROUNDTRUTH_FILES, open_sequence
 from runner.datasets.layouts import holds_sequence as generated
 from runner.engine.folders import claim_results_folder
+from runner.engine.importer import reimport_lost
 from runner.engine.ledger import Ledger, ResultsLock
 from runner.engine.plan import PlannedRun, plan
 from runner.engine.preparer import ViewPreparer
@@ -179,7 +180,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         recovered = recover(ledger, results, keep_attempts=docker_here)
         runs = plan(spec)
         added = ledger.sync_plan(runs)
-        recovered["imported"] += import_finished(ledger, runs, results)
+        recovered["imported"] += import_finished(ledger, runs, results) + reimport_lost(ledger, results)
         backend = backend or make_backend(spec)
         images = {m.run_label: methods.get(m.name)(m.params).image for m in spec.methods}
         backend.check(images)

@@ -294,7 +294,11 @@ def _classify(
 def foreign_timestamps(traj: Trajectory, view: PreparedView, tol_s: float = ASSOCIATION_TOLERANCE_S) -> str | None:
     """Why a trajectory's poses are not at the sequence's frame times (more than `tol_s` from every frame of
     times.txt), or None when each pose is at a frame."""
-    frames = view.original_timestamps()
+    return foreign_timestamps_of(traj, view.original_timestamps(), tol_s)
+
+
+def foreign_timestamps_of(traj: Trajectory, frames: np.ndarray, tol_s: float = ASSOCIATION_TOLERANCE_S) -> str | None:
+    """Why a trajectory's poses are not at the frame times `frames` (increasing), or None when each pose is."""
     if not len(traj) or not len(frames):
         return None
     t = traj.timestamps

@@ -167,7 +167,7 @@ class Ledger:
         with self._lock, self._db:
             self._db.execute("BEGIN")
             before = self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
-            self._db.execute("UPDATE runs SET active = 0")
+            self._db.execute("UPDATE runs SET active = 0 WHERE method IS NOT 'imported'")  # imports stay
             self._db.executemany(
                 "INSERT OR IGNORE INTO runs (key, label, method, dataset, sequence, direction, trial, settings, "
                 "active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)",
@@ -235,6 +235,18 @@ class Ledger:
         sets = ", ".join(f"{k} = ?" for k in values)
         with self._lock:
             self._db.execute(f"UPDATE runs SET {sets} WHERE key = ?", (*values.values(), key))
+
+    def insert_finished(self, records: list[dict]) -> None:
+        """Insert finished runs that no plan made (imported ones), all or none, active; existing keys are left
+        as they are."""
+        with self._lock, self._db:
+            self._db.execute("BEGIN")
+            for rec in records:
+                values = {k: v for k, v in rec.items() if k in ALL_COLUMNS}
+                values.update(active=1, pid=None, pid_start=None)
+                cols = ", ".join(values)
+                marks = ", ".join("?" for _ in values)
+                self._db.execute(f"INSERT OR IGNORE INTO runs ({cols}) VALUES ({marks})", tuple(values.values()))
 
     # ------------------------------------------------------------ reading
     def rows(self, active_only: bool = True, state: str | None = None) -> list[dict]:
