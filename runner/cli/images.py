@@ -49,13 +49,24 @@ def add_commands(sub) -> None:
     )
     im.add_argument("--results", type=Path, help="results folder of --verify (default .cache/verify)")
     im.set_defaults(func=cmd_images)
+    ve = sub.add_parser("verify", help="verify the methods of a spec on the synthetic rooms (any method)")
+    ve.add_argument("spec", type=Path, help="a spec: its methods (built-in, plug-in, external) and backend")
+    ve.add_argument("--method", action="append", help="only this method label (repeatable)")
+    ve.add_argument("--results", type=Path, help="results folder (default .cache/verify)")
+    ve.add_argument("--trials", type=int, default=2, help="trials per room and direction")
+    ve.add_argument("--frames", type=int, default=300, help="frames of each synthetic room")
+    ve.set_defaults(func=cmd_verify)
+    nm = sub.add_parser("new-method", help="write a method package of one's own: adapter, Dockerfile, test")
+    nm.add_argument("name", help="the method's name (lower case, digits, _)")
+    nm.add_argument("--dest", type=Path, help="the package folder to write (default ./slamrun-NAME)")
+    nm.set_defaults(func=cmd_new_method)
 
 
 def cmd_list_methods(args) -> int:
     import methods
 
     t = Table(title="methods")
-    for c in ("name", "view", "image", "gpu", "native", "loop closure switch"):
+    for c in ("name", "view", "image", "gpu", "native", "loop closure switch", "from"):
         t.add_column(c)
     for name, cls in sorted(methods.REGISTRY.items()):
         prof = cls.profile if isinstance(cls.profile, str) else getattr(cls.profile, "value", "per spec")
@@ -66,8 +77,11 @@ def cmd_list_methods(args) -> int:
             "optional" if cls.gpu_capable else "no",
             "yes" if cls.native else "no",
             cls.loop_closure_switch or "-",
+            methods.PLUGINS.get(name, "slamrun"),
         )
     console.print(t)
+    for name, why in sorted(methods.PLUGIN_ERRORS.items()):
+        console.print(f"not registered: {name}: {why}")
     return 0
 
 
@@ -114,3 +128,24 @@ def _pair(text: str, default_key: str | None = None) -> tuple[str, Path | str]:
     if default_key is None:
         raise SlamRunError(f"{text!r}: expected KEY=VALUE")
     return default_key, text
+
+
+def cmd_verify(args) -> int:
+    from runner.images.verify import print_table, verify_spec
+
+    rows = verify_spec(args.spec, args.method, args.results, lambda m: print(m, flush=True), args.trials, args.frames)
+    print_table(rows, console)
+    return 0 if all(r.passed for r in rows) else 1
+
+
+def cmd_new_method(args) -> int:
+    from runner.images.scaffold import new_method
+
+    dest = args.dest or Path(f"slamrun-{args.name}")
+    files = new_method(args.name, dest)
+    console.print(f"{dest}: {len(files)} files; fill in the lines marked FILL IN, then:")
+    console.print(f"  pip install -e {dest}        # registers {args.name} (entry point slamrun.methods)")
+    console.print(f"  slamrun list-methods        # {args.name} is listed")
+    console.print(f"  pytest {dest}/tests          # its adapter's tests")
+    console.print("  slamrun verify SPEC         # a spec naming it: the verification table on the synthetic rooms")
+    return 0
