@@ -238,3 +238,69 @@ def test_every_argument_has_help_and_there_is_a_version():
     check(_parser(), "slamrun")
     res = subprocess.run([sys.executable, "-m", "runner.cli", "--version"], capture_output=True, text=True)
     assert res.returncode == 0 and res.stdout.startswith("slamrun ")
+
+
+def test_the_tracker_equals_the_figures_of_the_same_rows_after_every_change():
+    """The live view's figures are kept from events at a constant cost per run (runner.engine.progress.Tracker):
+    after any sequence of changes they equal the figures computed from the ledger's rows."""
+    import random
+
+    from runner.engine.progress import Tracker, figures
+
+    rng = random.Random(3)
+    rows = [
+        {
+            "key": f"k{i}",
+            "label": f"m{i % 3}",
+            "direction": ("forward", "backward")[i % 2],
+            "state": "pending",
+            "failure": None,
+            "wall_s": None,
+            "started_at": None,
+        }
+        for i in range(300)
+    ]
+    session = {"lanes": 2, "started_at": 1000.0}
+    tracker = Tracker(rows, session, "c")
+    by_key = {r["key"]: r for r in rows}
+    for step in range(2000):
+        r = by_key[f"k{rng.randrange(300)}"]
+        change = rng.choice(["start", "done", "fail", "infra", "requeue"])
+        if change == "start":
+            upd = {"state": "running", "started_at": 1000.0 + step}
+        elif change == "done":
+            upd = {"state": "done", "failure": None, "wall_s": rng.uniform(0.5, 3.0)}
+        elif change == "fail":
+            upd = {"state": "failed", "failure": rng.choice(["lost", "crashed", "timeout"]), "wall_s": 1.0}
+        elif change == "infra":
+            upd = {"state": "failed", "failure": "infra", "wall_s": None}
+        else:
+            upd = {"state": "pending"}
+        r.update(upd)
+        if upd["state"] == "pending":
+            r["failure"] = None
+        tracker.update(r["key"], **upd)
+        if step % 97 == 0 or step == 1999:
+            mine, theirs = tracker.figures(now=5000.0).to_dict(), figures(rows, session, 5000.0, "c").to_dict()
+            for k in ("occupancy", "eta_s"):  # sums in another order: equal to rounding
+                a, b = mine.pop(k), theirs.pop(k)
+                assert (a is None and b is None) or a == pytest.approx(b, rel=1e-12), (step, k)
+            assert mine == theirs, step
+
+
+def test_the_eta_counts_the_runners_own_time_per_run():
+    """Runs of 0.1 s that take 0.5 s of a lane each (starting, collecting): the estimate uses 0.5 s a run, not 0.1."""
+    from runner.engine.progress import figures
+
+    rows = [
+        {"key": f"k{i}", "label": "m", "direction": "forward", "state": "done", "failure": None, "wall_s": 0.1,
+         "started_at": 100.0 + 0.5 * i}
+        for i in range(100)
+    ] + [
+        {"key": f"p{i}", "label": "m", "direction": "forward", "state": "pending", "failure": None, "wall_s": None,
+         "started_at": None}
+        for i in range(900)
+    ]  # fmt: skip
+    f = figures(rows, {"lanes": 1, "started_at": 100.0}, now=150.0)
+    assert f.eta_s == pytest.approx(900 * 0.5)
+    assert f.occupancy == pytest.approx(10 / 50)

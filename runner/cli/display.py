@@ -16,12 +16,19 @@ from rich.table import Table
 from rich.text import Text
 
 from runner.engine.ledger import Ledger
-from runner.engine.progress import Figures, duration, figures, one_line
+from runner.engine.progress import Figures, Tracker, duration, one_line
 
 
 def read_figures(results: Path, now: float | None = None) -> Figures | None:
     """The figures of a results folder's ledger, read without writing or locking anything; None when the
     ledger does not exist yet."""
+    tracker = read_tracker(results)
+    return None if tracker is None else tracker.figures(now or time.time())
+
+
+def read_tracker(results: Path) -> Tracker | None:
+    """A Tracker over a results folder's ledger (rows, session, campaign name), read without writing or locking
+    anything; None when the ledger does not exist yet."""
     from runner.engine.campaign import session_alive
 
     path = Path(results) / "ledger.sqlite"
@@ -32,10 +39,9 @@ def read_figures(results: Path, now: float | None = None) -> Figures | None:
         session = ledger.meta("session")
         if session and not session.get("ended_at") and not session_alive(session):
             session = {**session, "ended_at": session.get("last_seen") or session["started_at"], "crashed": True}
-        f = figures(ledger.rows(), session, now or time.time(), ledger.meta("campaign", Path(results).name))
+        return Tracker(ledger.rows(), session, ledger.meta("campaign", Path(results).name))
     finally:
         ledger.close()
-    return f
 
 
 def headline(f: Figures, width: int = 40) -> Table:
@@ -89,7 +95,7 @@ class LiveProgress:
         self.lanes: dict[int, tuple[str, str, float]] = {}  # lane -> (run key, what, started)
         self._lock = threading.Lock()  # events come from the lanes and the finishing threads
         self.finished_here = 0
-        self._figures: Figures | None = None
+        self._tracker: Tracker | None = None
         self._last_read = 0.0
         self._live = None
         if tty:
@@ -98,15 +104,41 @@ class LiveProgress:
             self._live = Live(console=console, refresh_per_second=2, get_renderable=self.render, transient=False)
             self._live.start()
 
-    def figures(self, force: bool = False) -> Figures | None:
+    RESYNC_S = 30.0  # the ledger is read whole this often (and until a session is recorded); events in between
+
+    def figures(self) -> Figures | None:
+        """The figures, kept current from the runs' events at a constant cost per run; the ledger is read whole
+        only every RESYNC_S seconds (what no event reports: another process's changes, a recovered run)."""
         now = time.monotonic()
-        if force or self._figures is None or now - self._last_read > 1.0:
+        t = self._tracker
+        # this campaign's own session not read yet (none, or an earlier one that ended), a run the tracker does
+        # not know (the plan grew), or time for the periodic read
+        stale = (
+            t is None
+            or not t.session
+            or t.session.get("ended_at")
+            or t.unknown
+            or now - self._last_read > self.RESYNC_S
+        )
+        if stale and now - self._last_read > 1.0:
             try:
-                self._figures = read_figures(self.results) or self._figures
+                self._tracker = read_tracker(self.results) or self._tracker
             except Exception:  # noqa: BLE001 - the ledger is being created or replaced: keep the last figures
                 pass
             self._last_read = now
-        return self._figures
+        return None if self._tracker is None else self._tracker.figures(time.time())
+
+    def _track(self, kind: str, run, info: dict) -> None:
+        if self._tracker is None:
+            return
+        if kind == "started":
+            self._tracker.update(run.key.id, state="running", started_at=time.time())
+        elif kind == "finished":
+            self._tracker.update(
+                run.key.id, state=info.get("state"), failure=info.get("failure"), wall_s=info.get("wall_s")
+            )
+        elif kind in ("retry", "requeued"):
+            self._tracker.update(run.key.id, state="pending")
 
     def render(self):
         f = self.figures()
@@ -127,6 +159,7 @@ class LiveProgress:
             self._event(kind, run, lane, info)
 
     def _event(self, kind: str, run, lane, info: dict) -> None:
+        self._track(kind, run, info)
         if kind == "started":
             self.lanes[lane.index] = (
                 f"{run.key.label} {run.key.sequence} {run.key.direction.value} {run.key.trial}",
@@ -136,7 +169,7 @@ class LiveProgress:
             if self.lanes.get(lane.index, ("",))[0] == run.key.id:  # the lane may run the next one already
                 self.lanes.pop(lane.index, None)
             self.finished_here += 1
-            f = self.figures(force=True)
+            f = self.figures()
             if not self.tty:
                 what = info.get("failure") or "ok"
                 metric = info.get("e_align")
