@@ -564,6 +564,67 @@ def bench_analysis(tmp: Path) -> None:
     report("report: statistics + tables + figures, 10,000 runs", f"{time.perf_counter() - t0:.1f} s", "< 30 s")
 
 
+def bench_scale(tmp: Path, n_runs: int = 10_000) -> None:
+    """The study's scale: a 10,000-run plan of a trivial method through the command line (its live output, not
+    a terminal), the finish time of every run read from its output line; the rate over the first minute and
+    around 50 % done side by side, the ETA printed at 10 % against the time that really remained, and `slamrun
+    status` on the finished 10,000-row ledger as a whole process."""
+    import re
+
+    import yaml
+
+    from runner.datasets.synth import generate
+
+    print(f"scale: a {n_runs:,}-run plan of a no-op method, 2 lanes, through `slamrun campaign`")
+    generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
+    spec = {
+        "name": "scale",
+        "results": str(tmp / "res"),
+        "cache": str(tmp / "cache"),
+        "datasets": [{"name": "d", "path": str(tmp / "data"), "sequences": ["s"]}],
+        "methods": [{"name": "external", "params": {"argv": ["/bin/true"]}}],
+        "directions": ["forward"],
+        "trials": n_runs,
+        "lanes": 2,
+        "report": False,
+        "evaluate": False,
+    }
+    (tmp / "scale.yaml").write_text(yaml.safe_dump(spec))
+    slamrun = str(Path(sys.executable).parent / "slamrun")
+    t0 = time.monotonic()
+    proc = subprocess.Popen([slamrun, "campaign", str(tmp / "scale.yaml")], stdout=subprocess.PIPE, text=True)
+    finished: list[float] = []
+    eta_at_10 = None
+    for line in proc.stdout:
+        now = time.monotonic() - t0
+        if re.match(r"\[lane \d+\] \S+: (done|failed) \(", line):
+            finished.append(now)
+        elif line.startswith("progress:") and eta_at_10 is None and len(finished) >= n_runs // 10:
+            m = re.search(r"ETA (?:(\d+) h )?(?:(\d+) min )?(\d+) s", line)
+            if m:
+                h, mi, sec = (int(v) if v else 0 for v in m.groups())
+                eta_at_10 = (now, 3600 * h + 60 * mi + sec)
+    proc.wait()
+    end = finished[-1] if finished else 0.0
+    first = [t for t in finished if t <= finished[0] + 60] if finished else []
+    rate_first = (len(first) - 1) / max(first[-1] - first[0], 1e-9) if len(first) > 1 else 0.0
+    mid = finished[int(0.45 * len(finished)) : int(0.55 * len(finished))]
+    rate_mid = (len(mid) - 1) / max(mid[-1] - mid[0], 1e-9) if len(mid) > 1 else 0.0
+    report(f"runs finished of {n_runs:,}", f"{len(finished):,}", f"{n_runs:,}")
+    report("rate over the first minute", f"{rate_first:.1f} runs/s", ">= 25 runs/s")
+    report("rate around 50 % done (45-55 %)", f"{rate_mid:.1f} runs/s", "-")
+    report("  ratio 50 % / first minute", f"{rate_mid / max(rate_first, 1e-9):.2f}", "0.8 - 1.2")
+    if eta_at_10 is not None:
+        at, said = eta_at_10
+        real = end - at
+        report("ETA printed at 10 % done", f"{said:.0f} s", "-")
+        report("  time that really remained", f"{real:.0f} s", "-")
+        report("  ETA error", f"{100 * abs(said - real) / max(real, 1e-9):.1f} %", "<= 25 %")
+    t1 = time.perf_counter()
+    subprocess.run([slamrun, "status", str(tmp / "res"), "--json"], check=True, capture_output=True)
+    report(f"slamrun status on the {n_runs:,}-row ledger (whole process)", f"{time.perf_counter() - t1:.2f} s", "< 1 s")
+
+
 BENCHES: dict[str, Callable[[Path], None]] = {
     "evaluator": bench_evaluator,
     "evaluate_cores": bench_evaluate_cores,
@@ -575,6 +636,7 @@ BENCHES: dict[str, Callable[[Path], None]] = {
     "docker": bench_docker,
     "analysis": bench_analysis,
     "demo": bench_demo,
+    "scale": bench_scale,
 }
 
 

@@ -174,12 +174,13 @@ class LiveProgress:
                 what = info.get("failure") or "ok"
                 metric = info.get("e_align")
                 extra = f" e_align={metric:.4g}" if isinstance(metric, float) else ""
-                self.console.print(f"[lane {lane.index}] {run.key.id}: {info.get('state')} ({what}){extra}")
+                line = f"[lane {lane.index}] {run.key.id}: {info.get('state')} ({what}){extra}"
+                self.console.print(line, markup=False, highlight=False)
                 every = self.every or max(1, min(10, (f.total if f else 20) // 20))
                 if f is not None and self.finished_here % every == 0:
                     self.console.print(f"progress: {one_line(f)}")
         elif kind in ("retry", "requeued", "view"):
-            self.note(f"[lane {lane.index}] {run.key.id}: {kind} {info.get('message', '')}")
+            self.console.print(f"[lane {lane.index}] {run.key.id}: {kind} {info.get('message', '')}", markup=False)
 
     def close(self) -> None:
         if self._live is not None:

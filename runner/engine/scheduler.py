@@ -11,6 +11,7 @@ import os
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -73,7 +74,7 @@ class Scheduler:
         self.on_event = on_event or (lambda *a: None)
         self.stop = threading.Event()  # no new runs
         self.cancel = threading.Event()  # stop runs in flight
-        self._queue: list[PlannedRun] = []
+        self._queue: deque[PlannedRun] = deque()
         self._qcond = threading.Condition()
         self._finishing = 0  # runs handed to the finishing threads and not recorded yet
         self._finisher: ThreadPoolExecutor | None = None
@@ -83,7 +84,7 @@ class Scheduler:
 
     def run(self, runs: list[PlannedRun]) -> None:
         pending = set(self.ledger.pending_keys())
-        self._queue = [r for r in runs if r.key.id in pending]
+        self._queue = deque(r for r in runs if r.key.id in pending)
         exclusive = self.spec.measurement == "exclusive"
         lanes = make_lanes(1 if exclusive else self.spec.lanes, self.spec.cpus_per_lane, exclusive)
         threads = [
@@ -116,7 +117,7 @@ class Scheduler:
         with self._qcond:
             while not self.stop.is_set():
                 if self._queue:
-                    return self._queue.pop(0)
+                    return self._queue.popleft()
                 if self._finishing == 0:
                     return None
                 self._qcond.wait(0.2)
@@ -260,7 +261,7 @@ class Scheduler:
                 self.ledger.reset_to_pending(run.key.id)
                 self.on_event("retry", run, lane, {"message": str(exc), "delay_s": 0.0})
                 with self._qcond:
-                    self._queue.insert(0, run)
+                    self._queue.appendleft(run)
                     self._qcond.notify_all()
                 return
             self._record_infra(run, lane, str(exc))
