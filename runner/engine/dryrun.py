@@ -17,7 +17,7 @@ from runner.datasets.view import Profile
 from runner.engine.ledger import Ledger
 from runner.engine.paths import RunPaths, finished_record
 from runner.engine.plan import plan
-from runner.engine.progress import eta, wall_times
+from runner.engine.progress import eta, overhead_per_run, wall_times
 from runner.engine.spec import CampaignSpec
 from runner.errors import DatasetError
 from runner.results.vocabulary import is_infra
@@ -42,11 +42,13 @@ class DryRun:
 def dry_run(spec: CampaignSpec) -> DryRun:
     runs = plan(spec)
     rows: dict[str, dict] = {}
+    session: dict = {}
     path = spec.results / "ledger.sqlite"
     if path.exists() and path.stat().st_size:
         ledger = Ledger(path, read_only=True)
         try:
             rows = {r["key"]: r for r in ledger.rows(active_only=False)}
+            session = ledger.meta("session") or {}
         finally:
             ledger.close()
     counts: dict[tuple[str, str], Counter] = defaultdict(Counter)
@@ -102,8 +104,22 @@ def dry_run(spec: CampaignSpec) -> DryRun:
             out.views_to_prepare += 1
             out.view_bytes += 0 if (seq_dir, profile) in frames_counted else size
             frames_counted.add((seq_dir, profile))
-    out.eta_s, out.eta_basis = eta(dict(todo_by_method), wall_times(rows.values()), lanes)
+    overhead = last_session_overhead(list(rows.values()), session)
+    out.eta_s, out.eta_basis = eta(dict(todo_by_method), wall_times(rows.values()), lanes, overhead)
     return out
+
+
+def last_session_overhead(rows: list[dict], session: dict) -> float:
+    """The runner's own lane time per run measured over the results folder's last session (0 without one)."""
+    start, end = session.get("runs_from"), session.get("runs_to")
+    if not start or not end:
+        return 0.0
+    mine = [
+        float(r["wall_s"] or 0.0)
+        for r in rows
+        if r.get("started_at") and start <= r["started_at"] <= end and r["state"] in ("done", "failed")
+    ]
+    return overhead_per_run(sum(mine), len(mine), int(session.get("lanes") or 1), end - start)
 
 
 def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: CampaignSpec) -> int | None:
