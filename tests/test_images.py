@@ -151,3 +151,16 @@ def test_the_network_an_image_holds_is_given_a_stand_in_or_a_clear_error(tmp_pat
     assert model_choice("cnn_dso", given)[0] == "given"
     with pytest.raises(SlamRunError, match="mask_rcnn_coco.h5.*matterport"):
         model_choice("dynaslam", BuildOptions(standin_model=True))  # no stand-in for Mask R-CNN
+
+
+def test_every_pypi_file_of_a_continued_copy_is_found(tmp_path):
+    """A COPY continued over several lines names a wheel on each: every one goes into the build context (the
+    reference VO's image copies three)."""
+    from runner.images.build import pypi_files_of
+
+    dockerfile = tmp_path / "Dockerfile"
+    dockerfile.write_text("FROM x\nCOPY pypi/a-1-py3-none-any.whl \\\n     pypi/b-2-py3-none-any.whl /tmp/\nRUN true\n")
+    assert pypi_files_of(dockerfile) == ["a-1-py3-none-any.whl", "b-2-py3-none-any.whl"]
+    from runner.images.build import ROOT
+
+    assert len(pypi_files_of(ROOT / "docker" / "reference_vo" / "Dockerfile")) == 3

@@ -114,7 +114,8 @@ def buildable() -> dict[str, tuple[str, Path]]:
 def pypi_files_of(dockerfile: Path) -> list[str]:
     """The PyPI files a Dockerfile copies from the build context (`pypi/<file>.whl`)."""
     names = []
-    for line in dockerfile.read_text().splitlines():
+    instructions = re.sub(r"\\\n", " ", dockerfile.read_text())  # a continued line is one instruction
+    for line in instructions.splitlines():
         if line.strip().upper().startswith(("COPY", "ADD")):
             names += [n for n in PYPI_RE.findall(line) if n not in names]
     return names

@@ -332,6 +332,26 @@ PYPI_FILES: dict[str, PypiFile] = {
             "2.21.0",
             "2b847d217b02ee7731ed91431daf3250daa0196c3c94614d23be27232e6e5b6c",
         ),
+        # The reference VO's image: NumPy, SciPy and OpenCV (headless: its own libraries inside, no VTK, GDAL or
+        # Qt) as wheels on Debian 12's Python 3.11, instead of Debian's python3-opencv and python3-scipy (2 GB)
+        PypiFile(
+            "numpy-2.2.6-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
+            "numpy",
+            "2.2.6",
+            "ba10f8411898fc418a521833e014a77d3ca01c15b0c6cdcce6a0d2897e6dbbdf",
+        ),
+        PypiFile(
+            "scipy-1.15.3-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
+            "scipy",
+            "1.15.3",
+            "39cb9c62e471b1bb3750066ecc3a3f3052b37751c7c3dfd0fd7e48900ed52982",
+        ),
+        PypiFile(
+            "opencv_python_headless-4.11.0.86-cp37-abi3-manylinux_2_17_x86_64.manylinux2014_x86_64.whl",
+            "opencv-python-headless",
+            "4.11.0.86",
+            "0e0a27c19dd1f40ddff94976cfe43066fbbe9dfbb2ec1907d66c19caef42a57b",
+        ),
     )
 }
 
