@@ -166,6 +166,13 @@ _TABLE = (
         "f538a24032c14f1d7d25cf55fd27c5134d3e27b8e005952e2dfe03fb818c2696",
         (),
     ),
+    (  # the TUM-Mono benchmark's own code: its MATLAB evaluator, run under Octave beside slamrun's (bench, tests)
+        "mono_dataset_code",
+        "tum-vision/mono_dataset_code",
+        "3feba2f77488e5b3e05c739c2c7afb57822ad083",
+        "e9091b93701240867ccd1b424771a3b8831c0fcdd2fa264b0a1d2ebd1fdebe99",
+        (),
+    ),
     (
         "g2o",
         "RainerKuemmerle/g2o",
@@ -193,6 +200,7 @@ _TREES = {
     "fast": "b67642e64abe584df9154e7533a70d51de09716518553ff0e40604b335c9156e",
     "monodepth-cpp": "ce43a2595cc78ee27ca5032022c3773984ef2aad97ec3acb66a80e28647dfac0",
     "g2o": "e56f748c20bffba0f6880ad1a7b8c65fbbdd551e57ed190735c04faa7d86a70d",
+    "mono_dataset_code": "1fbd1248c5b48a5f7047af46d8fc00da235c8b0e6783f313815fecb23b86fa25",
 }
 SOURCES: dict[str, Source] = {
     name: Source(name, repo, commit, sha, _TREES[name], absent) for name, repo, commit, sha, absent in _TABLE
