@@ -90,10 +90,8 @@ UPSTREAM = SHARED / "upstream"
 def require_upstream(path: Path = UPSTREAM) -> Path:
     """`path` (shared/upstream or an archive in it), or a skip saying why and how to provide it."""
     if not path.exists():
-        pytest.skip(
-            reason=f"{path} not found: these tests use the real upstream archives of shared/upstream, beside the "
-            "repository (SLAMRUN_SHARED names another shared/ folder)"
-        )
+        why = f"{path} not found: these tests use the real upstream archives of shared/upstream, beside the repository"
+        pytest.skip(reason=f"{why} (SLAMRUN_SHARED names another shared/ folder)")
     return path
 
 

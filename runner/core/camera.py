@@ -97,7 +97,8 @@ class FovCamera:
 
 
 class _DistortedPinhole:
-    """What every distorted camera model shares: its pinhole part, projection and unprojection."""
+    """What every distorted camera model shares (a mixin of the models below, which give `pinhole`, `distort` and
+    `undistort`): its size, projection and unprojection."""
 
     pinhole: PinholeCamera
 
@@ -108,12 +109,6 @@ class _DistortedPinhole:
     @property
     def height(self) -> int:
         return self.pinhole.height
-
-    def distort(self, xy: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
-
-    def undistort(self, xy: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
 
     def project(self, points_cam: np.ndarray) -> np.ndarray:
         """3-D points in the camera frame (N, 3), z forward → pixels (N, 2)."""

@@ -138,34 +138,42 @@ def unpack(archive: Path, dest: Path, name: str) -> Path:
     return dest / name
 
 
+def _euroc_archive(name: str, base: str) -> tuple[str, str] | None:
+    group = next((g for g, seqs in EUROC_SEQUENCES.items() if name in seqs), None)
+    return None if group is None else (name, f"{base}/{group}/{name}/{name}.zip")
+
+
+def _tum_rgbd_archive(name: str, base: str) -> tuple[str, str] | None:
+    full = name if name.startswith("rgbd_dataset_") else f"rgbd_dataset_{name}"
+    found = re.fullmatch(r"rgbd_dataset_(freiburg[123])_[a-z0-9_]+", full)
+    return None if found is None else (full, f"{base}/{found.group(1)}/{full}.tgz")
+
+
+def _tum_vi_archive(name: str, base: str) -> tuple[str, str] | None:
+    full = name if name.startswith("dataset-") else f"dataset-{name}_512_16"
+    found = re.fullmatch(r"dataset-([a-z]+)(\d+)_512_16", full)
+    if found is None or not 1 <= int(found.group(2)) <= TUM_VI_ROOMS.get(found.group(1), 0):
+        return None
+    return full, f"{base}/{full}.tar"
+
+
+# dataset -> (sequence name -> (folder, archive address) or None when it is not one of the dataset's, default base)
+ARCHIVES = {
+    "euroc": (_euroc_archive, EUROC_URL),
+    "tum-rgbd": (_tum_rgbd_archive, TUM_RGBD_URL),
+    "tum-vi": (_tum_vi_archive, TUM_VI_URL),
+}
+
+
 def remote_archives(dataset: str, names: list[str], base_url: str | None = None) -> list[tuple[str, str]]:
     """(sequence folder name, archive address) of each named sequence of EuRoC, TUM RGB-D or TUM-VI; names are
     checked against the dataset's sequences (TUM RGB-D: any rgbd_dataset_freiburg{1,2,3}_... name)."""
-    out = []
-    bad = []
-    for name in names:
-        if dataset == "euroc":
-            group = next((g for g, seqs in EUROC_SEQUENCES.items() if name in seqs), None)
-            if group is None:
-                bad.append(name)
-                continue
-            out.append((name, f"{(base_url or EUROC_URL).rstrip('/')}/{group}/{name}/{name}.zip"))
-        elif dataset == "tum-rgbd":
-            full = name if name.startswith("rgbd_dataset_") else f"rgbd_dataset_{name}"
-            found = re.fullmatch(r"rgbd_dataset_(freiburg[123])_[a-z0-9_]+", full)
-            if found is None:
-                bad.append(name)
-                continue
-            out.append((full, f"{(base_url or TUM_RGBD_URL).rstrip('/')}/{found.group(1)}/{full}.tgz"))
-        elif dataset == "tum-vi":
-            full = name if name.startswith("dataset-") else f"dataset-{name}_512_16"
-            found = re.fullmatch(r"dataset-([a-z]+)(\d+)_512_16", full)
-            if found is None or not 1 <= int(found.group(2)) <= TUM_VI_ROOMS.get(found.group(1), 0):
-                bad.append(name)
-                continue
-            out.append((full, f"{(base_url or TUM_VI_URL).rstrip('/')}/{full}.tar"))
-        else:
-            raise DatasetError(f"{dataset}: slamrun downloads tum-mono, euroc, tum-rgbd and tum-vi")
+    if dataset not in ARCHIVES:
+        raise DatasetError(f"{dataset}: slamrun downloads tum-mono, euroc, tum-rgbd and tum-vi")
+    archive, default = ARCHIVES[dataset]
+    base = (base_url or default).rstrip("/")
+    found = {name: archive(name, base) for name in names}
+    bad = [name for name, where in found.items() if where is None]
     if bad:
         known = {
             "euroc": ", ".join(s for seqs in EUROC_SEQUENCES.values() for s in seqs),
@@ -174,7 +182,7 @@ def remote_archives(dataset: str, names: list[str], base_url: str | None = None)
             + " (e.g. room1, dataset-room1_512_16)",
         }[dataset]
         raise DatasetError(f"--sequences: {', '.join(bad)}: not {dataset} sequences; known: {known}")
-    return out
+    return [where for where in found.values() if where is not None]
 
 
 def download_archives(

@@ -32,16 +32,21 @@ from runner.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_
 from runner.datasets.layouts import open_sequence, sequence_identity
 from runner.datasets.view import Direction
 from runner.engine.execute import evaluate, foreign_timestamps_of
+from runner.engine.folders import path_part_problem
 from runner.engine.ledger import Ledger
 from runner.engine.paths import RunPaths
 from runner.engine.plan import RunKey
 from runner.engine.spec import CampaignSpec, load_spec
 from runner.errors import SlamRunError, TrajectoryFormatError
+from runner.results.vocabulary import IMPORTED
 
-IMPORTED = "imported"  # the `method` of imported runs in the ledger (kept active whatever the spec plans)
 STUDY_PATTERN = r"(?:^|/)[a-z0-9-]+_(?P<direction>fw|bw)(?:__|/)sequence_(?P<sequence>\d+)_(?P<trial>\d+)\.txt$"
-DIRECTIONS = {"fw": Direction.forward, "forward": Direction.forward, "bw": Direction.backward}
-DIRECTIONS["backward"] = Direction.backward
+DIRECTIONS = {
+    "fw": Direction.forward,
+    "forward": Direction.forward,
+    "bw": Direction.backward,
+    "backward": Direction.backward,
+}
 
 
 class ImportRefused(SlamRunError):
@@ -190,8 +195,6 @@ def import_trajectories(
     """Import the sources' trajectories into the campaign at `results` as runs of `label` (one transaction)."""
     results = Path(results)
     spec = _campaign_spec(results)
-    from runner.engine.folders import path_part_problem
-
     if why := path_part_problem(label):
         raise ImportRefused(f"--as {label!r}: {why}")
     if label in {m.run_label for m in spec.methods}:

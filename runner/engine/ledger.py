@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from runner.errors import LedgerLockedError, LedgerLostError, SlamRunError
-from runner.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
+from runner.results.vocabulary import IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
 
 if TYPE_CHECKING:
     from runner.engine.plan import PlannedRun
@@ -167,7 +167,7 @@ class Ledger:
         with self._lock, self._db:
             self._db.execute("BEGIN")
             before = self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
-            self._db.execute("UPDATE runs SET active = 0 WHERE method IS NOT 'imported'")  # imports stay
+            self._db.execute("UPDATE runs SET active = 0 WHERE method IS NOT ?", (IMPORTED,))  # imports stay
             self._db.executemany(
                 "INSERT OR IGNORE INTO runs (key, label, method, dataset, sequence, direction, trial, settings, "
                 "active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)",

@@ -26,6 +26,9 @@ INFRA = "infra"  # the machine's fault: retried, never counted in a rate
 FAILURES = (*METHOD_FAILURES, INFRA)
 
 
+IMPORTED = "imported"  # the `method` of runs imported from published files (kept whatever a spec plans)
+
+
 def is_infra(state: str | None, failure: str | None) -> bool:
     """A run that failed for infrastructure reasons (not a result of the method)."""
     return state == "failed" and failure == INFRA
