@@ -167,7 +167,7 @@ def test_kitti_segments_of_a_known_scale_error():
     assert kitti(gt, est, alignment="sim3").t_pct == pytest.approx(0.0, abs=1e-9)  # the scale error aligned away
 
 
-def test_monocular_keyframes_need_a_similarity():
+def test_monocular_keyframes_need_a_similarity(evo):
     gt = read_tum(EVO / "freiburg1_xyz-groundtruth.txt")
     est = read_tum(EVO / "freiburg1_xyz-ORB_kf_mono.txt")
     sim, se3 = ate(gt, est, "sim3"), ate(gt, est, "se3")
@@ -188,14 +188,14 @@ def test_association_follows_evo_at_ties_and_tolerance():
 # ------------------------------------------------------------------ bad input
 
 
-def test_no_shared_timestamp_is_a_clear_error():
+def test_no_shared_timestamp_is_a_clear_error(evo):
     gt = read_tum(EVO / "fr2_desk_groundtruth.txt")
     est = read_tum(EVO / "freiburg1_xyz-rgbdslam.txt")
     with pytest.raises(MetricError, match="share no timestamp within 0.02 s"):
         ate(gt, est)
 
 
-def test_a_kitti_estimate_with_another_row_count_names_the_file(tmp_path):
+def test_a_kitti_estimate_with_another_row_count_names_the_file(evo, tmp_path):
     times = read_times(EVO / "KITTI_00_gt_times.txt")
     short = tmp_path / "short.txt"
     short.write_text("".join((EVO / "KITTI_00_ORB.txt").read_text().splitlines(keepends=True)[:100]))
@@ -203,7 +203,7 @@ def test_a_kitti_estimate_with_another_row_count_names_the_file(tmp_path):
         read_kitti(short, times)
 
 
-def test_an_euroc_csv_with_a_missing_column_names_the_file_and_line(tmp_path):
+def test_an_euroc_csv_with_a_missing_column_names_the_file_and_line(evo, tmp_path):
     lines = (EVO / "V102_groundtruth.csv").read_text().splitlines()
     lines[5] = ",".join(lines[5].split(",")[:6])
     bad = tmp_path / "data.csv"
@@ -217,7 +217,7 @@ def test_an_euroc_csv_with_a_missing_column_names_the_file_and_line(tmp_path):
         read_euroc_csv(bad)
 
 
-def test_euroc_nanoseconds_become_seconds_exactly():
+def test_euroc_nanoseconds_become_seconds_exactly(evo):
     gt = read_euroc_csv(EVO / "V102_groundtruth.csv")
     first = (EVO / "V102_groundtruth.csv").read_text().splitlines()[1].split(",")
     assert gt.timestamps[0] == pytest.approx(int(first[0]) / 1e9, abs=1e-9)
@@ -226,7 +226,7 @@ def test_euroc_nanoseconds_become_seconds_exactly():
     assert len(from_matrices(gt.timestamps[:2], np.tile(np.eye(4)[:3], (2, 1, 1)))) == 2
 
 
-def test_the_command_line_gives_the_library_figures_on_every_core():
+def test_the_command_line_gives_the_library_figures_on_every_core(evo):
     import json
     import subprocess
     import sys
