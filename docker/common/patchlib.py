@@ -78,6 +78,7 @@ OPENCV4 = [
     (r"\bCV_TERMCRIT_(ITER|EPS)\b", r"cv::TermCriteria::\1"),
     (r"\bCV_REDUCE_(SUM|AVG|MAX|MIN)\b", r"cv::REDUCE_\1"),
     (r"\bCV_CAP_PROP_(\w+)\b", r"cv::CAP_PROP_\1"),
+    (r"\bCV_SORT_(EVERY_ROW|EVERY_COLUMN|ASCENDING|DESCENDING)\b", r"cv::SORT_\1"),
 ]
 
 

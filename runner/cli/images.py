@@ -36,7 +36,7 @@ def add_commands(sub) -> None:
     im.add_argument(
         "--standin-model",
         action="store_true",
-        help="without --weights: an untrained stand-in network (CNN-DSO, CNN-SVO), for plumbing tests only",
+        help="without --weights: an untrained stand-in network (CNN-DSO, CNN-SVO, DynaSLAM), for plumbing tests only",
     )
     im.add_argument("--build-arg", action="append", default=[], metavar="KEY=VALUE", help="extra Docker build argument")
     im.add_argument("--log-dir", type=Path, help="where build logs and records go (default .cache/images)")

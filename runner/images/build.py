@@ -29,7 +29,7 @@ from runner.images import sources as src
 ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_LOG_DIR = ROOT / ".cache" / "images"
 SOURCE_RE = re.compile(r"\bsources/([A-Za-z0-9_.+-]+)\.tar\.gz\b")
-PYPI_RE = re.compile(r"\bpypi/([A-Za-z0-9_.+-]+\.whl)\b")
+PYPI_RE = re.compile(r"\bpypi/([A-Za-z0-9_.+-]+\.(?:whl|tar\.gz|zip))(?![A-Za-z0-9_.+-])")  # wheels and sdists
 LABEL = "slamrun"
 ANSI = re.compile(r"\x1b\[[0-9;]*m")  # the builder colours a step's stderr
 
@@ -47,6 +47,7 @@ VOCABULARIES = {
     "ldso": Vocabulary("ldso", "vocab/orbvoc.dbow3", "dbow3"),
     "orb_slam2": Vocabulary("orb_slam2", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
     "df_orb_slam": Vocabulary("df_orb_slam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
+    "dynaslam": Vocabulary("dynaslam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
 }
 
 
@@ -58,6 +59,7 @@ class Weights:
     name: str
     published: str
     standin: bool = False
+    arg: str = "MONODEPTH_MODEL"  # the build argument that says given or standin
 
 
 MONODEPTH = Weights(
@@ -70,7 +72,12 @@ MONODEPTH = Weights(
 WEIGHTS = {
     "cnn_dso": MONODEPTH,
     "cnn_svo": MONODEPTH,
-    "dynaslam": Weights("mask_rcnn_coco.h5", "the matterport/Mask_RCNN GitHub release v2.0 (mask_rcnn_coco.h5)"),
+    "dynaslam": Weights(
+        "mask_rcnn_coco.h5",
+        "the matterport/Mask_RCNN GitHub release v2.0 (mask_rcnn_coco.h5)",
+        standin=True,
+        arg="MASK_RCNN_MODEL",
+    ),
 }
 
 
@@ -227,7 +234,7 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
     if weights:
         labels[f"{LABEL}.weights"] = json.dumps(weights)
         log(f"weights of {name}: {json.dumps(weights)}")
-    args = {"VOCABULARY": kind} | ({"MONODEPTH_MODEL": model} if model != "none" and WEIGHTS[name].standin else {})
+    args = {"VOCABULARY": kind} | ({WEIGHTS[name].arg: model} if model != "none" and WEIGHTS[name].standin else {})
     labels[f"{LABEL}.build-args"] = json.dumps(args | opts.build_args)
     return labels
 

@@ -330,6 +330,143 @@ class PypiFile:
         return list(index.get("urls") or []) + list((index.get("releases") or {}).get(self.version) or [])
 
 
+# DynaSLAM's Python 2.7 (Mask R-CNN in the image's embedded python2.7): every file pip installs there, as
+# "file name" then its SHA-256 on the next line; project and version come from the file name (pypi_file()).
+# Found with `pip download` run by a Python 2.7.18 (pip 20.3.4) on the top-level pins; the build installs exactly
+# these with --no-index --require-hashes (docker/dynaslam/requirements-py27.txt, checked against this list).
+PY27_DYNASLAM = """
+# pip: the last pip for Python 2: installs everything below with --no-index --require-hashes
+pip-20.3.4-py2.py3-none-any.whl
+    217ae5161a0e08c0fb873858806e3478c9775caffce5168b50ec885e358c199d
+# setuptools: the last setuptools for Python 2: builds the pure-Python sdists below (no wheel for Python 2)
+setuptools-44.1.1-py2.py3-none-any.whl
+    27a714c09253134e60a6fa68130f78c7037e5562c4f21f8f318f2ae900d152d5
+# wheel: the last wheel for Python 2
+wheel-0.37.1-py2.py3-none-any.whl
+    4bdcd7d840138086126cd09254dc6195fb4fc6f01c050a1d7236f2630db1d22a
+# tensorflow-cpu: the last TensorFlow 1.x (cp27mu manylinux2010), CPU-only (111 MB, tensorflow's is 412 MB)
+tensorflow_cpu-1.15.0-cp27-cp27mu-manylinux2010_x86_64.whl
+    cd42c0b1d0aa6724909c28923a167e5211a1cf10df11149a503f5ba210a4fcf2
+# keras: the Keras DynaSLAM's users run: matterport's model.py needs keras.engine.topology (gone in 2.2)
+Keras-2.1.6-py2.py3-none-any.whl
+    a7abff3e87b6706764fbbd0521ba8f54c48f0720fd0495860cd3d2fd67899d48
+# numpy: the last numpy for Python 2; its C headers build DynaSLAM's numpy<->cv::Mat conversion
+numpy-1.16.6-cp27-cp27mu-manylinux1_x86_64.whl
+    1680c8d5086a88d293dfd1a10b6429a09140cacee878034fa2308472ec835db4
+# h5py: the last h5py for Python 2: Keras reads mask_rcnn_coco.h5 with it
+h5py-2.10.0-cp27-cp27mu-manylinux1_x86_64.whl
+    cbf28ae4b5af0f05aa6e7551cee304f1d317dbed1eb7ac1d827cee2f1ef97a99
+# scipy: the last scipy for Python 2 with scipy.misc.imresize (gone in 1.3), which Mask R-CNN resizes with
+scipy-1.2.3-cp27-cp27mu-manylinux1_x86_64.whl
+    e870dfd006ab657f9cc48b099646c5ceb4e812e59a7d460dc80ac9a659f089dc
+# scikit-image: the last scikit-image for Python 2 (MaskRCNN.py, utils.py import it)
+scikit_image-0.14.5-cp27-cp27mu-manylinux1_x86_64.whl
+    152052ebb27e03f3a1643dedefca18edd110d7e5bef7cb0e0869d5e0219580cc
+# matplotlib: the last matplotlib for Python 2 (MaskRCNN.py imports pyplot; MPLBACKEND=Agg)
+matplotlib-2.2.5-cp27-cp27mu-manylinux1_x86_64.whl
+    57077b4023f1af0151b6b580bccfcff2e3ec1e0f689ef58e4d1e751cdfbf13f0
+# pillow: the last Pillow for Python 2: scipy.misc.imresize works through it
+Pillow-6.2.2-cp27-cp27mu-manylinux1_x86_64.whl
+    e3a797a079ce289e59dbd7eac9ca3bf682d52687f718686857281475b7ca8e6a
+# grpcio: TensorFlow's: the last release with a cp27mu wheel (1.41 is source only: a long C++ build)
+grpcio-1.39.0-cp27-cp27mu-manylinux2010_x86_64.whl
+    4039645b8b5d19064766f3a6fa535f1db52a61c4d4de97a6a8945331a354d527
+# python-dateutil: matplotlib's: 2.8.2, the last for Python 2 (3.x would be resolved otherwise)
+python_dateutil-2.8.2-py2.py3-none-any.whl
+    961d03dc3453ebbc59dbdea9e4e11c5651520a876d0f4db161e8674aae935da9
+# the rest: their dependencies, as pip 20.3.4 resolves them for Python 2.7 (sdists where PyPI has no
+# Python 2 wheel: pure Python, built in the image by setuptools 44)
+absl-py-0.15.0.tar.gz
+    72d782fbeafba66ba3e525d46bccac949b9a174dbf66233e50ece09ee688dc81
+astor-0.8.1-py2.py3-none-any.whl
+    070a54e890cefb5b3739d19f30f5a5ec840ffc9c50ffa7d23cc9fc1a38ebbfc5
+backports.functools_lru_cache-1.6.6-py2.py3-none-any.whl
+    77e27d0ffbb463904bdd5ef8b44363f6cd5ef503e664b3f599a3bf5843ed37cf
+backports.weakref-1.0.post1-py2.py3-none-any.whl
+    81bc9b51c0abc58edc76aefbbc68c62a787918ffe943a37947e162c3f8e19e82
+cloudpickle-1.3.0-py2.py3-none-any.whl
+    8664761f810efc07dbb301459e413c99b68fcc6d8703912bd39d86618ac631e3
+cycler-0.10.0-py2.py3-none-any.whl
+    1d8a5ae1ff6c5cf9b93e8811e581232ad8920aeec647c37316ceac982b08cb2d
+decorator-4.4.2-py2.py3-none-any.whl
+    41fa54c2a0cc4ba648be4fd43cff00aedf5b9465c9bf18d64325bc225f08f760
+enum34-1.1.10-py2-none-any.whl
+    a98a201d6de3f2ab3db284e70a33b0f896fbf35f8086594e8c9e74b909058d53
+funcsigs-1.0.2-py2.py3-none-any.whl
+    330cc27ccbf7f1e992e69fef78261dc7c6569012cf397db8d3de0234e6c937ca
+functools32-3.2.3-2.tar.gz
+    f6253dfbe0538ad2e387bd8fdfd9293c925d63553f5813c4e587745416501e6d
+futures-3.4.0-py2-none-any.whl
+    5ec20fa8bdccf96ac9bf9fb2473f51b14c117db638aa8a4a6c27b43532a0efe9
+gast-0.2.2.tar.gz
+    fe939df4583692f0512161ec1c880e0a10e71e6a232da045ab8edd3756fbadf0
+google_pasta-0.2.0-py2-none-any.whl
+    4612951da876b1a10fe3960d7226f0c7682cf901e16ac06e473b267a5afa8954
+Keras_Applications-1.0.8.tar.gz
+    5579f9a12bcde9748f4a12233925a59b93b73ae6947409ff34aa2ba258189fe5
+Keras_Preprocessing-1.1.2-py2.py3-none-any.whl
+    7b82029b130ff61cc99b55f3bd27427df4838576838c5b2f65940e4fcec99a7b
+kiwisolver-1.1.0-cp27-cp27mu-manylinux1_x86_64.whl
+    05b5b061e09f60f56244adc885c4a7867da25ca387376b02c1efc29cc16bcd0f
+Markdown-3.1.1-py2.py3-none-any.whl
+    56a46ac655704b91e5b7e6326ce43d5ef72411376588afa1dd90e881b83c7e8c
+mock-3.0.5-py2.py3-none-any.whl
+    d157e52d4e5b938c550f39eb2fd15610db062441a9c2747d3dbfa9298211d0f8
+networkx-2.2.zip
+    45e56f7ab6fe81652fb4bc9f44faddb0e9025f469f602df14e3b2551c2ea5c8b
+opt_einsum-2.3.2.tar.gz
+    d3d464b4da7ef09e444c30e4003a27def37f85ff10ff2671e5f7d7813adac35b
+protobuf-3.17.3-cp27-cp27mu-manylinux_2_5_x86_64.manylinux1_x86_64.whl
+    13ee7be3c2d9a5d2b42a1030976f760f28755fcf5863c55b1460fd205e6cd637
+pyparsing-2.4.7-py2.py3-none-any.whl
+    ef9d7589ef3c200abe66653d3f1ab1033c3c419ae9b9bdb1240a85b024efc88b
+pytz-2026.6-py2.py3-none-any.whl
+    7fed3fee8fd6bd4a2b7b75a8d56021d0624127bf69bd5691f115db929ac570b3
+PyWavelets-1.0.3-cp27-cp27mu-manylinux1_x86_64.whl
+    e89551257233a3da717a9e6e2e303243df75faffe0b6781d21c15eb9d682ec6d
+PyYAML-5.4.1-cp27-cp27mu-manylinux1_x86_64.whl
+    bb4191dfc9306777bc594117aee052446b3fa88737cd13b7188d0e7aa8162185
+six-1.17.0-py2.py3-none-any.whl
+    4721f391ed90541fddacab5acf947aa0d3dc7d27b2e1e8eda2be8970586c3274
+subprocess32-3.5.4-cp27-cp27mu-manylinux2014_x86_64.whl
+    e45d985aef903c5b7444d34350b05da91a9e0ea015415ab45a21212786c649d0
+tensorboard-1.15.0-py2-none-any.whl
+    612b789386aa1b2c4804e1961273b37f8e4dd97613f98bc90ff0402d24627f50
+tensorflow_estimator-1.15.1-py2.py3-none-any.whl
+    8853bfb7c3c96fbdc80b3d66c37a10af6ccbcd235dc87474764270c02a0f86b9
+termcolor-1.1.0.tar.gz
+    1d6d69ce66211143803fbc56652b41d73b4a400a2891d7bf7a1cdf4c02de613b
+Werkzeug-1.0.1-py2.py3-none-any.whl
+    2de2a5db0baeae7b2d2664949077c2ac63fbd16d98da0ff71837f7d1dea3fd43
+wrapt-1.15.0-cp27-cp27mu-manylinux2010_x86_64.whl
+    58d7a75d731e8c63614222bcb21dd992b4ab01a399f1f09dd82af17bbfc2368a
+"""
+
+
+def pypi_file(filename: str, sha256: str) -> PypiFile:
+    """A PyPI file named by the conventions of wheels (`<project>-<version>-<tags>.whl`) and sdists
+    (`<project>-<version>.tar.gz|.zip`), its project name normalised as PyPI does."""
+    if filename.endswith(".whl"):
+        project, version = filename.split("-")[:2]
+    else:
+        m = re.fullmatch(r"(.+?)-(\d[^-]*(?:-\d+)?)\.(?:tar\.gz|zip)", filename)
+        if not m:
+            raise SourceError(f"{filename}: not a wheel or sdist file name")
+        project, version = m.groups()
+    return PypiFile(filename, re.sub(r"[-_.]+", "-", project).lower(), version, sha256)
+
+
+def pypi_table(text: str) -> tuple[PypiFile, ...]:
+    """The files of a table like PY27_DYNASLAM (comments left out)."""
+    words = [w for line in text.splitlines() if not line.lstrip().startswith("#") for w in line.split()]
+    return tuple(pypi_file(name, sha) for name, sha in zip(words[::2], words[1::2], strict=True))
+
+
+def requirements(files: list[PypiFile]) -> str:
+    """A pip requirements file pinning `files` by version and SHA-256 (`pip install --require-hashes`)."""
+    return "".join(f"{f.project}=={f.version} --hash=sha256:{f.sha256}\n" for f in files)
+
+
 PYPI_FILES: dict[str, PypiFile] = {
     f.filename: f
     for f in (
@@ -360,6 +497,7 @@ PYPI_FILES: dict[str, PypiFile] = {
             "4.11.0.86",
             "0e0a27c19dd1f40ddff94976cfe43066fbbe9dfbb2ec1907d66c19caef42a57b",
         ),
+        *pypi_table(PY27_DYNASLAM),
     )
 }
 
