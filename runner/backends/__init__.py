@@ -17,16 +17,23 @@ def make_backend(spec: CampaignSpec) -> Backend:
     if spec.distributed is not None:
         from runner.backends.dask import DaskBackend
 
-        return DaskBackend(spec.backend, spec.distributed.address, spec.results, local_workers=spec.lanes)
+        d = spec.distributed
+        if d.cluster is not None:
+            return DaskBackend(spec.backend, None, spec.results, local_workers=spec.lanes, jobs=d)
+        return DaskBackend(spec.backend, d.address, spec.results, local_workers=spec.lanes)
     return make_local_backend(spec.backend)
 
 
 def make_local_backend(name: str) -> Backend:
-    """The backend that runs a process on this machine: a local process tree or a Docker container."""
+    """The backend that runs a process on this machine: a local process tree, or a Docker or podman container."""
     if name == "local":
         from runner.backends.local import LocalBackend
 
         return LocalBackend()
+    if name == "podman":
+        from runner.backends.podman import PodmanBackend
+
+        return PodmanBackend()
     from runner.backends.docker import DockerBackend
 
     return DockerBackend()

@@ -16,9 +16,13 @@ import threading
 import time
 import uuid
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from runner.backends.base import Defaults, ExecRequest, ExecResult
 from runner.errors import InfraError, SchedulerUnreachable
+
+if TYPE_CHECKING:
+    from runner.engine.spec import DistributedSpec
 
 SILENCE_MARGIN_S = 120.0  # beyond a run's timeout, how long to wait for a worker's answer
 WORKER_SILENCE_S = 20.0  # a worker without a heartbeat to the scheduler for this long is hung (stopped, frozen)
@@ -39,6 +43,12 @@ class _RemoteCancel:
 
 def _execute_on_worker(backend_name: str, req: ExecRequest, flag: str) -> ExecResult:
     from runner.backends import make_local_backend
+
+    try:  # Dask hands a lost worker's task to another one; the campaign retries it in a fresh folder instead
+        with open(Path(flag).parent / "worker.txt", "x") as fh:
+            fh.write(f"{socket.gethostname()}\n")
+    except FileExistsError:
+        raise InfraError("its worker was lost mid-run (job ended, node gone); the run goes back to pending") from None
 
     def started(pid: int, t0: float) -> None:  # tells the campaign machine, through the shared folder
         tmp = Path(flag).parent / "process.txt.tmp"
@@ -101,7 +111,13 @@ class DaskBackend(Defaults):
     engine = "dask"
 
     def __init__(
-        self, backend_name: str, address: str, results: Path, local_workers: int = 2, connect_timeout_s: float = 30
+        self,
+        backend_name: str,
+        address: str | None,
+        results: Path,
+        local_workers: int = 2,
+        connect_timeout_s: float = 30,
+        jobs: DistributedSpec | None = None,
     ):
         try:
             from distributed import Client, LocalCluster
@@ -118,6 +134,13 @@ class DaskBackend(Defaults):
         self._beats: dict[str, tuple[float, float]] = {}  # worker -> (its last_seen, when it changed here)
         self._processing: dict[str, str] = {}  # task key -> worker running it
         self._disconnected_since: float | None = None
+        self._jobs = jobs
+        if jobs is not None:  # workers as batch jobs this campaign submits and cancels
+            from runner.backends.jobqueue import start_job_cluster
+
+            self._cluster, self.client = start_job_cluster(jobs, self.results, local_workers)
+            self.address = f"{jobs.cluster} ({self._cluster.scheduler_address})"
+            return
         try:
             if address == "local":
                 self._cluster = LocalCluster(
@@ -274,3 +297,7 @@ class DaskBackend(Defaults):
             pass
         if self._cluster is not None:
             self._cluster.close()
+        if self._jobs is not None:  # the cluster cancels its jobs; what it lost track of goes too
+            from runner.backends.jobqueue import cancel_jobs, job_name
+
+            cancel_jobs(self._jobs.cluster, job_name(self.results))

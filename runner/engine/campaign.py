@@ -176,14 +176,18 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         ledger.set_meta("campaign", spec.name)
         ledger.set_meta("spec", spec.model_dump(mode="json"))
         (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
-        docker_here = spec.backend == "docker" and spec.distributed is None
+        docker_here = spec.backend in ("docker", "podman") and spec.distributed is None
         recovered = recover(ledger, results, keep_attempts=docker_here)
         runs = plan(spec)
         added = ledger.sync_plan(runs)
         recovered["imported"] += import_finished(ledger, runs, results) + reimport_lost(ledger, results)
-        backend = backend or make_backend(spec)
         images = {m.run_label: methods.get(m.name)(m.params).image for m in spec.methods}
-        backend.check(images)
+        backend = backend or make_backend(spec)
+        try:
+            backend.check(images)
+        except BaseException:
+            backend.close()  # a cluster's jobs end with it
+            raise
         described = {label: backend.describe_image(tag) for label, tag in images.items() if tag}
         if any(d is not None for d in described.values()):  # which image, from which sources, made these results
             (results / "images.json").write_text(json.dumps(described, indent=1))

@@ -1,0 +1,201 @@
+"""Campaigns on a real Slurm cluster (one node on 127.0.0.1) through dask-jobqueue: workers as jobs, a job
+cancelled mid-run, the checks before any run, and jobs that never start."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from runner.backends.jobqueue import job_name
+from runner.datasets.synth import generate
+from runner.engine.campaign import run_campaign
+from runner.engine.spec import load_spec
+from runner.errors import InfraError, SpecError
+from tests import slurm_cluster
+from tests.conftest import write_spec
+from tests.test_campaign import ledger_rows
+
+pytest.importorskip("dask_jobqueue")
+
+
+@pytest.fixture(scope="module")
+def slurm():
+    why = slurm_cluster.missing()
+    if why:
+        if os.environ.get("CI"):
+            pytest.fail(f"CI installs Slurm (.ci/run), yet: {why}")
+        pytest.skip(why)
+    cluster = slurm_cluster.SlurmCluster().start()
+    before = os.environ.get("SLURM_CONF")
+    os.environ["SLURM_CONF"] = cluster.env["SLURM_CONF"]
+    try:
+        yield cluster
+    finally:
+        if before is None:
+            os.environ.pop("SLURM_CONF", None)
+        else:
+            os.environ["SLURM_CONF"] = before
+        cluster.stop()
+
+
+@pytest.fixture(scope="module")
+def rooms(tmp_path_factory) -> Path:
+    """Two synthetic sequences the reference VO initialises and tracks on (a few seconds a run)."""
+    root = tmp_path_factory.mktemp("rooms")
+    generate(root / "seq_a", frames=120, seed=1, size=(320, 240))
+    generate(root / "seq_b", frames=120, seed=2, size=(320, 240))
+    return root
+
+
+def slurm_spec(tmp_path: Path, dataset: Path, **distributed) -> Path:
+    cluster = {
+        "cluster": "slurm",
+        "queue": "debug",
+        "cores": 1,
+        "memory": "1GB",
+        "walltime": "00:30:00",
+        "interface": "lo",  # scheduler and workers on loopback
+        "min_workers": 2,
+        "max_workers": 2,
+        "worker_wait_s": 120,
+    } | distributed
+    return write_spec(
+        tmp_path,
+        dataset,
+        [{"name": "reference_vo"}],
+        trials=2,
+        lanes=2,
+        timeout_s=300,
+        distributed=cluster,
+    )
+
+
+def our_jobs(slurm, results: Path) -> list[tuple[str, str, str]]:
+    return [j for j in slurm.jobs() if j[1] == job_name(results)]
+
+
+def test_a_campaign_runs_on_slurm_jobs_and_a_cancelled_job_costs_no_run(tmp_path, rooms, slurm):
+    spec = load_spec(slurm_spec(tmp_path, rooms))
+    results = spec.results
+    seen: set[str] = set()
+    cancelled: list[str] = []
+    stop = threading.Event()
+
+    def watch_and_cancel() -> None:  # once two jobs run and a run is in flight on a worker: scancel one job
+        while not stop.is_set():
+            jobs = [j for j in our_jobs(slurm, results) if j[2] == "RUNNING"]
+            seen.update(j[0] for j in jobs)
+            in_flight = list(results.rglob("worker.txt")) if results.exists() else []
+            if not cancelled and len(jobs) == 2 and in_flight:
+                slurm.run("scancel", jobs[0][0])
+                cancelled.append(jobs[0][0])
+            time.sleep(0.2)
+
+    watcher = threading.Thread(target=watch_and_cancel, daemon=True)
+    watcher.start()
+    try:
+        res = run_campaign(spec, on_event=None)
+    finally:
+        stop.set()
+        watcher.join()
+    rows = ledger_rows(res.results)
+    assert len(rows) == 8  # 2 sequences x 2 directions x 2 trials, each once
+    assert [r["state"] for r in rows] == ["done"] * 8, [(r["state"], r["message"]) for r in rows]
+    assert cancelled, f"no job was cancelled mid-run (jobs seen: {sorted(seen)})"
+    assert any(r["attempts"] > 1 for r in rows), "the cancelled job's run was not retried"
+    assert len(seen) >= 3, f"no job replaced the cancelled one: {sorted(seen)}"
+    finished = sorted(res.results.glob("runs/*/*/*/*/run.json"))
+    assert len(finished) == 8, finished  # one folder per run: none written twice, no half-written one left
+    assert our_jobs(slurm, results) == []  # the campaign cancelled its jobs at the end
+
+
+def test_a_job_left_by_a_crashed_start_is_cancelled_by_the_next(tmp_path, rooms, slurm):
+    spec = load_spec(slurm_spec(tmp_path, rooms, min_workers=1, max_workers=1))
+    spec.results.mkdir(parents=True)
+    left = slurm.run("sbatch", "--parsable", "-J", job_name(spec.results), "--wrap", "sleep 600").stdout.strip()
+    deadline = time.monotonic() + 30
+    while left not in [j[0] for j in slurm.jobs()] and time.monotonic() < deadline:
+        time.sleep(0.2)
+    res = run_campaign(spec, on_event=None)
+    assert [r["state"] for r in ledger_rows(res.results)] == ["done"] * 8
+    assert left not in [j[0] for j in slurm.jobs()]
+
+
+def test_no_sbatch_on_path_is_said_before_any_run(tmp_path, rooms, slurm, monkeypatch):
+    python_only = tmp_path / "bin"
+    python_only.mkdir()
+    (python_only / "python").symlink_to(sys.executable)
+    monkeypatch.setenv("PATH", str(python_only))
+    spec = load_spec(slurm_spec(tmp_path, rooms))
+    with pytest.raises(InfraError, match=r"missing: sbatch, squeue, scancel, sinfo.*login node"):
+        run_campaign(spec, on_event=None)
+    assert {r["state"] for r in ledger_rows(spec.results)} == {"pending"}
+
+
+def test_a_partition_that_does_not_exist_is_named_with_the_ones_that_do(tmp_path, rooms, slurm):
+    spec = load_spec(slurm_spec(tmp_path, rooms, queue="gpu-large"))
+    with pytest.raises(InfraError, match=r"no partition 'gpu-large' \(it has: debug\)"):
+        run_campaign(spec, on_event=None)
+    assert our_jobs(slurm, spec.results) == []
+
+
+def test_a_job_slurm_cannot_satisfy_is_refused_before_it_is_queued(tmp_path, rooms, slurm):
+    spec = load_spec(slurm_spec(tmp_path, rooms, memory="500GB"))
+    with pytest.raises(InfraError, match=r"Slurm refuses the worker job.*node configuration is not available"):
+        run_campaign(spec, on_event=None)
+    assert our_jobs(slurm, spec.results) == []
+    assert {r["state"] for r in ledger_rows(spec.results)} == {"pending"}
+
+
+def test_jobs_that_stay_pending_end_the_wait_with_slurms_reason(tmp_path, rooms, slurm):
+    spec = load_spec(slurm_spec(tmp_path, rooms, job_directives=["--begin=now+3600"], worker_wait_s=8, min_workers=1))
+    t0 = time.monotonic()
+    with pytest.raises(InfraError, match=r"no worker job started within .* 8 s: job \d+ pending \(BeginTime\)"):
+        run_campaign(spec, on_event=None)
+    assert time.monotonic() - t0 < 60
+    assert our_jobs(slurm, spec.results) == []  # cancelled, not left queued
+    assert {r["state"] for r in ledger_rows(spec.results)} == {"pending"}
+
+
+def test_a_walltime_shorter_than_a_run_is_a_spec_error(tmp_path, tiny_dataset):
+    path = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [{"name": "reference_vo"}],
+        timeout_s=1800,
+        distributed={"cluster": "slurm", "walltime": "00:30:00"},
+    )
+    with pytest.raises(SpecError, match=r"walltime 00:30:00 \(1800 s\) is shorter than one run may take"):
+        load_spec(path)
+
+
+def test_address_and_cluster_are_one_or_the_other(tmp_path, tiny_dataset):
+    for distributed in ({"cluster": "slurm", "address": "tcp://h:8786"}, {"engine": "dask"}):
+        path = write_spec(tmp_path, tiny_dataset, [{"name": "reference_vo"}], distributed=distributed)
+        with pytest.raises(SpecError, match="either address .* or cluster"):
+            load_spec(path)
+
+
+def test_ctrl_c_cancels_the_jobs(tmp_path, rooms, slurm):
+    path = slurm_spec(tmp_path, rooms, min_workers=1, max_workers=1)
+    results = load_spec(path).results
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "runner.cli", "campaign", str(path)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        env={**os.environ, **slurm.env},
+    )
+    deadline = time.monotonic() + 120
+    while not [j for j in our_jobs(slurm, results) if j[2] == "RUNNING"] and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert our_jobs(slurm, results), "no job started"
+    proc.send_signal(2)
+    out, _ = proc.communicate(timeout=120)
+    assert "Traceback" not in out.decode(), out.decode()[-3000:]
+    assert our_jobs(slurm, results) == []
