@@ -1,15 +1,18 @@
-"""The Docker backend against a real Docker engine and real containers (no mocks).
+"""The container backends against real engines and real containers (no mocks): Docker's daemon, and podman
+(no daemon; the same tests, the image exported from Docker and loaded into podman's store).
 
-Skipped, with the reason shown, only where no engine can be reached; under CI (CI=true) a missing engine
-or base image is a failure, since .ci/run starts both.
+Skipped, with the reason shown, only where no engine can be reached; under CI (CI=true) a missing engine,
+podman or base image is a failure, since .ci/run installs and starts them.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -49,30 +52,44 @@ def engine_with_base():
     return api
 
 
-@pytest.fixture(scope="module")
-def backend():
-    from runner.backends.docker import DockerBackend
+@pytest.fixture(scope="module", params=["docker", "podman"])
+def backend(request):
+    from runner.backends import make_local_backend
 
-    b = DockerBackend()
+    if request.param == "podman" and shutil.which("podman") is None:
+        _unavailable("podman is not installed (Debian: apt-get install podman)")
+    engine_with_base()  # the images are built with Docker in either case
+    b = make_local_backend(request.param)
     try:
         b.check()
     except InfraError as exc:
-        _unavailable(f"no Docker engine: {exc}")
-    return b
+        _unavailable(f"no {request.param} engine: {exc}")
+    yield b
+    b.close()
+
+
+def in_podman(tag: str) -> None:
+    """`tag`, built by Docker, in podman's store (exported and loaded when podman lacks it or has an older one)."""
+    from runner.backends.docker import DockerBackend
+    from runner.images.export import export_image
+
+    docker_id = DockerBackend().client.images.get(tag).id
+    have = subprocess.run(["podman", "image", "inspect", "--format", "{{.Id}}", tag], capture_output=True, text=True)
+    if have.returncode == 0 and docker_id.removeprefix("sha256:") == have.stdout.strip():
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        path, _ = export_image(DockerBackend().client, tag, Path(tmp))
+        subprocess.run(["podman", "load", "-q", "-i", str(path)], check=True, capture_output=True)
 
 
 @pytest.fixture(scope="module")
 def image(backend):
     """The reference VO image, built from docker/reference_vo/Dockerfile (Docker's layer cache makes reruns fast)."""
-    import docker
-
-    try:
-        backend.client.images.get("debian:bookworm-slim")
-    except docker.errors.ImageNotFound:
-        _unavailable("no debian:bookworm-slim base image (scripts/make-offline-base.sh builds it offline)")
     from runner.images.build import build
 
     build(["reference_vo"], log=lambda *a: None)
+    if backend.name == "podman":
+        in_podman(IMAGE)
     return IMAGE
 
 
@@ -147,7 +164,7 @@ def test_log_flood_is_capped(backend, image, tmp_path, view):
 
 
 def test_missing_image_is_infra(backend, tmp_path, view):
-    with pytest.raises(InfraError, match="make images"):
+    with pytest.raises(InfraError, match="make images" if backend.name == "docker" else "podman load -i"):
         backend.check({"nonexistent": "slamrun/does-not-exist:latest"})
     req = _request(tmp_path, view, ["true"], image="slamrun/does-not-exist:latest")
     with pytest.raises(InfraError, match="missing"):
@@ -176,7 +193,7 @@ def test_campaign_with_reference_vo_image(backend, image, tmp_path, vo_dataset):
         tmp_path,
         vo_dataset,
         [{"name": "reference_vo"}],
-        backend="docker",
+        backend=backend.name,
         memory_limit_mb=1500,
         timeout_s=300,
         datasets=one_sequence(vo_dataset),
@@ -197,7 +214,7 @@ def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo
         tmp_path,
         vo_dataset,
         [{"name": "reference_vo"}],
-        backend="docker",
+        backend=backend.name,
         timeout_s=300,
         trials=2,
         datasets=one_sequence(vo_dataset),
@@ -225,17 +242,18 @@ def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo
 
 
 def test_dask_workers_check_their_own_docker_images(backend, image, tmp_path):
-    """With the Dask engine, each worker checks its own Docker daemon and images before any run."""
+    """With the Dask engine, each worker checks its own engine (Docker's daemon, podman) and images before any run."""
     pytest.importorskip("distributed")
     import socket
 
     from runner.backends.dask import DaskBackend
 
-    dask = DaskBackend("docker", "local", tmp_path, local_workers=1)
+    dask = DaskBackend(backend.name, "local", tmp_path, local_workers=1)
     try:
         dask.check({"reference_vo": image})  # present on this machine's daemon: fine
         with pytest.raises(InfraError) as err:
             dask.check({"nonexistent": "slamrun/does-not-exist:latest"})
-        assert socket.gethostname() in str(err.value) and "make images" in str(err.value)
+        assert socket.gethostname() in str(err.value)
+        assert ("make images" if backend.name == "docker" else "podman load -i") in str(err.value)
     finally:
         dask.close()

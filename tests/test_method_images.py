@@ -19,7 +19,7 @@ from runner.engine.spec import load_spec
 from runner.images.build import BuildOptions, build
 from runner.images.verify import scene_extent
 from tests.conftest import UPSTREAM, require_upstream, write_spec
-from tests.test_docker import engine_with_base
+from tests.test_docker import IN_CI, engine_with_base
 
 
 @pytest.fixture(scope="module")
@@ -88,3 +88,40 @@ def test_real_dso_on_the_euroc_and_kitti_layouts_through_docker(dso_image, tmp_p
     for run_dir in df.run_dir:  # no photometric calibration in these datasets: DSO's mode=1, no gamma/vignette
         argv = json.loads((Path(run_dir) / "run.json").read_text())["argv"]
         assert "mode=1" in argv and not any(a.startswith(("gamma=", "vignette=")) for a in argv), argv
+
+
+def test_real_dso_through_podman_matches_docker(dso_image, tmp_path):
+    """The same DSO image run by podman (no daemon; loaded from `slamrun images --export`'s archive) and by
+    Docker: 2 rooms x forward/backward x 2 trials each, every run done, e_align medians within 10 %. DSO runs
+    single-threaded (nomt=1, repeatable), so the engines' timing cannot make the two differ; multi-threaded, two
+    campaigns of 8 runs differ by ~15 % in their medians on the same engine."""
+    import shutil
+
+    from tests.test_docker import in_podman
+
+    if shutil.which("podman") is None:
+        pytest.fail("podman is not installed (.ci/run installs it)") if IN_CI else pytest.skip("podman not installed")
+    in_podman(dso_image)
+    data = tmp_path / "data"
+    generate(data / "room_a", frames=200, seed=3)
+    generate(data / "room_b", frames=200, seed=4)
+    medians = {}
+    for backend in ("docker", "podman"):
+        (tmp_path / backend).mkdir()
+        spec = write_spec(
+            tmp_path / backend,
+            data,
+            [{"name": "dso", "params": {"single_thread": True}}],
+            datasets=[{"name": "synth", "path": str(data), "sequences": ["room_a", "room_b"]}],
+            backend=backend,
+            trials=2,
+            lanes=2,
+            timeout_s=600,
+            name=f"dso-{backend}",
+        )
+        res = run_campaign(load_spec(spec), log=lambda *a: None)
+        df = pd.read_csv(res.results_csv)
+        assert res.counts["done"] == 8, df[["direction", "status", "failure", "message"]].to_string()
+        assert (df.eval_status == "ok").all() and df.ram_peak_mb.notna().all() and (df.fps > 0).all()
+        medians[backend] = float(df.e_align.median())
+    assert abs(medians["podman"] - medians["docker"]) <= 0.10 * medians["docker"], medians

@@ -66,6 +66,7 @@ def _docker():
 
 class DockerBackend(Defaults):
     name = "docker"
+    follow_logs = True  # the log is pumped while the container runs (False: read once it has exited)
 
     def __init__(self, sample_interval_s: float = 0.5, client=None):
         self.sample_interval_s = sample_interval_s
@@ -114,9 +115,16 @@ class DockerBackend(Defaults):
             try:
                 client.images.get(tag)
             except docker.errors.ImageNotFound:
-                problems.append(f"image {tag} for method {method!r} is missing; build it: make images METHOD={method}")
+                problems.append(self.missing_image(tag, method))
         if problems:
-            raise InfraError("Docker images:\n  " + "\n  ".join(problems))
+            raise InfraError(f"{self.name} images:\n  " + "\n  ".join(problems))
+
+    def missing_image(self, tag: str, method: str) -> str:
+        return f"image {tag} for method {method!r} is missing; build it: make images METHOD={method}"
+
+    def container_options(self) -> dict:
+        """Engine-specific options of every container (none for Docker)."""
+        return {}
 
     def describe_image(self, tag: str) -> dict:
         """The image a run used: its id and the slamrun.* labels its build recorded (sources and commits,
@@ -188,6 +196,7 @@ class DockerBackend(Defaults):
                 str(req.workdir): {"bind": str(WORK), "mode": "rw"},
             },
             environment={"HOME": str(WORK), "MPLBACKEND": "Agg", **req.env},
+            **self.container_options(),
         )
         if req.cpus:
             kwargs["cpuset_cpus"] = ",".join(str(c) for c in req.cpus)
@@ -239,8 +248,9 @@ class DockerBackend(Defaults):
             raise
         if on_start:
             on_start(0, 0.0)
-        pump = threading.Thread(target=self._pump_logs, args=(container, log), daemon=True)
-        pump.start()
+        pump = threading.Thread(target=self._pump_logs, args=(container, log, self.follow_logs), daemon=True)
+        if self.follow_logs:
+            pump.start()
         monitor = ContainerMonitor(container, self.sample_interval_s, t0, self.gpu if req.needs_gpu else None)
         monitor.start()
         exit_code = None
@@ -272,13 +282,11 @@ class DockerBackend(Defaults):
                 exit_code = None
         wall_s = time.monotonic() - t0
         series = monitor.stop()
-        pump.join(timeout=10)
+        if not self.follow_logs:
+            pump.start()  # the whole log, now that the container has exited
+        pump.join(timeout=10 if self.follow_logs else 120)
         log.close()
-        try:
-            container.reload()
-            oom = bool(container.attrs["State"].get("OOMKilled"))
-        except docker.errors.APIError:
-            oom = False
+        oom = self.out_of_memory(container, exit_code, req)
         series.write_csv(req.resources_path)
         return ExecResult(
             exit_code=exit_code,
@@ -292,9 +300,18 @@ class DockerBackend(Defaults):
         )
 
     @staticmethod
-    def _pump_logs(container, log: CappedLog) -> None:
+    def out_of_memory(container, exit_code: int | None, req: ExecRequest) -> bool:
+        """The engine's own verdict: the kernel's OOM killer ended the container."""
         try:
-            for chunk in container.logs(stream=True, follow=True, stdout=True, stderr=True):
+            container.reload()
+            return bool(container.attrs["State"].get("OOMKilled"))
+        except _docker().errors.APIError:
+            return False
+
+    @staticmethod
+    def _pump_logs(container, log: CappedLog, follow: bool = True) -> None:
+        try:
+            for chunk in container.logs(stream=True, follow=follow, stdout=True, stderr=True):
                 log.write(chunk)
         except Exception:  # noqa: BLE001 - the container is gone: the log ends here
             pass

@@ -48,6 +48,12 @@ def add_commands(sub) -> None:
         help="build what is missing, run a short Docker campaign per image, print a table of results",
     )
     im.add_argument("--results", type=Path, help="results folder of --verify (default .cache/verify)")
+    im.add_argument(
+        "--export",
+        type=Path,
+        metavar="DIR",
+        help="write the built images as archives into DIR, for `podman load -i` on machines without Docker",
+    )
     im.set_defaults(func=cmd_images)
     ve = sub.add_parser("verify", help="verify the methods of a spec on the synthetic rooms (any method)")
     ve.add_argument("spec", type=Path, help="a spec: its methods (built-in, plug-in, external) and backend")
@@ -109,6 +115,8 @@ def cmd_images(args) -> int:
         opts.jobs = args.jobs
     if args.log_dir:
         opts.log_dir = args.log_dir
+    if args.export:
+        return _export(args.method, args.export)
     if args.verify:
         from runner.images.verify import print_table, verify
 
@@ -148,4 +156,21 @@ def cmd_new_method(args) -> int:
     console.print(f"  slamrun list-methods        # {args.name} is listed")
     console.print(f"  pytest {dest}/tests          # its adapter's tests")
     console.print("  slamrun verify SPEC         # a spec naming it: the verification table on the synthetic rooms")
+    return 0
+
+
+def _export(only: list[str] | None, dest: Path) -> int:
+    from runner.backends.docker import DockerBackend
+    from runner.images.build import buildable
+    from runner.images.export import export_image
+
+    client = DockerBackend().client
+    for name, (tag, _) in buildable().items():
+        if only and name not in only:
+            continue
+        if not only and not client.images.list(name=tag):
+            continue  # without --method: the images built here
+        path, sha = export_image(client, tag, dest)
+        size_mb = path.stat().st_size / 2**20
+        console.print(f"{tag} -> {path} ({size_mb:.0f} MB, sha256 {sha}); load it: podman load -i {path}")
     return 0
