@@ -55,7 +55,11 @@ def _execute_on_worker(backend_name: str, req: ExecRequest, flag: str) -> ExecRe
         tmp.write_text(f"{socket.gethostname()} {pid} {t0!r}\n")  # pid 0: a container
         tmp.replace(tmp.with_suffix(""))
 
-    return make_local_backend(backend_name).execute(req, _RemoteCancel(Path(flag)), started)  # type: ignore[arg-type]
+    backend = make_local_backend(backend_name)
+    try:
+        return backend.execute(req, _RemoteCancel(Path(flag)), started)  # type: ignore[arg-type]
+    finally:
+        backend.close()  # podman's API service ends with the run
 
 
 def _dask_logs_to(path: Path) -> None:
@@ -98,7 +102,11 @@ def _check_on_worker(backend_name: str, images: dict | None, probe: str) -> str 
     try:
         from runner.backends import make_local_backend
 
-        make_local_backend(backend_name).check(images)
+        backend = make_local_backend(backend_name)
+        try:
+            backend.check(images)
+        finally:
+            backend.close()
     except Exception as exc:  # noqa: BLE001 - reported with the worker's name
         return f"{host}: {exc}"
     return None
