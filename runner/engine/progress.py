@@ -12,7 +12,6 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 
-from runner.results.summary import tally_rows
 from runner.results.vocabulary import METHOD_FAILURES, is_infra
 
 
@@ -78,70 +77,9 @@ def wall_times(rows: Iterable[dict]) -> dict[str, list[float]]:
 
 
 def figures(rows: list[dict], session: dict | None = None, now: float | None = None, campaign: str = "") -> Figures:
-    session = session or {}
-    lanes = int(session.get("lanes") or 1)
-    t = tally_rows(rows)
-    # runs left: unfinished, and infrastructure failures (retried at the next start)
-    left: dict[str, int] = Counter(
-        r["label"] for r in rows if r["state"] in ("pending", "running") or is_infra(r["state"], r.get("failure"))
-    )
-    started = session.get("runs_from") or session.get("started_at")  # the scheduler's span when known
-    ended = session.get("runs_to") or session.get("ended_at")
-    elapsed = occupancy = None
-    overhead = 0.0
-    if started:
-        end = ended or now
-        if end is not None:
-            elapsed = max(end - started, 0.0)
-            mine = [
-                float(r["wall_s"] or 0.0)
-                for r in rows
-                if r.get("started_at") and r["started_at"] >= started and r["state"] in ("done", "failed")
-            ]
-            busy = sum(mine)
-            occupancy = busy / (lanes * elapsed) if elapsed > 0 else None
-            overhead = overhead_per_run(busy, len(mine), lanes, elapsed)
-    eta_s, basis = eta(left, wall_times(rows), lanes, overhead)
-    return Figures(
-        campaign=campaign,
-        total=len(rows),
-        done=t.done,
-        failed=t.failed,
-        infra=t.infra,
-        pending=sum(r["state"] == "pending" for r in rows),
-        running=sum(r["state"] == "running" for r in rows),
-        failures={k: n for k, n in t.failures.items() if n},
-        lanes=lanes,
-        elapsed_s=elapsed,
-        eta_s=eta_s,
-        eta_basis=basis,
-        occupancy=occupancy,
-        active=bool(session) and not ended,
-        per_group=per_group(rows),
-    )
-
-
-def per_group(rows: list[dict]) -> list[dict]:
-    """Counts per method label and direction, with the success rate over method results."""
-    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
-    for r in rows:
-        groups[(r["label"], r["direction"])].append(r)
-    out = []
-    for (label, direction), group in sorted(groups.items()):
-        t = tally_rows(group)
-        out.append(
-            {
-                "method": label,
-                "direction": direction,
-                "pending": sum(r["state"] == "pending" for r in group),
-                "running": sum(r["state"] == "running" for r in group),
-                "done": t.done,
-                "failed": t.failed,
-                "infra": t.infra,
-                "success_pct": t.success_pct,
-            }
-        )
-    return out
+    """The figures of a set of ledger rows (`slamrun status`, the end of a campaign); the live view keeps a
+    Tracker instead and applies each run's change to it."""
+    return Tracker(rows, session, campaign).figures(now)
 
 
 def duration(seconds: float | None) -> str:
@@ -198,9 +136,9 @@ class Tracker:
         self.busy = 0.0
         self.session_runs = 0
         self.unknown = 0
-        for r in rows:
+        for i, r in enumerate(rows):
             row = {k: r.get(k) for k in ("label", "direction", "state", "failure", "wall_s", "started_at")}
-            self.rows[r["key"]] = row
+            self.rows[r.get("key", i)] = row
             self._count(row, +1)
 
     def update(self, key: str, **changes) -> None:
