@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from runner.engine.progress import eta, figures
+from runner.engine.progress import Tracker, eta, figures
 from tests.conftest import fake_method, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -57,13 +57,42 @@ def snapshot(folder: Path) -> dict[str, tuple[int, int]]:
 # ------------------------------------------------------------ the figures
 
 
-def test_eta_is_the_median_wall_time_per_method_times_runs_left_over_lanes():
-    walls = {"a": [10.0, 12.0, 100.0], "b": [4.0]}
-    assert eta({"a": 3, "b": 5}, walls, lanes=2) == ((3 * 12.0 + 5 * 4.0) / 2, "measured")
-    seconds, basis = eta({"a": 1, "c": 2}, walls, lanes=1)  # c has no finished run: the median of all
+def test_eta_is_the_median_wall_time_per_method_and_sequence_times_runs_left_over_lanes():
+    a, b, c = ("a", "d/s1"), ("b", "d/s1"), ("c", "d/s1")
+    walls = {a: [10.0, 12.0, 100.0], b: [4.0]}
+    assert eta({a: 3, b: 5}, walls, lanes=2) == ((3 * 12.0 + 5 * 4.0) / 2, "measured")
+    seconds, basis = eta({a: 1, c: 2}, walls, lanes=1)  # c has no finished run: the median of all
     assert basis == "partly estimated" and seconds == 12.0 + 2 * 11.0
-    assert eta({"a": 2}, {}, lanes=1) == (None, "unknown")
-    assert eta({"a": 0}, walls, lanes=1) == (0.0, "-")
+    assert eta({a: 2}, {}, lanes=1) == (None, "unknown")
+    assert eta({a: 0}, walls, lanes=1) == (0.0, "-")
+
+
+def test_eta_tells_a_long_sequence_from_a_short_one_of_the_same_method():
+    """The study's sequences run from 40 s to 10 min: a method's median over all of them would say the same
+    for each; per sequence, the runs left on the long one count as long."""
+    short, long_ = ("dso", "tum-mono/seq_01"), ("dso", "tum-mono/seq_02")
+    walls = {short: [40.0, 41.0, 39.0, 40.0, 40.0], long_: [600.0]}
+    assert eta({long_: 9}, walls, lanes=1) == (9 * 600.0, "measured")  # the method's median (40 s) says 360 s
+    seconds, basis = eta({("dso", "tum-mono/seq_03"): 2}, walls, lanes=1)  # not yet run: the method's median
+    assert (seconds, basis) == (2 * 40.0, "partly estimated")
+
+
+def test_the_tracker_and_figures_agree_per_sequence():
+    rows = [
+        {"key": f"k{i}", "label": "m", "dataset": "d", "sequence": seq, "direction": "forward", "state": state}
+        | {"failure": None, "wall_s": wall, "started_at": 100.0 + i}
+        for i, (seq, state, wall) in enumerate(
+            [("s1", "done", 10.0), ("s1", "pending", None), ("s2", "done", 50.0), ("s2", "pending", None)]
+        )
+    ]
+    session = {"started_at": 100.0, "lanes": 1}
+    tracker = Tracker(rows, session)
+    assert tracker.figures(now=200.0).eta_s == figures(rows, session, now=200.0).eta_s
+    tracker.update("k1", state="done", wall_s=12.0, started_at=150.0)
+    rows[1] |= {"state": "done", "wall_s": 12.0, "started_at": 150.0}
+    assert tracker.figures(now=200.0) == figures(rows, session, now=200.0)
+    overhead = (1 * 100.0 - (10.0 + 50.0 + 12.0)) / 3  # the lane's time per run beyond the runs' own
+    assert tracker.figures(now=200.0).eta_s == pytest.approx(50.0 + overhead)  # s2's run left, at s2's pace
 
 
 def test_figures_count_infra_apart_and_measure_lane_occupancy():

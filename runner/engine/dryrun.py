@@ -17,7 +17,7 @@ from runner.datasets.view import Profile
 from runner.engine.ledger import Ledger
 from runner.engine.paths import RunPaths, finished_record
 from runner.engine.plan import plan
-from runner.engine.progress import eta, overhead_per_run, wall_times
+from runner.engine.progress import eta, overhead_per_run, run_group, wall_times
 from runner.engine.spec import CampaignSpec
 from runner.errors import DatasetError
 from runner.results.vocabulary import is_infra
@@ -52,7 +52,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         finally:
             ledger.close()
     counts: dict[tuple[str, str], Counter] = defaultdict(Counter)
-    todo_by_method: Counter = Counter()
+    todo_by_group: Counter = Counter()
     todo_views = set()
     for run in runs:
         row = rows.get(run.key.id)
@@ -67,7 +67,9 @@ def dry_run(spec: CampaignSpec) -> DryRun:
             state = row["state"]
         counts[(run.key.label, run.key.direction.value)][state] += 1
         if state in ("new", "pending", "infra"):
-            todo_by_method[run.key.label] += 1
+            todo_by_group[
+                run_group({"label": run.key.label, "dataset": run.dataset, "sequence": run.key.sequence})
+            ] += 1
             todo_views.add((run.sequence_dir, run.key.direction, run.profile))
     groups = []
     for (label, direction), c in sorted(counts.items()):
@@ -91,7 +93,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         done=total["done"],
         failed=total["failed"],
         infra=total["infra"],
-        to_run=sum(todo_by_method.values()),
+        to_run=sum(todo_by_group.values()),
         lanes=lanes,
         groups=groups,
     )
@@ -105,7 +107,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
             out.view_bytes += 0 if (seq_dir, profile) in frames_counted else size
             frames_counted.add((seq_dir, profile))
     overhead = last_session_overhead(list(rows.values()), session)
-    out.eta_s, out.eta_basis = eta(dict(todo_by_method), wall_times(rows.values()), lanes, overhead)
+    out.eta_s, out.eta_basis = eta(dict(todo_by_group), wall_times(rows.values()), lanes, overhead)
     return out
 
 

@@ -41,21 +41,38 @@ class Figures:
         return asdict(self) | {"finished": self.finished}
 
 
+RunGroup = tuple[str, str]  # (method label, "dataset/sequence"): runs whose wall times are alike
+
+
+def run_group(row: dict) -> RunGroup:
+    return row["label"], f"{row.get('dataset') or ''}/{row.get('sequence') or ''}"
+
+
 def eta(
-    left: dict[str, int], walls: dict[str, list[float]], lanes: int, overhead_s: float = 0.0
+    left: dict[RunGroup, int], walls: dict[RunGroup, list[float]], lanes: int, overhead_s: float = 0.0
 ) -> tuple[float | None, str]:
-    """Seconds until the runs left end: per method, the median wall time of its finished runs plus the runner's
-    own time per run on a lane (`overhead_s`: starting, collecting, waiting for a view), times its runs left,
-    summed and spread over the lanes. A method with no finished run yet borrows the median of all."""
-    todo = {m: n for m, n in left.items() if n > 0}
+    """Seconds until the runs left end: per method and sequence, the median wall time of its finished runs plus
+    the runner's own time per run on a lane (`overhead_s`: starting, collecting, waiting for a view), times its
+    runs left, summed and spread over the lanes. A sequence a method has not finished yet borrows that method's
+    median over its other sequences; a method with no finished run, the median of all."""
+    todo = {g: n for g, n in left.items() if n > 0}
     if not todo:
         return 0.0, "-"
     every = [w for ws in walls.values() for w in ws]
     if not every:
         return None, "unknown"
     overall = statistics.median(every)
-    total = sum(n * ((statistics.median(walls[m]) if walls.get(m) else overall) + overhead_s) for m, n in todo.items())
-    basis = "measured" if all(walls.get(m) for m in todo) else "partly estimated"
+    by_method: dict[str, list[float]] = defaultdict(list)
+    for (label, _), ws in walls.items():
+        by_method[label].extend(ws)
+
+    def typical(group: RunGroup) -> float:
+        if walls.get(group):
+            return statistics.median(walls[group])
+        return statistics.median(by_method[group[0]]) if by_method.get(group[0]) else overall
+
+    total = sum(n * (typical(g) + overhead_s) for g, n in todo.items())
+    basis = "measured" if all(walls.get(g) for g in todo) else "partly estimated"
     return total / max(lanes, 1), basis
 
 
@@ -67,12 +84,13 @@ def overhead_per_run(busy_s: float, runs: int, lanes: int, elapsed_s: float | No
     return max(lanes * elapsed_s - busy_s, 0.0) / runs
 
 
-def wall_times(rows: Iterable[dict]) -> dict[str, list[float]]:
-    """Per method label, the wall times of its finished runs (method results, not infrastructure failures)."""
-    walls: dict[str, list[float]] = defaultdict(list)
+def wall_times(rows: Iterable[dict]) -> dict[RunGroup, list[float]]:
+    """Per method label and sequence, the wall times of its finished runs (method results, not infrastructure
+    failures)."""
+    walls: dict[RunGroup, list[float]] = defaultdict(list)
     for r in rows:
         if r["state"] in ("done", "failed") and not is_infra(r["state"], r.get("failure")) and r.get("wall_s"):
-            walls[r["label"]].append(float(r["wall_s"]))
+            walls[run_group(r)].append(float(r["wall_s"]))
     return walls
 
 
@@ -132,12 +150,14 @@ class Tracker:
         self.rows: dict[str, dict] = {}
         self.groups: dict[tuple[str, str], Counter] = defaultdict(Counter)
         self.failures: Counter = Counter()
-        self.walls: dict[str, list[float]] = defaultdict(list)
+        self.walls: dict[RunGroup, list[float]] = defaultdict(list)
+        self.left: Counter = Counter()  # (label, sequence) -> runs left
         self.busy = 0.0
         self.session_runs = 0
         self.unknown = 0
         for i, r in enumerate(rows):
             row = {k: r.get(k) for k in ("label", "direction", "state", "failure", "wall_s", "started_at")}
+            row["group"] = run_group(r)
             self.rows[r.get("key", i)] = row
             self._count(row, +1)
 
@@ -158,11 +178,14 @@ class Tracker:
         self.groups[(row["label"], row["direction"])][cat] += sign
         if cat == "failed":
             self.failures[row["failure"]] += sign
+        group = row["group"]
+        if cat in ("pending", "running", "infra"):
+            self.left[group] += sign
         if cat in ("done", "failed") and row["wall_s"]:
             if sign > 0:
-                self.walls[row["label"]].append(float(row["wall_s"]))
+                self.walls[group].append(float(row["wall_s"]))
             else:
-                self.walls[row["label"]].remove(float(row["wall_s"]))
+                self.walls[group].remove(float(row["wall_s"]))
         finished = cat in ("done", "failed", "infra")
         if finished and self.started and row["started_at"] and row["started_at"] >= self.started:
             self.busy += sign * float(row["wall_s"] or 0.0)
@@ -170,11 +193,9 @@ class Tracker:
 
     def figures(self, now: float | None = None) -> Figures:
         totals: Counter = Counter()
-        left: Counter = Counter()
         per = []
         for (label, direction), c in sorted(self.groups.items()):
             totals.update(c)
-            left[label] += c["pending"] + c["running"] + c["infra"]
             if sum(c.values()) == 0:
                 continue
             results = c["done"] + c["failed"]
@@ -199,7 +220,7 @@ class Tracker:
                 elapsed = max(end - self.started, 0.0)
                 occupancy = self.busy / (self.lanes * elapsed) if elapsed > 0 else None
                 overhead = overhead_per_run(self.busy, self.session_runs, self.lanes, elapsed)
-        eta_s, basis = eta(left, self.walls, self.lanes, overhead)
+        eta_s, basis = eta(self.left, self.walls, self.lanes, overhead)
         kinds = [k for k in METHOD_FAILURES if self.failures[k]] + sorted(
             k for k in self.failures if k not in METHOD_FAILURES and self.failures[k]
         )
