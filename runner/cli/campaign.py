@@ -8,8 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-from rich.table import Table
-
 from runner.cli.console import console
 from runner.errors import SlamRunError
 from runner.results.vocabulary import FAILURES
@@ -61,7 +59,7 @@ def cmd_campaign(args) -> int:
     spec = spec.model_copy(update=updates)
     if args.dry_run:
         return _print_dry_run(spec)
-    progress = LiveProgress(spec.results, console, sys.stdout.isatty())
+    progress = LiveProgress(spec.results, console.real(), sys.stdout.isatty())
     sched_ref = {}
 
     def on_signal(signum, _frame):
@@ -129,6 +127,8 @@ def _print_dry_run(spec) -> int:
     from runner.engine.progress import duration
 
     d = dry_run(spec)
+    from rich.table import Table
+
     t = Table(title=f"{spec.name}: what `slamrun campaign` would run (nothing was run or written)")
     for c in ("method", "direction", "runs", "new", "pending", "done", "failed"):
         t.add_column(c, justify="left" if c in ("method", "direction") else "right")
@@ -166,6 +166,8 @@ def _print_summary(campaign: str, results: Path, csv: Path) -> None:
     if df.empty:
         return
     summ = method_summary(df)
+    from rich.table import Table
+
     t = Table(title=f"{campaign}: per method")
     medians = [f"median_{m}" for m in ("e_t", "e_r", "e_s_sym", "e_align", "ate_rmse", "rpe_t_rmse")]
     medians = [c for c in medians if summ[c].notna().any()] or medians[:4]  # the metrics this campaign has
@@ -207,7 +209,7 @@ def cmd_status(args) -> int:
         return 0
     from rich.live import Live
 
-    with Live(status_view(f), console=console, refresh_per_second=1) as live:
+    with Live(status_view(f), console=console.real(), refresh_per_second=1) as live:
         while True:
             time.sleep(args.interval)
             f = read_figures(args.results) or f

@@ -59,7 +59,7 @@ def cmd_download(args) -> int:
         BarColumn(),
         DownloadColumn(),
         TransferSpeedColumn(),
-        console=console,
+        console=console.real(),
         disable=not sys.stdout.isatty(),
     ) as progress:
 

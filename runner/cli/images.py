@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from rich.table import Table
-
 from runner.cli.console import console
 from runner.errors import SlamRunError
 
@@ -69,6 +67,8 @@ def add_commands(sub) -> None:
 
 
 def cmd_list_methods(args) -> int:
+    from rich.table import Table
+
     import methods
 
     t = Table(title="methods")
