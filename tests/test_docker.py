@@ -7,6 +7,7 @@ podman or base image is a failure, since .ci/run installs and starts them.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -257,3 +258,30 @@ def test_dask_workers_check_their_own_docker_images(backend, image, tmp_path):
         assert ("make images" if backend.name == "docker" else "podman load -i") in str(err.value)
     finally:
         dask.close()
+
+
+def test_podmans_api_service_ends_with_a_runner_killed_by_sigkill():
+    if shutil.which("podman") is None:
+        _unavailable("podman is not installed (Debian: apt-get install podman)")
+    script = (
+        "import sys, time\n"
+        "from runner.backends.podman import PodmanBackend\n"
+        "b = PodmanBackend(); b.client.ping()\n"
+        "print(b.service.proc.pid, flush=True)\n"
+        "time.sleep(600)\n"
+    )
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    service = int(proc.stdout.readline())
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline:
+        try:
+            os.kill(service, 0)
+        except ProcessLookupError:
+            break
+        with contextlib.suppress(ChildProcessError):
+            os.waitpid(service, os.WNOHANG)  # not our child: reaped by init; this only avoids a zombie here
+        time.sleep(0.1)
+    state = Path(f"/proc/{service}/stat").read_text().split()[2] if Path(f"/proc/{service}").exists() else "gone"
+    assert state in ("gone", "Z"), f"podman system service {service} still runs ({state})"

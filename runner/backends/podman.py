@@ -1,8 +1,8 @@
 """podman backend: the Docker backend's containers, run by podman, with no daemon.
 
 podman has no resident daemon; slamrun starts `podman system service` on a private socket for as long as the
-backend is used (it ends with this process, even one killed with SIGKILL, and by itself after a minute without
-a client), and talks to it with the same Docker API client. So every guarantee of the Docker backend holds:
+backend is used (it ends with the backend's close, and with this process even when that is killed with SIGKILL),
+and talks to it with the same Docker API client. So every guarantee of the Docker backend holds:
 network none, read-only data, CPU set and memory limit, labels for leftovers, capped logs, removal.
 
 Two differences are handled here: podman's default ulimits are above what an unprivileged or sandboxed host
@@ -25,12 +25,13 @@ from pathlib import Path
 from runner.backends.docker import DockerBackend, _docker, _reason
 from runner.errors import DaemonUnreachable, InfraError
 
-IDLE_EXIT_S = 60  # the service ends by itself after this long without a client
+IDLE_EXIT_S = 0  # never by itself: an idle exit between two runs would look like a lost engine
 START_WAIT_S = 30
 
 
 def _die_with_parent() -> None:
-    """In the service's process: receive SIGTERM when the process that started it dies (prctl PR_SET_PDEATHSIG)."""
+    """In the service's process: receive SIGTERM when the thread that started it ends (prctl PR_SET_PDEATHSIG;
+    the campaign's main thread, or a Dask worker's thread, which closes the backend after each run anyway)."""
     os.setsid()
     ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)
 
