@@ -37,9 +37,20 @@ def _version() -> str:
         return "unknown (not installed)"
 
 
+class _PrintVersion(argparse.Action):
+    """--version, read from the installed package only when asked (importlib.metadata costs every command 30 ms)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, **kw):
+        super().__init__(option_strings, dest, nargs=0, help="show the version and exit", **kw)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"slamrun {_version()}")
+        parser.exit()
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="slamrun", description="Run and compare monocular SLAM/VO methods.")
-    p.add_argument("--version", action="version", version=f"slamrun {_version()}")
+    p.add_argument("--version", action=_PrintVersion)
     sub = p.add_subparsers()
     for group in GROUPS:
         group.add_commands(sub)
