@@ -258,6 +258,21 @@ def bench_scheduler(tmp: Path) -> None:
     report("campaign, per run (no-op method)", f"{campaign_s / n * 1000:.1f} ms", "-")
     report("bare subprocess.run, per run", f"{bare_s / n * 1000:.1f} ms", "-")
     report("scheduler overhead per run", f"{overhead_ms:.1f} ms", "< 50 ms")
+    # runs of 1 s on 2 lanes: the share of the lanes' time the runs use (status's occupancy)
+    from runner.cli.display import read_figures
+
+    busy_spec = loaded.model_copy(
+        update={
+            "results": tmp / "res-busy",
+            "lanes": 2,
+            "trials": 40,
+            "methods": [loaded.methods[0].model_copy(update={"params": {"argv": ["/bin/sleep", "1"]}})],
+        }
+    )
+    run_campaign(busy_spec, log=lambda *a: None)
+    f = read_figures(tmp / "res-busy")
+    busy = (f.occupancy or 0.0) if f else 0.0
+    report("lanes busy, 40 runs of 1 s on 2 lanes", f"{100 * busy:.1f} %", ">= 90 %")
     try:
         import distributed  # noqa: F401
     except ImportError:
