@@ -204,3 +204,14 @@ def test_the_image_claims_no_gpu_and_says_which_network_it_holds():
     assert not any(e.startswith("NVIDIA_") for e in env)  # no GPU runtime asked for: TensorFlow's CPU build
     assert labels.get("slamrun.method") == "dynaslam" and "mask_rcnn_coco.h5" in labels.get("slamrun.weights", "")
     assert os.path.basename(IMAGE).startswith("dynaslam")
+
+
+def test_its_verification_fits_in_half_an_hour_and_says_what_it_ran():
+    from runner.images.verify import SCOPES, VerifyRow, markdown_table
+
+    scope = SCOPES["dynaslam"]
+    seconds_per_frame = 10  # Mask R-CNN on this machine's 2 cores, the slower end measured (the README's row)
+    runs = len(scope.sequences) * 2 * scope.trials  # forward and backward
+    assert runs >= 2 and runs * (scope.frames * seconds_per_frame + 60) <= 36 * 60
+    row = VerifyRow("dynaslam", True, runs=runs, runs_ok=runs, scope=str(scope), plumbing_only=True)
+    assert f"| {runs}/{runs} (room_a only, 1 trial, {scope.frames} frames: Mask R-CNN" in markdown_table([row])

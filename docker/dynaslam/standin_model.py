@@ -12,10 +12,11 @@ import sys
 import numpy as np
 import tensorflow as tf
 
+sys.path.insert(0, ".")  # DynaSLAM's src/python: the working directory
 np.random.seed(0)
 tf.set_random_seed(0)
 
-import coco  # noqa: E402  (DynaSLAM's, beside this script's working directory)
+import coco  # noqa: E402
 import model as modellib  # noqa: E402
 
 
