@@ -2,7 +2,8 @@
 
 `mono_tum VOCAB SETTINGS SEQDIR [MASKDIR]` must run from the repository root; the image's wrapper
 `dynaslam-run` does that and copies KeyFrameTrajectory.txt into the work directory. Without masks it is
-plain ORB-SLAM2. Mask R-CNN runs on the CPU unless `gpu: true`. 640x480 is hard-coded upstream.
+plain ORB-SLAM2. Mask R-CNN runs on the CPU: the image (Debian 11, tensorflow-cpu 1.15 for Python 2.7) has no
+GPU build, so `gpu: true` is refused rather than claimed. 640x480 is hard-coded upstream.
 """
 
 from __future__ import annotations
@@ -12,17 +13,16 @@ from pathlib import Path
 from pydantic import Field
 
 from methods.orb_slam2 import OrbSlam2, OrbSlam2Params
-from methods.upstream import GpuOptional, GpuOptionalParams
 from runner.datasets.view import PreparedView
 from runner.errors import MethodFailure
 
 
-class DynaSlamParams(OrbSlam2Params, GpuOptionalParams):
+class DynaSlamParams(OrbSlam2Params):
     vocabulary: str = Field("/opt/DynaSLAM/Vocabulary/ORBvoc.txt", description="ORB vocabulary (ORBvoc.txt).")
     masks: bool = Field(True, description="Segment every frame with Mask R-CNN (off: plain ORB-SLAM2).")
 
 
-class DynaSlam(GpuOptional, OrbSlam2):
+class DynaSlam(OrbSlam2):
     name = "dynaslam"
     image = "slamrun/dynaslam:latest"
     binary = "/opt/DynaSLAM/dynaslam-run"
@@ -43,4 +43,4 @@ class DynaSlam(GpuOptional, OrbSlam2):
         return argv
 
     def environment(self) -> dict[str, str]:
-        return {**super().environment(), "MPLBACKEND": "Agg", "SLAMRUN_WORKDIR": "/work", **self.cpu_environment()}
+        return {**super().environment(), "MPLBACKEND": "Agg", "SLAMRUN_WORKDIR": "/work", "CUDA_VISIBLE_DEVICES": ""}

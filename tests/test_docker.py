@@ -135,18 +135,20 @@ def test_nonzero_exit_and_contract(backend, image, tmp_path, view):
         "import os, socket, sys\n"
         "print('uid', os.getuid(), 'data', sorted(os.listdir('/data'))[:3], flush=True)\n"
         "open('/work/out.txt', 'w').write('ok')\n"
+        "open('/work/masks/m.txt', 'w').write('ok')\n"
         "try:\n    open('/data/x', 'w')\nexcept OSError:\n    print('data is read-only')\n"
         "try:\n    socket.create_connection(('127.0.0.1', 9), timeout=1)\nexcept OSError as e:\n    print('net', e)\n"
         "print('nproc', len(os.sched_getaffinity(0)))\n"
         "sys.exit(3)\n"
     )
     req = _request(tmp_path, view, ["python3", "-c", script], cpus=(0,))
+    (req.workdir / "masks").mkdir()  # a folder the adapter wrote (DynaSLAM's mask cache): the run's user writes in it
     res = backend.execute(req, threading.Event())
     log = req.log_path.read_text()
     assert res.exit_code == 3 and not res.timed_out and not res.oom
     assert "uid 1000" in log or f"uid {os.getuid()}" in log  # a non-root user
     assert "data is read-only" in log and "camera.txt" in log and "nproc 1" in log
-    assert (req.workdir / "out.txt").read_text() == "ok"
+    assert (req.workdir / "out.txt").read_text() == "ok" and (req.workdir / "masks" / "m.txt").read_text() == "ok"
 
 
 def test_memory_limit_is_oom(backend, image, tmp_path, view):

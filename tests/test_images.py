@@ -165,3 +165,11 @@ def test_every_pypi_file_of_a_continued_copy_is_found(tmp_path):
     from runner.images.build import ROOT
 
     assert len(pypi_files_of(ROOT / "docker" / "reference_vo" / "Dockerfile")) == 3
+
+
+def test_each_recipe_names_the_debian_base_slamrun_makes_when_missing():
+    from runner.images.build import buildable, debian_bases
+
+    bases = {name: debian_bases(dockerfile) for name, (_, dockerfile) in buildable().items()}
+    assert bases.pop("dynaslam") == {"debian:bullseye-slim"}  # Python 2.7 for its embedded Mask R-CNN
+    assert all(b == {"debian:bookworm-slim"} for b in bases.values()), bases

@@ -178,8 +178,10 @@ class DockerBackend(Defaults):
         if req.image is None:
             raise InfraError("this method has no Docker image; run it with backend: local")
         user = None
-        if os.getuid() == 0:
-            os.chown(req.workdir, CONTAINER_UID, CONTAINER_UID)
+        if os.getuid() == 0:  # the work folder and what the adapter wrote in it (DynaSLAM's masks/) to the user
+            for folder, dirs, files in os.walk(req.workdir):
+                for name in [folder, *(os.path.join(folder, n) for n in dirs + files)]:
+                    os.chown(name, CONTAINER_UID, CONTAINER_UID, follow_symlinks=False)
             user = f"{CONTAINER_UID}:{CONTAINER_UID}"
         else:
             user = f"{os.getuid()}:{os.getgid()}"

@@ -293,8 +293,32 @@ def build(
             raise SlamRunError(f"{dockerfile}: missing; every method with an image needs its docker/<name>/ folder")
         if only_missing and client.images(name=tag):
             continue
+        ensure_bases(client, dockerfile, log)
         records.append(build_one(client, name, tag, dockerfile, opts, log))
     return records
+
+
+def debian_bases(dockerfile: Path) -> set[str]:
+    """The `debian:<suite>-slim` images a recipe starts FROM (bookworm for most, bullseye for DynaSLAM)."""
+    return set(re.findall(r"^FROM\s+(debian:[a-z]+-slim)\b", dockerfile.read_text(), flags=re.MULTILINE))
+
+
+def ensure_bases(client, dockerfile: Path, log: Callable[[str], None]) -> None:
+    """Make a missing Debian base without a registry (scripts/make-offline-base.sh: debootstrap from the
+    machine's Debian mirror, then docker import), as CI does for bookworm."""
+    import subprocess
+
+    for base in sorted(debian_bases(dockerfile)):
+        if client.images(name=base):
+            continue
+        suite = base.split(":")[1].removesuffix("-slim")
+        log(f"making the base image {base} from the Debian mirror (scripts/make-offline-base.sh, about a minute)")
+        env = {**os.environ, "SUITE": suite, "TAG": base}
+        done = subprocess.run(
+            ["bash", str(ROOT / "scripts" / "make-offline-base.sh")], env=env, capture_output=True, text=True
+        )
+        if done.returncode != 0:
+            raise InfraError(f"could not make the base image {base}: {(done.stderr or done.stdout).strip()[-500:]}")
 
 
 def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions, log) -> BuildRecord:
