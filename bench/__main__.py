@@ -259,7 +259,7 @@ def bench_scheduler(tmp: Path) -> None:
     report("bare subprocess.run, per run", f"{bare_s / n * 1000:.1f} ms", "-")
     report("scheduler overhead per run", f"{overhead_ms:.1f} ms", "< 50 ms")
     # runs of 1 s on 2 lanes: the share of the lanes' time the runs use (status's occupancy)
-    from runner.cli.display import read_figures
+    from runner.engine.session import read_figures
 
     busy_spec = loaded.model_copy(
         update={

@@ -333,3 +333,56 @@ def test_the_eta_counts_the_runners_own_time_per_run():
     f = figures(rows, {"lanes": 1, "started_at": 100.0}, now=150.0)
     assert f.eta_s == pytest.approx(900 * 0.5)
     assert f.occupancy == pytest.approx(10 / 50)
+
+
+def test_wall_times_give_the_medians_of_the_runs_they_hold_after_adds_and_removes():
+    """The ETA's medians are read from lists kept sorted (constant cost per finished run at the study's scale):
+    per group, per method over its groups, and overall, they equal statistics.median of the same wall times."""
+    import random
+    import statistics
+
+    from runner.engine.progress import WallTimes
+
+    rng = random.Random(7)
+    groups = [(m, f"d/s{s}") for m in ("a", "b") for s in range(3)]
+    held: dict = {g: [] for g in groups}
+    times = WallTimes()
+    for step in range(3000):
+        g = rng.choice(groups)
+        if held[g] and rng.random() < 0.4:
+            w = rng.choice(held[g])
+            held[g].remove(w)
+            times.remove(g, w)
+        else:
+            w = round(rng.uniform(0.1, 9.0), 1)  # repeated values too
+            held[g].append(w)
+            times.add(g, w)
+        if step % 50 == 0:
+            every = [w for ws in held.values() for w in ws]
+            for group in groups:
+                mine = [w for (m, _), ws in held.items() if m == group[0] for w in ws]
+                want = held[group] or mine or every
+                if want:
+                    assert times.typical(group) == statistics.median(want), (step, group)
+    assert bool(times) == any(held.values())
+
+
+def test_status_reads_only_the_columns_the_figures_use(tmp_path):
+    """`slamrun status` reads the progress columns, not whole rows; the figures are the same."""
+    from runner.engine.ledger import Ledger
+    from runner.engine.progress import Tracker
+
+    ledger = Ledger(tmp_path / "ledger.sqlite")
+    rows = [
+        {"key": f"k{i:03d}", "label": "m", "method": "m", "dataset": "d", "sequence": f"s{i % 3}"}
+        | {"direction": "forward", "trial": i, "settings": "", "state": "done", "wall_s": 1.0 + i % 5}
+        | {"started_at": 10.0 + i, "e_align": 0.01, "failure": None}
+        for i in range(40)
+    ]
+    ledger.insert_finished(rows)
+    full, narrow = ledger.rows(), ledger.progress_rows()
+    ledger.close()
+    assert [set(r) for r in narrow] == [set(Ledger.PROGRESS_COLUMNS)] * 40
+    assert narrow == [{k: r[k] for k in Ledger.PROGRESS_COLUMNS} for r in full]
+    session = {"lanes": 2, "started_at": 10.0}
+    assert Tracker(narrow, session).figures(100.0) == Tracker(full, session).figures(100.0)

@@ -322,3 +322,27 @@ def test_a_methods_environment_reaches_its_process(tmp_path, tiny_dataset):
     assert res.counts["done"] == 1
     (seen,) = list((res.results / "runs").rglob("raw/env.txt"))
     assert seen.read_text() == "loop-off"
+
+
+def test_a_run_clears_its_own_half_written_attempts_and_leaves_its_siblings(tmp_path, tiny_dataset):
+    """Before attempt n, attempts 1..n of the same run are removed (one check each, not a listing of a folder of
+    thousands of runs); another run's attempt and a later-numbered leftover stay; recovery (no number) clears
+    every attempt of the run it finds."""
+    from runner.engine.paths import RunPaths
+    from runner.engine.plan import plan
+
+    spec = write_spec(
+        tmp_path, tiny_dataset, [fake_method()], datasets=one_sequence(tiny_dataset), directions=["forward"], trials=2
+    )
+    runs = plan(load_spec(spec))
+    mine, other = (RunPaths(tmp_path / "res", r.key) for r in runs[:2])
+    assert mine.final.parent == other.final.parent  # two trials: siblings
+    for paths, attempts in ((mine, (1, 2, 5)), (other, (1,))):
+        for a in attempts:
+            (paths.staging(a) / "raw").mkdir(parents=True)
+            (paths.staging(a) / "raw" / "x.txt").write_text("half")
+    mine.clear_staging(up_to=2)
+    assert not mine.staging(1).exists() and not mine.staging(2).exists()
+    assert mine.staging(5).exists() and other.staging(1).exists()
+    mine.clear_staging()
+    assert not mine.staging(5).exists() and other.staging(1).exists()

@@ -87,7 +87,7 @@ def cmd_campaign(args) -> int:
     finally:
         progress.close()
     _print_summary(spec.name, result.results, result.results_csv)
-    from runner.cli.display import read_figures
+    from runner.engine.session import read_figures
 
     figures = read_figures(result.results)
     busy = f", lanes busy {100 * figures.occupancy:.0f} %" if figures and figures.occupancy is not None else ""
@@ -196,7 +196,7 @@ def _fmt(v) -> str:
 
 
 def cmd_status(args) -> int:
-    from runner.cli.display import read_figures, status_view
+    from runner.engine.session import read_figures
 
     f = read_figures(args.results)
     if f is None:
@@ -204,6 +204,8 @@ def cmd_status(args) -> int:
     if args.json:
         print(json.dumps(f.to_dict()))
         return 0
+    from runner.cli.display import status_view
+
     if not args.watch:
         console.print(status_view(f))
         return 0

@@ -15,33 +15,8 @@ from rich.progress_bar import ProgressBar
 from rich.table import Table
 from rich.text import Text
 
-from runner.engine.ledger import Ledger
 from runner.engine.progress import Figures, Tracker, duration, one_line
-
-
-def read_figures(results: Path, now: float | None = None) -> Figures | None:
-    """The figures of a results folder's ledger, read without writing or locking anything; None when the
-    ledger does not exist yet."""
-    tracker = read_tracker(results)
-    return None if tracker is None else tracker.figures(now or time.time())
-
-
-def read_tracker(results: Path) -> Tracker | None:
-    """A Tracker over a results folder's ledger (rows, session, campaign name), read without writing or locking
-    anything; None when the ledger does not exist yet."""
-    from runner.engine.campaign import session_alive
-
-    path = Path(results) / "ledger.sqlite"
-    if not path.exists():
-        return None
-    ledger = Ledger(path, read_only=True)
-    try:
-        session = ledger.meta("session")
-        if session and not session.get("ended_at") and not session_alive(session):
-            session = {**session, "ended_at": session.get("last_seen") or session["started_at"], "crashed": True}
-        return Tracker(ledger.rows(), session, ledger.meta("campaign", Path(results).name))
-    finally:
-        ledger.close()
+from runner.engine.session import read_tracker
 
 
 def headline(f: Figures, width: int = 40) -> Table:

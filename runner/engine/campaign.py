@@ -23,6 +23,7 @@ from runner.engine.plan import PlannedRun, plan
 from runner.engine.preparer import ViewPreparer
 from runner.engine.recovery import collect_leftovers, import_finished, recover
 from runner.engine.scheduler import Event, Scheduler
+from runner.engine.session import session_record
 from runner.engine.spec import CampaignSpec
 from runner.errors import BackendUnreachable, DatasetError, LedgerLostError, StorageError, storage_problem
 from runner.results.vocabulary import is_infra
@@ -78,27 +79,6 @@ def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], lo
         if r.key.id in keys and k not in views:
             views[k] = prepare(r.sequence_dir, r.key.direction, r.profile, spec.cache, frame_format=spec.frame_format)
     return views
-
-
-def session_record(spec: CampaignSpec) -> dict:
-    """Who runs the campaign now, since when, on how many lanes (for status, --watch and the ETA)."""
-    import psutil
-
-    me = psutil.Process()
-    lanes = 1 if spec.measurement == "exclusive" else spec.lanes
-    return {"pid": me.pid, "pid_start": me.create_time(), "started_at": time.time(), "lanes": lanes, "ended_at": None}
-
-
-def session_alive(session: dict | None) -> bool:
-    """Whether the campaign process of a session record still runs (same PID and start time)."""
-    import psutil
-
-    if not session or session.get("ended_at"):
-        return False
-    try:
-        return abs(psutil.Process(session["pid"]).create_time() - session["pid_start"]) < 0.01
-    except (psutil.Error, KeyError, TypeError):
-        return False
 
 
 def check_sequences(spec: CampaignSpec, skip_ungenerated: bool = False) -> list[str]:

@@ -74,8 +74,8 @@ def launch_run(
     anywhere is a StorageError and any other OSError an InfraError (the machine's fault, not the method's);
     the run's staging folder is removed either way, except when the Docker daemon went away mid-run (the
     next start may collect the finished container)."""
-    with _os_errors_as_infra(run, paths):
-        paths.clear_staging()
+    with _os_errors_as_infra(run, paths, attempt):
+        paths.clear_staging(up_to=attempt)
         stage = paths.staging(attempt)
         raw = RunPaths.raw(stage)
         raw.mkdir(parents=True)
@@ -140,7 +140,7 @@ def finish_attempt(
 ) -> RunOutcome:
     """What a finished process left in its staging folder, read, evaluated, recorded in run.json and renamed
     into place. Also used to collect a container that finished while the Docker daemon was away."""
-    with _os_errors_as_infra(run, paths):
+    with _os_errors_as_infra(run, paths, attempt):
         stage = paths.staging(attempt)
         raw = RunPaths.raw(stage)
         log_tail = tail(RunPaths.log(stage))
@@ -252,11 +252,11 @@ def evaluate(gt: Trajectory, traj: Trajectory, wanted: tuple[str, ...], alignmen
 
 
 @contextmanager
-def _os_errors_as_infra(run: PlannedRun, paths: RunPaths) -> Iterator[None]:
+def _os_errors_as_infra(run: PlannedRun, paths: RunPaths, attempt: int) -> Iterator[None]:
     try:
         yield
     except OSError as exc:
-        paths.clear_staging()
+        paths.clear_staging(up_to=attempt)
         if why := storage_problem(exc):
             raise StorageError(f"{run.key.id}: {why} ({exc})", why) from None
         raise InfraError(f"{run.key.id}: {exc}") from None

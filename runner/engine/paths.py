@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -56,11 +57,21 @@ class RunPaths:
     def run_json(run_dir: Path) -> Path:
         return run_dir / "run.json"
 
-    def clear_staging(self) -> None:
-        """Remove half-written attempts (a crash mid-run leaves them)."""
+    def clear_staging(self, up_to: int | None = None) -> None:
+        """Remove half-written attempts (a crash mid-run leaves them): those numbered 1 to `up_to`, checked one by
+        one (a run's folder has thousands of siblings at the study's scale: listing them for every run made the
+        runner's cost per run grow with the campaign), or every one found in the folder when `up_to` is None
+        (recovery at a start). Attempts are numbered from the ledger, so a later one never meets an earlier
+        one's leftovers."""
         parent = self.final.parent
-        if parent.exists():
-            for p in parent.glob(f".{self.final.name}.tmp-*"):
+        if up_to is not None:
+            stages = (self.staging(a) for a in range(1, up_to + 1))
+        elif parent.exists():
+            stages = parent.glob(f".{self.final.name}.tmp-*")
+        else:
+            return
+        for p in stages:
+            if os.path.lexists(p):
                 shutil.rmtree(p, ignore_errors=True)
 
 

@@ -7,7 +7,7 @@ and the session record the campaign keeps in the ledger's meta table. The live d
 
 from __future__ import annotations
 
-import statistics
+import bisect
 from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
@@ -48,8 +48,49 @@ def run_group(row: dict) -> RunGroup:
     return row["label"], f"{row.get('dataset') or ''}/{row.get('sequence') or ''}"
 
 
+class WallTimes:
+    """The wall times of finished runs per (method, sequence), kept sorted per group, per method and overall, so
+    a median is read without sorting: the ETA of a 10,000-run campaign costs per finished run what a 10-run
+    one does (a run is added or removed in O(log n) comparisons and one memmove)."""
+
+    def __init__(self, walls: dict[RunGroup, list[float]] | None = None):
+        self.by_group: dict[RunGroup, list[float]] = defaultdict(list)
+        self.by_method: dict[str, list[float]] = defaultdict(list)
+        self.every: list[float] = []
+        for group, ws in (walls or {}).items():
+            for w in ws:
+                self.add(group, w)
+
+    def add(self, group: RunGroup, wall_s: float) -> None:
+        for values in (self.by_group[group], self.by_method[group[0]], self.every):
+            bisect.insort(values, wall_s)
+
+    def remove(self, group: RunGroup, wall_s: float) -> None:
+        for values in (self.by_group[group], self.by_method[group[0]], self.every):
+            del values[bisect.bisect_left(values, wall_s)]
+
+    def typical(self, group: RunGroup) -> float:
+        """The group's median wall time; that method's median over its other sequences when the group has no
+        finished run yet; else the median of all."""
+        for values in (self.by_group.get(group), self.by_method.get(group[0]), self.every):
+            if values:
+                return _median(values)
+        raise ValueError("no finished run")
+
+    def __bool__(self) -> bool:
+        return bool(self.every)
+
+
+def _median(ordered: list[float]) -> float:
+    n = len(ordered)
+    return ordered[n // 2] if n % 2 else (ordered[n // 2 - 1] + ordered[n // 2]) / 2
+
+
 def eta(
-    left: dict[RunGroup, int], walls: dict[RunGroup, list[float]], lanes: int, overhead_s: float = 0.0
+    left: dict[RunGroup, int],
+    walls: dict[RunGroup, list[float]] | WallTimes,
+    lanes: int,
+    overhead_s: float = 0.0,
 ) -> tuple[float | None, str]:
     """Seconds until the runs left end: per method and sequence, the median wall time of its finished runs plus
     the runner's own time per run on a lane (`overhead_s`: starting, collecting, waiting for a view), times its
@@ -58,21 +99,11 @@ def eta(
     todo = {g: n for g, n in left.items() if n > 0}
     if not todo:
         return 0.0, "-"
-    every = [w for ws in walls.values() for w in ws]
-    if not every:
+    times = walls if isinstance(walls, WallTimes) else WallTimes(walls)
+    if not times:
         return None, "unknown"
-    overall = statistics.median(every)
-    by_method: dict[str, list[float]] = defaultdict(list)
-    for (label, _), ws in walls.items():
-        by_method[label].extend(ws)
-
-    def typical(group: RunGroup) -> float:
-        if walls.get(group):
-            return statistics.median(walls[group])
-        return statistics.median(by_method[group[0]]) if by_method.get(group[0]) else overall
-
-    total = sum(n * (typical(g) + overhead_s) for g, n in todo.items())
-    basis = "measured" if all(walls.get(g) for g in todo) else "partly estimated"
+    total = sum(n * (times.typical(g) + overhead_s) for g, n in todo.items())
+    basis = "measured" if all(times.by_group.get(g) for g in todo) else "partly estimated"
     return total / max(lanes, 1), basis
 
 
@@ -150,7 +181,7 @@ class Tracker:
         self.rows: dict[str, dict] = {}
         self.groups: dict[tuple[str, str], Counter] = defaultdict(Counter)
         self.failures: Counter = Counter()
-        self.walls: dict[RunGroup, list[float]] = defaultdict(list)
+        self.walls = WallTimes()
         self.left: Counter = Counter()  # (label, sequence) -> runs left
         self.busy = 0.0
         self.session_runs = 0
@@ -183,9 +214,9 @@ class Tracker:
             self.left[group] += sign
         if cat in ("done", "failed") and row["wall_s"]:
             if sign > 0:
-                self.walls[group].append(float(row["wall_s"]))
+                self.walls.add(group, float(row["wall_s"]))
             else:
-                self.walls[group].remove(float(row["wall_s"]))
+                self.walls.remove(group, float(row["wall_s"]))
         finished = cat in ("done", "failed", "infra")
         if finished and self.started and row["started_at"] and row["started_at"] >= self.started:
             self.busy += sign * float(row["wall_s"] or 0.0)
