@@ -100,7 +100,9 @@ def test_real_dso_through_podman_matches_docker(dso_image, tmp_path):
     from tests.test_docker import in_podman
 
     if shutil.which("podman") is None:
-        pytest.fail("podman is not installed (.ci/run installs it)") if IN_CI else pytest.skip("podman not installed")
+        if IN_CI:
+            pytest.fail("podman is not installed (.ci/run installs it)")
+        pytest.skip(reason="podman is not installed (apt-get install podman; .ci/run installs it)")
     in_podman(dso_image)
     data = tmp_path / "data"
     generate(data / "room_a", frames=200, seed=3)

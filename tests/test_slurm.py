@@ -21,7 +21,7 @@ from tests import slurm_cluster
 from tests.conftest import write_spec
 from tests.test_campaign import ledger_rows
 
-pytest.importorskip("dask_jobqueue")
+pytest.importorskip("dask_jobqueue", reason="dask-jobqueue is not installed (make install gets it)")
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def slurm():
     if why:
         if os.environ.get("CI"):
             pytest.fail(f"CI installs Slurm (.ci/run), yet: {why}")
-        pytest.skip(why)
+        pytest.skip(reason=f"no single-node Slurm here ({why}); .ci/run installs slurm-wlm and munge")
     cluster = slurm_cluster.SlurmCluster().start()
     before = os.environ.get("SLURM_CONF")
     os.environ["SLURM_CONF"] = cluster.env["SLURM_CONF"]
