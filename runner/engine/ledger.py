@@ -249,8 +249,11 @@ class Ledger:
                 self._db.execute(f"INSERT OR IGNORE INTO runs ({cols}) VALUES ({marks})", tuple(values.values()))
 
     # ------------------------------------------------------------ reading
-    def rows(self, active_only: bool = True, state: str | None = None) -> list[dict]:
-        sql = "SELECT * FROM runs"
+    def rows(
+        self, active_only: bool = True, state: str | None = None, columns: tuple[str, ...] | None = None
+    ) -> list[dict]:
+        """The runs as dicts, in key order: every column, or only `columns`."""
+        sql = f"SELECT {', '.join(columns) if columns else '*'} FROM runs"
         cond, args = [], []
         if active_only:
             cond.append("active = 1")
@@ -267,15 +270,8 @@ class Ledger:
     PROGRESS_COLUMNS = ("key", "label", "dataset", "sequence", "direction", "state", "failure", "wall_s", "started_at")
 
     def progress_rows(self) -> list[dict]:
-        """The active runs with only what the progress figures read (runner.engine.progress.Tracker): a third of
-        the time of `rows()` on a 10,000-run ledger."""
-        try:
-            cur = self._db.execute(f"SELECT {', '.join(self.PROGRESS_COLUMNS)} FROM runs WHERE active = 1 ORDER BY key")
-            cur.row_factory = None
-            names = self.PROGRESS_COLUMNS
-            return [dict(zip(names, r, strict=True)) for r in cur]
-        except sqlite3.OperationalError:  # an empty ledger opened read-only has no tables yet
-            return []
+        """The active runs with only what the progress figures read (runner.engine.progress.Tracker)."""
+        return self.rows(columns=self.PROGRESS_COLUMNS)
 
     def get(self, key: str) -> dict | None:
         row = self._db.execute("SELECT * FROM runs WHERE key = ?", (key,)).fetchone()
