@@ -174,6 +174,12 @@ def test_read_tum_many_matches_read_tum_file_by_file(tmp_path):
         "crlf.txt": rows(8, 6.0).replace("\n", "\r\n"),
         "seven_columns.txt": rows(4, 1.0) + "1 2 3 4 5 6 7\n",
         "unsorted.txt": "".join(reversed(rows(9, 7.0).splitlines(keepends=True))),
+        "duplicate_time.txt": rows(4, 2.0) + rows(4, 2.0 + 3 / 30),
+        "nan_row.txt": rows(4, 3.0) + "3.5 nan 0 0 0 0 0 1\n" + rows(4, 4.0),
+        "inf_last_row.txt": rows(4, 3.0) + "9 1 2 3 0 0 0 inf\n",
+        "zero_quaternion.txt": rows(4, 3.0) + "9 1 2 3 0 0 0 0\n",
+        "unit_quaternions.txt": "".join(f"{1 + i / 30:.9f} 1 2 3 0 0 0.6 0.8\n" for i in range(12)),
+        "one_row.txt": "5 1 2 3 0 0 0 2\n",
         "empty.txt": "",
         "plain_c.txt": rows(30, 8.0),
     }
@@ -204,5 +210,9 @@ def test_read_tum_many_matches_read_tum_file_by_file(tmp_path):
     assert isinstance(got[-1], TrajectoryFormatError) and "missing.txt" in str(got[-1])
     assert isinstance(got[paths.index(tmp_path / "seven_columns.txt")], TrajectoryFormatError)
     plain = [tmp_path / "plain_a.txt", tmp_path / "plain_b.txt", tmp_path / "plain_c.txt"]
+    parsed_together = {"plain_a", "header", "unsorted", "duplicate_time", "nan_row", "inf_last_row", "zero_quaternion"}
+    parsed_together |= {"unit_quaternions", "one_row", "written", "no_final_newline", "missing", "empty"}
     for odd in paths:  # each odd file between plain ones, in one batch
-        check([plain[0], odd, plain[1], plain[2]], batch_bytes=1 << 22)
+        got = check([plain[0], odd, plain[1], plain[2]], batch_bytes=1 << 22)
+        if odd.stem in parsed_together:  # numbers in rows: the batch was parsed once, the odd file repaired apart
+            assert got[0].positions.base is got[3].positions.base is not None, f"{odd.name}: not read as one batch"
