@@ -32,6 +32,7 @@ from tests.conftest import one_sequence, write_spec
 
 IMAGE = "slamrun/reference_vo:latest"
 IN_CI = os.environ.get("CI") == "true"
+TEST_CAMPAIGNS = ("t", "killtest", "pytest-docker")  # the campaign names these tests label containers with
 
 
 def _unavailable(reason: str):
@@ -66,6 +67,9 @@ def backend(request):
         b.check()
     except InfraError as exc:
         _unavailable(f"no {request.param} engine: {exc}")
+    for name in TEST_CAMPAIGNS:  # containers an interrupted earlier test session left in this engine
+        for old in b.client.containers.list(all=True, filters={"label": f"slamrun.campaign={name}"}):
+            old.remove(force=True)
     yield b
     b.close()
 
@@ -229,8 +233,6 @@ def _running_keys(results: Path) -> set[str]:
 
 def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo_dataset):
     labels = {"label": "slamrun.campaign=killtest"}
-    for old in backend.client.containers.list(all=True, filters=labels):  # an interrupted earlier test's
-        old.remove(force=True)
     spec = write_spec(
         tmp_path,
         vo_dataset,
