@@ -153,10 +153,18 @@ def test_real_file_facts(shared_data):
     assert not read_tum(DATA / "dso_tum_mono_examples/sequence_01.txt").report.was_unsorted
 
 
-def test_read_tum_many_matches_read_tum_file_by_file(tmp_path):
-    """Batched reading gives each file exactly what read_tum gives it, errors included, in order."""
+@pytest.mark.parametrize("reader", ["compiled", "arrow"])
+def test_read_tum_many_matches_read_tum_file_by_file(tmp_path, monkeypatch, reader):
+    """Batched reading gives each file exactly what read_tum gives it, errors included, in order; by the
+    compiled reader, and by Arrow's where that is not built."""
+    from runner.core import trajectory
     from runner.core.trajectory import read_tum_many, write_tum
     from runner.errors import TrajectoryFormatError
+
+    if reader == "arrow":
+        monkeypatch.setattr(trajectory, "_tumparse", None)
+    else:
+        need_compiled_reader()
 
     rng = np.random.default_rng(3)
 
@@ -214,5 +222,78 @@ def test_read_tum_many_matches_read_tum_file_by_file(tmp_path):
     parsed_together |= {"unit_quaternions", "one_row", "written", "no_final_newline", "missing", "empty"}
     for odd in paths:  # each odd file between plain ones, in one batch
         got = check([plain[0], odd, plain[1], plain[2]], batch_bytes=1 << 22)
-        if odd.stem in parsed_together:  # numbers in rows: the batch was parsed once, the odd file repaired apart
+        if reader == "compiled" or odd.stem in parsed_together:  # the plain files' rows were parsed as one batch
             assert got[0].positions.base is got[3].positions.base is not None, f"{odd.name}: not read as one batch"
+
+
+def need_compiled_reader():
+    """The compiled reader of plain tables; skipped with the reason where it is not built (failed under CI)."""
+    import os
+
+    from runner.core import trajectory
+
+    if trajectory._tumparse is None:
+        why = "runner.core._tumparse is not built (a C compiler and `pip install -e .`, as `make install` does)"
+        if os.environ.get("CI") == "true":
+            pytest.fail(why)
+        pytest.skip(why)
+    return trajectory._tumparse
+
+
+def test_compiled_reader_reads_numbers_exactly_as_python_does():
+    """Every number as Python's float() (correctly rounded) reads it, bit for bit, whatever the format; a text
+    that is not rows of single-space-separated numbers is refused (-1), never misread."""
+    tumparse = need_compiled_reader()
+    rng = np.random.default_rng(0)
+    values = np.concatenate(
+        [
+            rng.normal(size=4000) * 10.0 ** rng.integers(-40, 40, 4000),
+            rng.uniform(-1e6, 1e6, 4000),
+            [0.0, -0.0, 1e-320, 5e-324, 1.7976931348623157e308, 2.0**53 + 1, 123456789012345678901.0],
+        ]
+    )
+    values = values[: len(values) // 8 * 8]
+    for fmt in ("%.17g", "%.15g", "%.9f", "%.6e", "%.3f", "%.25f", "%.0f", "%+.12E", "%.30g"):
+        text = "".join(" ".join(fmt % v for v in row) + "\n" for row in values.reshape(-1, 8)).encode()
+        data, rows = tumparse.parse_many([text], 8)
+        got = np.frombuffer(data, np.float64)
+        want = np.array([float(v) for v in text.split()])
+        assert rows == [len(values) // 8] and np.array_equal(got.view(np.int64), want.view(np.int64)), fmt
+    forms = {
+        b"1 2 3\n4 5 6": 2,  # no newline after the last row
+        b"-0 +1. .5\n007 1E+2 2e-3\n": 2,
+        b"": 0,
+        b"1 2\n": -1,  # a short row
+        b"1  2 3\n": -1,  # two spaces
+        b"1 2 3 \n": -1,
+        b"1 2 3\n\n": -1,  # a blank line
+        b"1 2 3\r\n": -1,
+        b"1 2 x\n": -1,
+        b"1 2 nan\n": -1,  # not a plain number: the careful path reads it
+        b"1 2 1e\n": -1,
+        b"1 2 .\n": -1,
+        b"1 2 -\n": -1,
+        b"1 2 3\x004 5 6\n": -1,
+        b"# 1 2 3\n": -1,
+        b"1,2,3\n": -1,
+    }
+    data, rows = tumparse.parse_many(list(forms), 3)
+    assert rows == list(forms.values())
+    assert np.frombuffer(data, np.float64).tolist() == [1, 2, 3, 4, 5, 6, -0.0, 1, 0.5, 7, 100, 0.002]
+    with pytest.raises(TypeError, match=r"texts\[1\]: bytes expected"):
+        tumparse.parse_many([b"1\n", "1\n"], 1)
+
+
+def test_compiled_reader_agrees_with_arrow_on_real_files(shared_data, monkeypatch):
+    """The study's trajectory files, read by the compiled reader and by Arrow's: the same arrays and reports."""
+    from runner.core import trajectory
+
+    need_compiled_reader()
+    files = sorted((DATA / "study_trajectories").glob("*.txt")) + sorted((DATA / "dso_tum_mono_examples").glob("*.txt"))
+    compiled = list(trajectory.read_tum_many(files))
+    monkeypatch.setattr(trajectory, "_tumparse", None)
+    arrow = list(trajectory.read_tum_many(files))
+    for path, a, b in zip(files, compiled, arrow, strict=True):
+        for name in ("timestamps", "positions", "quaternions"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), (path.name, name)
+        assert a.report == b.report, path.name

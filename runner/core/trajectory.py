@@ -17,6 +17,11 @@ import numpy as np
 
 from runner.errors import TrajectoryFormatError
 
+try:  # the compiled reader of plain tables (setup.py); without it Arrow's CSV reader does its work
+    from runner.core import _tumparse
+except ImportError:  # pragma: no cover - a build without a C compiler
+    _tumparse = None
+
 NON_UNIT_TOL = 1e-3  # |q| further than this from 1 counts as non-unit (renormalised)
 FAR_FROM_UNIT_TOL = 0.1  # |q| further than this from 1 counts as far from unit (a converter bug upstream)
 
@@ -96,20 +101,21 @@ def read_tum_many(
     size = 0
 
     def flush() -> Iterator[Trajectory | TrajectoryFormatError]:
-        # Rows are counted by newlines, so a batch takes files whose rows all end in one; a blank line
-        # or a stray character makes the counts or the parse disagree and the batch take the slow path.
-        plain = [
-            (i, body)
-            for i, (_, data) in enumerate(pending)
-            if isinstance(data, bytes)
-            for body in [_skip_header(data)]
-            if body[-1:] == b"\n"
-        ]
-        columns = _fast_columns(b"".join(body for _, body in plain), 8) if len(plain) > 1 else None
-        rows = np.array([body.count(b"\n") for _, body in plain], int)
+        texts = [(i, _skip_header(data)) for i, (_, data) in enumerate(pending) if isinstance(data, bytes)]
         done: dict[int, Trajectory | None] = {}
-        if columns is not None and len(columns[0]) == rows.sum():
-            done = dict(zip((i for i, _ in plain), _normalise_batch(columns, rows), strict=True))
+        parsed = _parse_plain([text for _, text in texts], 8) if _tumparse is not None else None
+        if parsed is not None:
+            table, rows = parsed
+            read = [(i, n) for (i, _), n in zip(texts, rows, strict=True) if n > 0]
+            if read:
+                counts = np.array([n for _, n in read], int)
+                done = dict(zip((i for i, _ in read), _normalise_batch(list(table.T), counts), strict=True))
+        elif len(texts) > 1:  # Arrow over the texts joined: rows counted by newlines, so each must end in one
+            plain = [(i, text) for i, text in texts if text[-1:] == b"\n"]
+            columns = _fast_columns(b"".join(text for _, text in plain), 8)
+            counts = np.array([text.count(b"\n") for _, text in plain], int)
+            if columns is not None and len(columns[0]) == counts.sum():  # else a blank line or a stray character
+                done = dict(zip((i for i, _ in plain), _normalise_batch(columns, counts), strict=True))
         for i, (path, data) in enumerate(pending):
             if isinstance(data, TrajectoryFormatError):
                 yield data
@@ -368,10 +374,22 @@ def _arrow_options(ncols: int) -> tuple:
 
 
 def _fast_table(data: bytes, ncols: int) -> np.ndarray | None:
-    """The common case (numbers separated by single spaces) as an (N, ncols) table, see `_fast_columns`;
-    None when the text needs the careful path."""
+    """The common case (numbers separated by single spaces) as an (N, ncols) table, by the compiled reader or
+    else Arrow's; None when the text needs the careful path."""
+    if _tumparse is not None:
+        table, rows = _parse_plain([data], ncols)
+        if rows[0] > 0:
+            return table
     columns = _fast_columns(data, ncols)
     return None if columns is None else np.stack(columns, axis=1)
+
+
+def _parse_plain(texts: list[bytes], ncols: int) -> tuple[np.ndarray, list[int]]:
+    """Texts of rows of `ncols` numbers separated by single spaces, each row ending in a newline (the last one
+    may not), by the compiled reader, exactly as strtod reads them: the rows of all such texts one after the
+    other, and each text's row count (-1: not of that form, none of its rows taken; 0: empty)."""
+    data, rows = _tumparse.parse_many(texts, ncols)
+    return np.frombuffer(data, np.float64).reshape(-1, ncols), rows
 
 
 def _fast_columns(data: bytes, ncols: int) -> list[np.ndarray] | None:

@@ -1,0 +1,12 @@
+"""The one compiled part: runner.core._tumparse, the fast reader of plain numeric tables (TUM trajectory files).
+
+Optional: where it cannot be built (no C compiler), slamrun installs without it and reads those files with
+Arrow's CSV reader instead (about half as fast, the same numbers)."""
+
+from setuptools import Extension, setup
+
+setup(
+    ext_modules=[
+        Extension("runner.core._tumparse", ["runner/core/_tumparse.c"], extra_compile_args=["-O3"], optional=True)
+    ]
+)
