@@ -258,3 +258,58 @@ def json_equal(a, b) -> bool:
     import json
 
     return json.dumps(a, sort_keys=True) == json.dumps(b, sort_keys=True)
+
+
+def test_many_estimates_at_once_give_each_file_its_own_result(monkeypatch):
+    """tum_mono_many against tum_mono_file one by one: the usual estimates evaluated together, every other one
+    (NaN-holding, empty, unassociated, incomplete, a segment at one point, a pose in both segments) with its own
+    status and detail; the same figures to rounding, in order."""
+    from runner.core import evaluation
+
+    gt = ground_truth(400)
+    base = np.nan_to_num(gt.positions)
+    rng = np.random.default_rng(11)
+    ests, usual = [], []
+    for i in range(8):  # the usual case: scale, noise, dropped frames, jittered times
+        keep = rng.random(len(gt)) < 0.9
+        keep[[0, len(gt) - 1]] = True
+        pos = inverse_apply(*sim3(0.5 + i, rng.normal(size=3), rng.normal(size=3)), base)
+        pos += np.cumsum(rng.normal(scale=0.002 * i, size=pos.shape), axis=0)
+        est = estimate_from(gt, pos, keep)
+        if i % 2:
+            est = est.with_timestamps(est.timestamps + rng.uniform(-9e-4, 9e-4, len(est)))
+        ests.append(est)
+        usual.append(True)
+    nan_pos = base.copy()
+    nan_pos[5, 1] = np.nan
+    at_one_point = base.copy()
+    at_one_point[:80] = [1.0, 2.0, 3.0]
+    odd = [
+        estimate_from(gt, nan_pos),  # a row dropped by the reader: nan
+        Trajectory(np.zeros(0), np.zeros((0, 3)), np.zeros((0, 4))),  # empty
+        from_arrays(gt.timestamps + 0.0011, base, np.tile([0, 0, 0, 1.0], (len(gt), 1))),  # unassociated
+        estimate_from(gt, base, np.arange(len(gt)) < len(gt) // 2),  # incomplete
+        estimate_from(gt, at_one_point),  # degenerate start segment: nan
+    ]
+    full_gt = ground_truth(400, nan_middle=False)  # even row count, finite middle row: a pose in both segments
+    for k, est in enumerate(odd):
+        ests.insert(2 * k + 1, est)
+        usual.insert(2 * k + 1, False)
+
+    calls = []
+    plain = evaluation.tum_mono
+    monkeypatch.setattr(evaluation, "tum_mono", lambda g, e: calls.append(e) or plain(g, e))
+    got = evaluation.tum_mono_many(gt, ests)
+    assert not any(any(e is c for c in calls) for e, u in zip(ests, usual, strict=True) if u), "not batched"
+    monkeypatch.setattr(evaluation, "tum_mono", plain)
+    shared = evaluation.tum_mono_many(full_gt, ests[:1])
+    pairs = [*zip(got, [tum_mono_file(gt, e) for e in ests], strict=True), (shared[0], tum_mono(full_gt, ests[0]))]
+    for res, want in pairs:
+        assert (res.status, res.detail, res.n_poses) == (want.status, want.detail, want.n_poses)
+        a, b = res.to_dict(), want.to_dict()
+        for name in ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse"):
+            if b[name] is None:
+                assert a[name] is None, name
+            else:
+                assert a[name] == pytest.approx(b[name], rel=1e-9, abs=1e-12), name
+    assert [r.status for r in got].count(EvalStatus.ok) == 8

@@ -17,12 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from runner.core import metrics
-from runner.core.evaluation import tum_mono_file
+from runner.core.evaluation import TumMonoResult, tum_mono_file, tum_mono_many
 from runner.core.trajectory import Trajectory, read_kitti, read_tum_many
 from runner.errors import MetricError, TrajectoryFormatError
 from runner.results.vocabulary import EVALUATE_FIELDS
 
 METRICS = ("tum-mono", "ate", "rpe", "kitti")
+GROUP = 32  # TUM-Mono estimates evaluated together (their arrays stay in the CPU's cache)
 
 
 @dataclass(frozen=True)
@@ -42,10 +43,7 @@ class Options:
 def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     """One estimate's figures for `opts.metric` (status ok), or its status and why not."""
     if opts.metric == "tum-mono":
-        d = tum_mono_file(gt, traj).to_dict()
-        return {k: d.get(k) for k in EVALUATE_FIELDS} | (
-            {"detail": d["detail"]} if d["status"] != "ok" and d["detail"] else {}
-        )
+        return _tum_mono_fields(tum_mono_file(gt, traj))
     try:
         if opts.metric == "ate":
             res = metrics.ate(gt, traj, opts.alignment, opts.tolerance_s)
@@ -58,6 +56,12 @@ def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     except MetricError as exc:
         return {"status": "failed", "n_poses": len(traj), "detail": str(exc)}
     return {"status": "ok", "n_poses": len(traj), **res.to_dict()}
+
+
+def _tum_mono_fields(res: TumMonoResult) -> dict:
+    d = res.to_dict()
+    detail = {"detail": d["detail"]} if d["status"] != "ok" and d["detail"] else {}
+    return {k: d.get(k) for k in EVALUATE_FIELDS} | detail
 
 
 def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | TrajectoryFormatError]:
@@ -73,15 +77,29 @@ def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | Traje
 
 
 def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory, opts: Options = Options()) -> list[dict]:
-    out = []
+    """Each file's result, in order; TUM-Mono's metric for `GROUP` files at a time (`tum_mono_many`)."""
+    out: list[dict] = []
+    group: list[tuple[str | Path, Trajectory]] = []
+
+    def flush() -> None:
+        for (path, _), res in zip(group, tum_mono_many(gt, [t for _, t in group]), strict=True):
+            out.append({"file": str(path), **_tum_mono_fields(res)})
+        group.clear()
+
     for path, traj in zip(paths, _read(paths, opts), strict=True):
         if isinstance(traj, TrajectoryFormatError):
+            flush()
             d = {"status": "unreadable", "detail": str(traj)}
             if opts.metric == "tum-mono":  # every figure present, null
                 d = dict.fromkeys(EVALUATE_FIELDS) | d
+            out.append({"file": str(path), **d})
+        elif opts.metric == "tum-mono":
+            group.append((path, traj))
+            if len(group) == GROUP:
+                flush()
         else:
-            d = evaluate_one(gt, traj, opts)
-        out.append({"file": str(path), **d})
+            out.append({"file": str(path), **evaluate_one(gt, traj, opts)})
+    flush()
     return out
 
 

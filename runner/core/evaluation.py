@@ -73,12 +73,18 @@ def associate(gt_times: np.ndarray, est_times: np.ndarray, tol: float = ASSOCIAT
 
 
 def _nearest(gt_times: np.ndarray, est_times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Index of the nearest ground-truth time for each estimated time, and the distance to it."""
-    idx = np.searchsorted(gt_times, est_times)
-    hi = np.minimum(idx, len(gt_times) - 1)
-    if (gt_times[hi] == est_times).all():  # the usual case: poses written at the frames' own times
-        return hi, np.zeros(len(est_times))
-    lo = np.maximum(idx - 1, 0)
+    """Index of the nearest ground-truth time for each estimated time, and the distance to it (of two at the
+    same distance, the earlier). `gt_times` must be sorted increasingly."""
+    n = len(gt_times)
+    if n < 2 or not np.isfinite(est_times).all():
+        idx = np.searchsorted(gt_times, est_times)
+        hi = np.minimum(idx, n - 1)
+        lo = np.maximum(idx - 1, 0)
+    else:  # interp's search starts from the last answer: fast on sorted times. Its floor is the row at or
+        # before t, or (rounded) the one after, so the nearest row is lo or lo + 1 either way.
+        lo = np.interp(est_times, gt_times, np.arange(n, dtype=float)).astype(np.intp)
+        np.minimum(lo, n - 2, out=lo)
+        hi = lo + 1
     d_hi = np.abs(gt_times[hi] - est_times)
     d_lo = np.abs(gt_times[lo] - est_times)
     take_lo = d_lo <= d_hi
@@ -188,3 +194,128 @@ def _align_segments(est: list[np.ndarray], gt: list[np.ndarray]) -> tuple[list[S
         errors.append(math.sqrt(float(np.einsum("ij,ij->", r, r)) / len(r)))
     sims = [Sim3(rots[k], mu_g[k] - maps[k] @ mu_e[k], float(scales[k])) for k in (0, 1)]
     return sims, errors
+
+
+def tum_mono_many(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResult]:
+    """`tum_mono_file` for many estimates against one ground truth: the same figures, to rounding.
+
+    The usual estimate (every pose within 1 ms of a ground-truth row, both segments of at least three poses,
+    none in both) is evaluated together with the others: association, segment sums (`np.add.reduceat`) and
+    the Sim(3) fits (one batched SVD) take a few numpy calls for all of them instead of some sixty a file.
+    Any other estimate, or one whose alignment degenerates, takes `tum_mono_file`, for its status and detail.
+    """
+    out: list[TumMonoResult | None] = [None] * len(ests)
+    batch = [k for k, e in enumerate(ests) if len(e) and not e.report.n_nonfinite_dropped]
+    if batch and len(gt) >= 2:
+        for k, res in zip(batch, _tum_mono_usual(gt, [ests[k] for k in batch]), strict=True):
+            out[k] = res
+    return [res if res is not None else tum_mono_file(gt, e) for res, e in zip(out, ests, strict=True)]
+
+
+def _first_rows(counts: np.ndarray) -> np.ndarray:
+    """Where each of consecutive groups of `counts` rows starts."""
+    first = np.zeros(len(counts), int)
+    np.cumsum(counts[:-1], out=first[1:])
+    return first
+
+
+def _tum_mono_usual(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResult | None]:
+    """The batched part of `tum_mono_many`: each estimate's result, or None where it is not the usual case."""
+    gt_t, n_gt = gt.timestamps, len(gt.timestamps)
+    rows = np.fromiter((len(e) for e in ests), int, len(ests))
+    starts = _first_rows(rows)
+    t = np.concatenate([e.timestamps for e in ests])
+    match, distance = _nearest(gt_t, t)
+    # each file's segments as tum_mono slices its sorted times: [lo, hi) by the GT rows' times
+    lo_s = np.add.reduceat(t < gt_t[0], starts)
+    hi_s = np.add.reduceat(t <= gt_t[n_gt // 2 - 1], starts)
+    lo_e = np.add.reduceat(t < gt_t[(n_gt + 1) // 2 - 1], starts)
+    hi_e = np.add.reduceat(t <= gt_t[-1], starts)
+    candidate = (
+        np.logical_and.reduceat(distance <= ASSOCIATION_TOLERANCE_S, starts)
+        & (hi_s - lo_s >= MIN_SEGMENT_POSES)
+        & (hi_e - lo_e >= MIN_SEGMENT_POSES)
+    )
+    for k in np.flatnonzero(candidate):  # (NaN or infinite positions make the figures NaN: `tum_mono` then)
+        if not np.isfinite(ests[k].quaternions.sum()):
+            candidate[k] = False
+        elif lo_e[k] < hi_s[k] and gt.finite_rows[match[starts[k] + lo_e[k] : starts[k] + hi_s[k]]].any():
+            candidate[k] = False  # a pose in both segments (an even GT row count with a finite middle row)
+    files = np.flatnonzero(candidate)
+    if len(files) == 0:
+        return [None] * len(ests)
+    # the segments' rows of every candidate, [start 1, end 1, start 2, end 2, ...], those with a finite GT row
+    seg_len = np.column_stack((hi_s - lo_s, hi_e - lo_e))[files].ravel()
+    seg_at = np.column_stack((starts + lo_s, starts + lo_e))[files].ravel()
+    idx = np.repeat(seg_at - _first_rows(seg_len), seg_len) + np.arange(seg_len.sum())
+    valid = gt.finite_rows[match[idx]]
+    n_valid = np.add.reduceat(valid, _first_rows(seg_len)).reshape(-1, 2)
+    enough = (n_valid >= MIN_SEGMENT_POSES).all(axis=1)
+    files, n_seg = files[enough], n_valid[enough].ravel()
+    if len(files) == 0:
+        return [None] * len(ests)
+    in_files = np.repeat(np.repeat(enough, 2), seg_len)
+    keep = valid[in_files]
+    parts = [ests[k].positions[a:b] for k in files for a, b in ((lo_s[k], hi_s[k]), (lo_e[k], hi_e[k]))]
+    # coordinates first, (3, rows): every sum below runs along contiguous memory
+    e_rows = np.ascontiguousarray(np.concatenate(parts)[keep].T)
+    g_rows = np.ascontiguousarray(gt.positions[match[idx[in_files][keep]]].T)
+    n_both = n_seg[0::2] + n_seg[1::2]
+    first_seg, first_both = _first_rows(n_seg), _first_rows(n_both)
+
+    def moments(n: np.ndarray, first: np.ndarray):
+        """Means (k, 3), centred rows (3, rows), cross-covariances (k, 3, 3) = sum of centred target x centred
+        source^T, and the source's centred sums of squares (k,), of the groups of n rows from `first`."""
+        mu_e = np.add.reduceat(e_rows, first, axis=1) / n
+        mu_g = np.add.reduceat(g_rows, first, axis=1) / n
+        ec, gc = e_rows - np.repeat(mu_e, n, axis=1), g_rows - np.repeat(mu_g, n, axis=1)
+        cov = np.add.reduceat((gc[:, None, :] * ec[None, :, :]).reshape(9, -1), first, axis=1)
+        var = np.add.reduceat(np.einsum("ij,ij->j", ec, ec), first)
+        return mu_e.T, mu_g.T, ec, gc, cov.T.reshape(-1, 3, 3), var
+
+    seg, both = moments(n_seg, first_seg), moments(n_both, first_both)
+    n_files = len(files)
+    rots, scales = _umeyama(np.concatenate((seg[4], both[4])), np.concatenate((seg[5], both[5])))
+    with np.errstate(all="ignore"):  # a degenerate fit gives NaN or inf: that file takes `tum_mono`
+        maps = scales[:, None, None] * rots
+        maps_seg, maps_both = maps[: 2 * n_files], maps[2 * n_files :]
+        errors = []
+        for (_, _, ec, gc, _, _), m, n, first in (
+            (seg, maps_seg, n_seg, first_seg),
+            (both, maps_both, n_both, first_both),
+        ):
+            per_row = np.repeat(m.reshape(-1, 9).T, n, axis=1).reshape(3, 3, -1)  # each row's map, (3, 3, rows)
+            r = np.einsum("abj,bj->aj", per_row, ec) - gc
+            errors.append(np.sqrt(np.add.reduceat(np.einsum("ij,ij->j", r, r), first) / n))
+        trans = seg[1] - np.einsum("fij,fj->fi", maps_seg, seg[0])  # Sim(3) translations, [start 1, end 1, ...]
+        rot_s, rot_e, scale_s, scale_e = (
+            rots[0 : 2 * n_files : 2],
+            rots[1 : 2 * n_files : 2],
+            scales[0::2],
+            scales[1::2],
+        )
+        a_mat_t = np.ascontiguousarray(np.swapaxes(maps_seg[1::2] - maps_seg[0::2], 1, 2))  # e_align: end fit
+        # minus start fit, over all poses (transposed: p @ A^T)
+        shift = trans[1::2] - trans[0::2]
+        rel_rot = rot_e @ np.swapaxes(rot_s, 1, 2)
+        e_s = scale_s[:n_files] / scale_e[:n_files]
+        drift_t = trans[1::2] - np.einsum("fij,fj->fi", rel_rot, trans[0::2]) / e_s[:, None]
+        e_t = np.sqrt(np.einsum("ij,ij->i", drift_t, drift_t))
+        out: list[TumMonoResult | None] = [None] * len(ests)
+        for i, k in enumerate(files):
+            p = ests[k].positions
+            diff = np.dot(p, a_mat_t[i])
+            diff += shift[i]
+            diff = diff.ravel()
+            values = (
+                float(e_t[i]),
+                rotation_angle_deg(rel_rot[i]),
+                float(e_s[i]),
+                math.sqrt(float(np.dot(diff, diff)) / len(p)),
+                float(errors[0][2 * i]),
+                float(errors[0][2 * i + 1]),
+                float(errors[1][i]),
+            )
+            if all(math.isfinite(v) for v in values):
+                out[k] = TumMonoResult(EvalStatus.ok, *values, n_poses=len(p))
+    return out
