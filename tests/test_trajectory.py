@@ -250,12 +250,16 @@ def test_compiled_reader_reads_numbers_exactly_as_python_does():
             rng.normal(size=4000) * 10.0 ** rng.integers(-40, 40, 4000),
             rng.uniform(-1e6, 1e6, 4000),
             [0.0, -0.0, 1e-320, 5e-324, 1.7976931348623157e308, 2.0**53 + 1, 123456789012345678901.0],
+            [12345678.0, 123456789.0, 1234567812345678.0, 1e-8, 99999999.0, 100000000.0, 9999999999999999999.0],
         ]
     )
-    values = values[: len(values) // 8 * 8]
-    for fmt in ("%.17g", "%.15g", "%.9f", "%.6e", "%.3f", "%.25f", "%.0f", "%+.12E", "%.30g"):
+    values = np.concatenate([values, np.zeros(-len(values) % 8)])
+    for fmt in ("%.17g", "%.15g", "%.9f", "%.6e", "%.3f", "%.25f", "%.0f", "%+.12E", "%.30g", "%.7f", "%.8f", "%.16f"):
         text = "".join(" ".join(fmt % v for v in row) + "\n" for row in values.reshape(-1, 8)).encode()
         data, rows = tumparse.parse_many([text], 8)
+        if max(map(len, text.split())) > 127:  # 1.8e308 in %.9f: a number that long is left to the careful path
+            assert rows == [-1], fmt
+            continue
         got = np.frombuffer(data, np.float64)
         want = np.array([float(v) for v in text.split()])
         assert rows == [len(values) // 8] and np.array_equal(got.view(np.int64), want.view(np.int64)), fmt

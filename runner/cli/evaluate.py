@@ -36,9 +36,10 @@ def add_commands(sub) -> None:
 
 
 def cmd_evaluate(args) -> int:
-    from runner.core.batch_eval import Options, evaluate_files
+    from runner.core.batch_eval import Options, evaluate_files, keep_freed_memory
     from runner.core.metrics import Alignment
 
+    keep_freed_memory()
     if args.metric == "tum-mono" and args.gt_format not in (None, "tum-mono"):
         raise SlamRunError("--metric tum-mono needs a TUM-Mono groundtruthSync.txt (--gt-format tum-mono)")
     needs_times = args.est_format == "kitti" or args.gt_format == "kitti"

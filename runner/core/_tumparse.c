@@ -13,25 +13,34 @@ of any other form is refused (row count -1): the caller then takes its careful p
 static const double POW10[23] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
                                  1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
 
-/* The value of 8 ASCII digits at s, or -1 when they are not all digits. */
-static inline int64_t eight_digits(const char *s) {
-    uint64_t v;
-    memcpy(&v, s, 8);
-    if (((v & 0xF0F0F0F0F0F0F0F0ULL) | (((v + 0x0606060606060606ULL) & 0xF0F0F0F0F0F0F0F0ULL) >> 4)) !=
-        0x3333333333333333ULL)
-        return -1;
-    v -= 0x3030303030303030ULL;
+static const uint64_t POW10_INT[9] = {1, 10, 100, 1000, 10000, 100000, 1000000, 10000000, 100000000};
+
+/* The number that 8 digit values (0-9, one a byte, the first in the lowest byte) write. */
+static inline uint64_t eight_values(uint64_t v) {
     v = (v * 10) + (v >> 8);
-    v = (((v & 0x000000FF000000FFULL) * 0x000F424000000064ULL) +
-         (((v >> 16) & 0x000000FF000000FFULL) * 0x0000271000000001ULL)) >> 32;
-    return (int64_t)v;
+    return (((v & 0x000000FF000000FFULL) * 0x000F424000000064ULL) +
+            (((v >> 16) & 0x000000FF000000FFULL) * 0x0000271000000001ULL)) >> 32;
 }
 
-/* The run of digits from s appended to *mant, 8 at a time where it can; *n counts them (the mantissa holds
-   them all while *n <= 19). Returns the position after them. The text ends in a NUL byte, never a digit. */
+/* The run of digits from s appended to *mant, up to 8 at a time; *n counts them (the mantissa holds them all
+   while *n <= 19). Returns the position after them. The text ends in a NUL byte, never a digit. */
 static inline const char *run(const char *s, const char *end, uint64_t *mant, int *n) {
-    for (int64_t eight; end - s >= 8 && (eight = eight_digits(s)) >= 0; s += 8, *n += 8)
-        if (*n <= 11) *mant = *mant * 100000000ULL + (uint64_t)eight;
+#if defined(__BYTE_ORDER__) && __BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__
+    while (end - s >= 8) {
+        uint64_t x;
+        memcpy(&x, s, 8);
+        x -= 0x3030303030303030ULL; /* digits become 0-9; a borrow only reaches bytes after a non-digit */
+        uint64_t not_digit = (x | (x + 0x7676767676767676ULL)) & 0x8080808080808080ULL;
+        int len = not_digit ? __builtin_ctzll(not_digit) >> 3 : 8; /* leading digits, little-endian */
+        if (len == 0) return s;
+        if (*n + len <= 19) *mant = *mant * POW10_INT[len] + eight_values(x << (8 * (8 - len)));
+        *n += len;
+        s += len;
+        if (len < 8) return s;
+    }
+#else
+    (void)end;
+#endif
     for (; (unsigned)(*s - '0') < 10; s++, (*n)++)
         if (*n < 19) *mant = *mant * 10 + (uint64_t)(*s - '0');
     return s;
