@@ -243,6 +243,8 @@ def need_compiled_reader():
 def test_compiled_reader_reads_numbers_exactly_as_python_does():
     """Every number as Python's float() (correctly rounded) reads it, bit for bit, whatever the format; a text
     that is not rows of single-space-separated numbers is refused (-1), never misread."""
+    from runner.core import trajectory
+
     tumparse = need_compiled_reader()
     rng = np.random.default_rng(0)
     values = np.concatenate(
@@ -256,11 +258,11 @@ def test_compiled_reader_reads_numbers_exactly_as_python_does():
     values = np.concatenate([values, np.zeros(-len(values) % 8)])
     for fmt in ("%.17g", "%.15g", "%.9f", "%.6e", "%.3f", "%.25f", "%.0f", "%+.12E", "%.30g", "%.7f", "%.8f", "%.16f"):
         text = "".join(" ".join(fmt % v for v in row) + "\n" for row in values.reshape(-1, 8)).encode()
-        data, rows = tumparse.parse_many([text], 8)
+        table, rows = trajectory._parse_plain([text], 8)
         if max(map(len, text.split())) > 127:  # 1.8e308 in %.9f: a number that long is left to the careful path
             assert rows == [-1], fmt
             continue
-        got = np.frombuffer(data, np.float64)
+        got = table.ravel()  # row by row
         want = np.array([float(v) for v in text.split()])
         assert rows == [len(values) // 8] and np.array_equal(got.view(np.int64), want.view(np.int64)), fmt
     forms = {
@@ -281,9 +283,9 @@ def test_compiled_reader_reads_numbers_exactly_as_python_does():
         b"# 1 2 3\n": -1,
         b"1,2,3\n": -1,
     }
-    data, rows = tumparse.parse_many(list(forms), 3)
+    table, rows = trajectory._parse_plain(list(forms), 3)
     assert rows == list(forms.values())
-    assert np.frombuffer(data, np.float64).tolist() == [1, 2, 3, 4, 5, 6, -0.0, 1, 0.5, 7, 100, 0.002]
+    assert table.ravel().tolist() == [1, 2, 3, 4, 5, 6, -0.0, 1, 0.5, 7, 100, 0.002]
     with pytest.raises(TypeError, match=r"texts\[1\]: bytes expected"):
         tumparse.parse_many([b"1\n", "1\n"], 1)
 

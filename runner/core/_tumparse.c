@@ -89,15 +89,17 @@ static const char *number(const char *s, const char *end, double *out) {
     return s;
 }
 
-/* Rows of ncols numbers separated by single spaces, each ending in '\n' (the last may not), into out (room
-   for cap rows): the row count, or -1 when the text is not of that form. */
-static Py_ssize_t table(const char *s, Py_ssize_t size, int ncols, double *out, Py_ssize_t cap) {
+/* Rows of ncols numbers separated by single spaces, each ending in '\n' (the last may not), column by column:
+   number c of row r at out[c * stride + r], for at most room rows. The row count, or -1 when the text is not
+   of that form. */
+static Py_ssize_t table(const char *s, Py_ssize_t size, int ncols, double *out, Py_ssize_t stride,
+                        Py_ssize_t room) {
     const char *end = s + size;
     Py_ssize_t rows = 0;
     while (s < end) {
-        if (rows >= cap) return -1;
+        if (rows >= room) return -1;
         for (int c = 0; c < ncols; c++) {
-            s = number(s, end, out++);
+            s = number(s, end, out + c * stride + rows);
             if (s == NULL) return -1;
             if (c < ncols - 1) {
                 if (s >= end || *s != ' ') return -1;
@@ -113,8 +115,9 @@ static Py_ssize_t table(const char *s, Py_ssize_t size, int ncols, double *out, 
     return rows;
 }
 
-/* parse_many(texts, ncols) -> (bytearray: the float64 rows of every text of the plain form, one after the
-   other; list: each text's row count, -1 for one that is not of that form and was skipped) */
+/* parse_many(texts, ncols) -> (bytearray: ncols columns of float64, each `room` long (its length / 8 / ncols),
+   holding the rows of every text of the plain form one after the other; list: each text's row count, -1 for
+   one that is not of that form and was skipped) */
 static PyObject *parse_many(PyObject *Py_UNUSED(self), PyObject *args) {
     PyObject *seq;
     int ncols;
@@ -146,7 +149,7 @@ static PyObject *parse_many(PyObject *Py_UNUSED(self), PyObject *args) {
     Py_BEGIN_ALLOW_THREADS
     for (Py_ssize_t i = 0; i < n; i++) {
         PyObject *b = PySequence_Fast_GET_ITEM(fast, i);
-        rows[i] = table(PyBytes_AS_STRING(b), PyBytes_GET_SIZE(b), ncols, out + used * ncols, cap - used);
+        rows[i] = table(PyBytes_AS_STRING(b), PyBytes_GET_SIZE(b), ncols, out + used, cap, cap - used);
         if (rows[i] > 0) used += rows[i];
     }
     Py_END_ALLOW_THREADS
@@ -158,9 +161,8 @@ static PyObject *parse_many(PyObject *Py_UNUSED(self), PyObject *args) {
         else PyList_SET_ITEM(counts, i, r);
     }
     PyMem_Free(rows);
-    if (!counts || PyByteArray_Resize(data, used * ncols * (Py_ssize_t)sizeof(double)) < 0) {
-        Py_XDECREF(counts);
-        Py_XDECREF(data);
+    if (!counts) {
+        Py_DECREF(data);
         return NULL;
     }
     return Py_BuildValue("(NN)", data, counts);

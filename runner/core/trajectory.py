@@ -387,9 +387,10 @@ def _fast_table(data: bytes, ncols: int) -> np.ndarray | None:
 def _parse_plain(texts: list[bytes], ncols: int) -> tuple[np.ndarray, list[int]]:
     """Texts of rows of `ncols` numbers separated by single spaces, each row ending in a newline (the last one
     may not), by the compiled reader, exactly as strtod reads them: the rows of all such texts one after the
-    other, and each text's row count (-1: not of that form, none of its rows taken; 0: empty)."""
+    other (a column-major table), and each text's row count (-1: not of that form, none of its rows taken)."""
     data, rows = _tumparse.parse_many(texts, ncols)
-    return np.frombuffer(data, np.float64).reshape(-1, ncols), rows
+    columns = np.frombuffer(data, np.float64).reshape(ncols, -1)  # each column contiguous
+    return columns[:, : sum(n for n in rows if n > 0)].T, rows
 
 
 def _fast_columns(data: bytes, ncols: int) -> list[np.ndarray] | None:
