@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -151,10 +152,14 @@ def bench_evaluate_cores(tmp: Path) -> None:
     gt_path = tmp / "groundtruthSync.txt"
     np.savetxt(gt_path, data, fmt="%.9f")
     slamrun = str(Path(sys.executable).parent / "slamrun")
-    t0 = time.perf_counter()
-    subprocess.run([slamrun, "evaluate", "--gt", str(gt_path), *map(str, files)], check=True, capture_output=True)
-    ours_process = time.perf_counter() - t0
-    report("slamrun evaluate as a process (1,000 files, every core)", f"{ours_process:.2f} s", "-")
+    times = []
+    for _ in range(3):  # a 0.4 s process: its median of three (the official one takes a minute, run once)
+        t0 = time.perf_counter()
+        subprocess.run([slamrun, "evaluate", "--gt", str(gt_path), *map(str, files)], check=True, capture_output=True)
+        times.append(time.perf_counter() - t0)
+    ours_process = statistics.median(times)
+    spread = f"{min(times):.2f}-{max(times):.2f}"
+    report("slamrun evaluate as a process (1,000 files, every core)", f"{ours_process:.2f} s ({spread})", "-")
     from bench import official
 
     if official.octave() is None:

@@ -318,7 +318,8 @@ def quat_to_rotmat(q: np.ndarray) -> np.ndarray:
 
 def _read_bytes(path: str | Path) -> bytes:
     try:
-        return Path(path).read_bytes()
+        with open(path, "rb", buffering=0) as f:  # one read into the bytes object, no buffer between
+            return f.readall()
     except FileNotFoundError:
         raise TrajectoryFormatError(f"{path}: no such trajectory file") from None
     except IsADirectoryError:
