@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -219,6 +220,18 @@ def _first_rows(counts: np.ndarray) -> np.ndarray:
     return first
 
 
+class _Moments(NamedTuple):
+    """Groups of point pairs: means (k, 3), centred rows (3, rows), cross-covariances (k, 3, 3) = sum of centred
+    target x centred source^T, and the source's centred sums of squares (k,)."""
+
+    mu_e: np.ndarray
+    mu_g: np.ndarray
+    ec: np.ndarray
+    gc: np.ndarray
+    cov: np.ndarray
+    var: np.ndarray
+
+
 def _tum_mono_usual(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResult | None]:
     """The batched part of `tum_mono_many`: each estimate's result, or None where it is not the usual case."""
     gt_t, n_gt = gt.timestamps, len(gt.timestamps)
@@ -263,42 +276,34 @@ def _tum_mono_usual(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResul
     n_both = n_seg[0::2] + n_seg[1::2]
     first_seg, first_both = _first_rows(n_seg), _first_rows(n_both)
 
-    def moments(n: np.ndarray, first: np.ndarray):
-        """Means (k, 3), centred rows (3, rows), cross-covariances (k, 3, 3) = sum of centred target x centred
-        source^T, and the source's centred sums of squares (k,), of the groups of n rows from `first`."""
+    def moments(n: np.ndarray, first: np.ndarray) -> _Moments:
+        """The moments of the groups of n rows from `first`."""
         mu_e = np.add.reduceat(e_rows, first, axis=1) / n
         mu_g = np.add.reduceat(g_rows, first, axis=1) / n
         ec, gc = e_rows - np.repeat(mu_e, n, axis=1), g_rows - np.repeat(mu_g, n, axis=1)
         cov = np.add.reduceat((gc[:, None, :] * ec[None, :, :]).reshape(9, -1), first, axis=1)
         var = np.add.reduceat(np.einsum("ij,ij->j", ec, ec), first)
-        return mu_e.T, mu_g.T, ec, gc, cov.T.reshape(-1, 3, 3), var
+        return _Moments(mu_e.T, mu_g.T, ec, gc, cov.T.reshape(-1, 3, 3), var)
 
     seg, both = moments(n_seg, first_seg), moments(n_both, first_both)
     n_files = len(files)
-    rots, scales = _umeyama(np.concatenate((seg[4], both[4])), np.concatenate((seg[5], both[5])))
+    rots, scales = _umeyama(np.concatenate((seg.cov, both.cov)), np.concatenate((seg.var, both.var)))
     with np.errstate(all="ignore"):  # a degenerate fit gives NaN or inf: that file takes `tum_mono`
         maps = scales[:, None, None] * rots
         maps_seg, maps_both = maps[: 2 * n_files], maps[2 * n_files :]
         errors = []
-        for (_, _, ec, gc, _, _), m, n, first in (
-            (seg, maps_seg, n_seg, first_seg),
-            (both, maps_both, n_both, first_both),
-        ):
+        for mom, m, n, first in ((seg, maps_seg, n_seg, first_seg), (both, maps_both, n_both, first_both)):
             per_row = np.repeat(m.reshape(-1, 9).T, n, axis=1).reshape(3, 3, -1)  # each row's map, (3, 3, rows)
-            r = np.einsum("abj,bj->aj", per_row, ec) - gc
+            r = np.einsum("abj,bj->aj", per_row, mom.ec) - mom.gc
             errors.append(np.sqrt(np.add.reduceat(np.einsum("ij,ij->j", r, r), first) / n))
-        trans = seg[1] - np.einsum("fij,fj->fi", maps_seg, seg[0])  # Sim(3) translations, [start 1, end 1, ...]
-        rot_s, rot_e, scale_s, scale_e = (
-            rots[0 : 2 * n_files : 2],
-            rots[1 : 2 * n_files : 2],
-            scales[0::2],
-            scales[1::2],
-        )
+        trans = seg.mu_g - np.einsum("fij,fj->fi", maps_seg, seg.mu_e)  # translations, [start 1, end 1, ...]
+        rot_s, rot_e = rots[0 : 2 * n_files : 2], rots[1 : 2 * n_files : 2]
+        scale_s, scale_e = scales[0 : 2 * n_files : 2], scales[1 : 2 * n_files : 2]
         a_mat_t = np.ascontiguousarray(np.swapaxes(maps_seg[1::2] - maps_seg[0::2], 1, 2))  # e_align: end fit
         # minus start fit, over all poses (transposed: p @ A^T)
         shift = trans[1::2] - trans[0::2]
         rel_rot = rot_e @ np.swapaxes(rot_s, 1, 2)
-        e_s = scale_s[:n_files] / scale_e[:n_files]
+        e_s = scale_s / scale_e
         drift_t = trans[1::2] - np.einsum("fij,fj->fi", rel_rot, trans[0::2]) / e_s[:, None]
         e_t = np.sqrt(np.einsum("ij,ij->i", drift_t, drift_t))
         out: list[TumMonoResult | None] = [None] * len(ests)
