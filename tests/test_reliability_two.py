@@ -315,7 +315,12 @@ def read_only(folder: Path) -> None:
     """Make `folder` read-only from now on: a read-only bind mount over it (files already open for writing
     stay writable, as on a filesystem remounted read-only under a running process). `writable` undoes it."""
     subprocess.run(["mount", "--bind", str(folder), str(folder)], check=True)
-    subprocess.run(["mount", "-o", "remount,bind,ro", str(folder)], check=True)
+    for _ in range(50):  # "mount point is busy" while the campaign writes at that instant: again, shortly after
+        done = subprocess.run(["mount", "-o", "remount,bind,ro", str(folder)], capture_output=True, text=True)
+        if done.returncode == 0:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"{folder} could not be made read-only in 5 s: {done.stderr.strip()}")
 
 
 def writable(folder: Path) -> None:
