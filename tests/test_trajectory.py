@@ -236,7 +236,7 @@ def need_compiled_reader():
         why = "runner.core._tumparse is not built (a C compiler and `pip install -e .`, as `make install` does)"
         if os.environ.get("CI") == "true":
             pytest.fail(why)
-        pytest.skip(why)
+        pytest.skip(reason=why)
     return trajectory._tumparse
 
 
