@@ -15,11 +15,12 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 import methods
+from runner.core.inputs import expanded_size, read_text_bounded
 from runner.datasets.generated import target_problem
 from runner.datasets.layouts import holds_sequence
 from runner.datasets.view import Direction
 from runner.engine.folders import path_part_problem, results_folder_problem
-from runner.errors import SpecError
+from runner.errors import SlamRunError, SpecError
 
 
 class Strict(BaseModel):
@@ -250,15 +251,13 @@ MAX_SPEC_VALUES = 100_000  # values in the document once its aliases are expande
 def load_spec(path: str | Path, check_files: bool = True) -> CampaignSpec:
     """Read, validate and resolve a spec file; raises SpecError listing every problem, each with its line."""
     path = Path(path)
-    try:
-        if path.is_file() and path.stat().st_size > MAX_SPEC_BYTES:
-            raise SpecError(str(path), [f"{path.stat().st_size} bytes; a spec is at most {MAX_SPEC_BYTES} bytes"])
-        text = path.read_text()
-    except (FileNotFoundError, IsADirectoryError):
-        raise SpecError(str(path), ["file not found"]) from None
+    try:  # a regular file of at most a page: a FIFO or a device is refused without blocking on it
+        text = read_text_bounded(path, MAX_SPEC_BYTES, "spec file")
+    except SlamRunError as exc:
+        raise SpecError(str(path), [str(exc).removeprefix(f"{path}: ")]) from None
     try:
         node = yaml.compose(text, Loader=yaml.SafeLoader)
-        if node is not None and (n := _expanded_size(node, {})) > MAX_SPEC_VALUES:
+        if node is not None and (n := expanded_size(node)) > MAX_SPEC_VALUES:
             raise SpecError(
                 str(path),
                 [f"its YAML aliases expand to {n:,} values (at most {MAX_SPEC_VALUES:,}): an alias bomb? Write it out"],
@@ -268,23 +267,14 @@ def load_spec(path: str | Path, check_files: bool = True) -> CampaignSpec:
         mark = getattr(exc, "problem_mark", None)
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
         raise SpecError(str(path), [f"{where}not valid YAML ({getattr(exc, 'problem', exc)})"]) from None
+    except RecursionError:
+        raise SpecError(str(path), ["YAML nested too deeply to be a spec"]) from None
     if not isinstance(raw, dict):
         raise SpecError(str(path), ["expected a mapping at the top (name, datasets, methods, ...)"])
     try:
         return validate_spec(raw, base_dir=path.resolve().parent, source=str(path), check_files=check_files)
     except SpecError as exc:
         raise SpecError(exc.source, [_with_line(p, node) for p in exc.problems]) from None
-
-
-def _expanded_size(node: yaml.Node, memo: dict[int, int]) -> int:
-    """How many values a node stands for with every alias expanded (an alias is the same node object again)."""
-    if id(node) not in memo:
-        memo[id(node)] = 1  # a recursive alias counts once
-        if isinstance(node, yaml.SequenceNode):
-            memo[id(node)] = 1 + sum(_expanded_size(c, memo) for c in node.value)
-        elif isinstance(node, yaml.MappingNode):
-            memo[id(node)] = 1 + sum(_expanded_size(k, memo) + _expanded_size(v, memo) for k, v in node.value)
-    return memo[id(node)]
 
 
 def _with_line(problem: str, root: yaml.Node | None) -> str:
