@@ -14,6 +14,7 @@ from runner.analysis import figures, tables
 from runner.analysis.load import evaluated, load_results, metrics_for
 from runner.analysis.stats import study_statistics
 from runner.analysis.summary import method_summary
+from runner.core import jsonio
 from runner.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS
 
 RUNS_COLUMNS = {
@@ -58,7 +59,7 @@ def write_report(
     if ok.method.nunique() >= 2 and len(ok) > len(metrics) + 1:
         st = study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha)
         (out / "statistics.json").parent.mkdir(parents=True, exist_ok=True)
-        (out / "statistics.json").write_text(json.dumps(st.to_json(), indent=1))
+        (out / "statistics.json").write_text(jsonio.dumps(st.to_json(), indent=1))
         acc = [m for m in ("e_t", "e_r", "e_s_sym", "e_s") if m in metrics][:3]
         seg = [m for m in ("e_start", "e_end", "e_rmse") if m in metrics]
         trajectory = [m for m in TRAJECTORY_STATS_METRICS if m in metrics]
@@ -93,7 +94,7 @@ def write_report(
             if part.method.nunique() < 2 or len(part) <= len(metrics) + 1:
                 continue
             sd = study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha)
-            (out / f"statistics_{direction}.json").write_text(json.dumps(sd.to_json(), indent=1))
+            (out / f"statistics_{direction}.json").write_text(jsonio.dumps(sd.to_json(), indent=1))
             td = tables.medians_with_letters(sd, acc or trajectory)
             what = "Drift" if acc else "ATE, RPE and KITTI's errors"
             tables.write_all(td, tab_dir, f"table3_drift_{direction}", f"{what} medians, {direction} runs only")

@@ -4,6 +4,7 @@ adds its subcommands, whose functions call library functions; errors become one 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 
 from runner.cli import analysis, campaign, data, evaluate, images
@@ -19,13 +20,28 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     try:
-        return args.func(args) or 0
+        code = args.func(args) or 0
+        sys.stdout.flush()  # a reader that went away is known here, not at the interpreter's exit
+        return code
+    except BrokenPipeError:
+        return _reader_gone()
     except SlamRunError as exc:
         print(f"slamrun: error: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("slamrun: interrupted", file=sys.stderr)
         return 130
+
+
+def _reader_gone() -> int:
+    """The reader of slamrun's output closed it (`slamrun stats --json | head -c 10`): end quietly, as a Unix
+    tool killed by SIGPIPE does (exit 141), with what is still buffered dropped instead of a traceback."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except OSError:
+        pass
+    return 141
 
 
 def _version() -> str:

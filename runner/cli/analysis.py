@@ -3,10 +3,10 @@ trajectories imported into a campaign's results."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from runner.cli.console import console
+from runner.core import jsonio
 from runner.errors import SlamRunError
 
 
@@ -46,7 +46,7 @@ def cmd_stats(args) -> int:
         raise SlamRunError(f"{args.results}: no column(s) {', '.join(missing)}; have {', '.join(df.columns)}")
     st = study_statistics(evaluated(df, metrics), metrics, level=args.level, adjust=args.adjust, alpha=args.alpha)
     if args.json:
-        print(json.dumps(st.to_json()))
+        print(jsonio.dumps(st.to_json()))
         return 0
     console.print(f"{len(st.kept)} runs kept, {st.n_outliers} outliers above {st.cutoff:.4f}")
     for name, m in st.metrics.items():

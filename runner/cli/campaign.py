@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import json
 import signal
 import sys
 import time
 from pathlib import Path
 
 from runner.cli.console import console
+from runner.core import jsonio
 from runner.errors import SlamRunError
 from runner.results.vocabulary import FAILURES
 
@@ -202,7 +202,7 @@ def cmd_status(args) -> int:
     if f is None:
         raise SlamRunError(f"{args.results}: no ledger.sqlite; is this a results directory of `slamrun campaign`?")
     if args.json:
-        print(json.dumps(f.to_dict()))
+        print(jsonio.dumps(f.to_dict()))
         return 0
     from runner.cli.display import status_view
 
@@ -241,7 +241,7 @@ def cmd_validate(args) -> int:
 def cmd_schema(args) -> int:
     from runner.engine.spec import json_schema
 
-    print(json.dumps(json_schema(), indent=2))
+    print(jsonio.dumps(json_schema(), indent=2))
     return 0
 
 

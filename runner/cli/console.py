@@ -17,7 +17,12 @@ class _LazyConsole:
         if self._console is None:
             from rich.console import Console
 
-            self._console = Console(stderr=False, width=None if sys.stdout.isatty() else 160)
+            class _Console(Console):
+                def on_broken_pipe(self) -> None:  # the CLI ends every command alike when its reader is gone
+                    self.quiet = True
+                    raise BrokenPipeError
+
+            self._console = _Console(stderr=False, width=None if sys.stdout.isatty() else 160)
         return self._console
 
     def __getattr__(self, name: str):

@@ -3,9 +3,9 @@ every core."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
+from runner.core import jsonio
 from runner.errors import SlamRunError
 
 GT_FORMATS = ("tum-mono", "tum", "euroc", "kitti")
@@ -59,7 +59,7 @@ def cmd_evaluate(args) -> int:
     )
     for d in evaluate_files(gt, args.traj, args.jobs, opts):
         if args.json:
-            print(json.dumps(d))
+            print(jsonio.dumps(d))
         else:
             vals = " ".join(f"{k}={v:.6g}" for k, v in d.items() if isinstance(v, float))
             detail = d.get("detail")

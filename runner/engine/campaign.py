@@ -13,6 +13,7 @@ import yaml
 import methods
 from runner.backends import make_backend
 from runner.backends.base import Backend
+from runner.core import jsonio
 from runner.datasets.cache import prepare, remove_damaged
 from runner.datasets.layouts import GROUNDTRUTH_FILES, open_sequence
 from runner.datasets.layouts import holds_sequence as generated
@@ -170,7 +171,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             raise
         described = {label: backend.describe_image(tag) for label, tag in images.items() if tag}
         if any(d is not None for d in described.values()):  # which image, from which sources, made these results
-            (results / "images.json").write_text(json.dumps(described, indent=1))
+            (results / "images.json").write_text(jsonio.dumps(described, indent=1))
         pending = set(ledger.pending_keys())
         removed = remove_damaged(spec.cache)
         if removed:

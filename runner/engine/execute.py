@@ -6,7 +6,6 @@ looks complete. Method failures come back as data; infrastructure faults raise I
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import threading
@@ -21,7 +20,7 @@ import numpy as np
 from methods.base import Method
 from runner.backends.base import Backend, ExecRequest, ExecResult, disk_reserve_bytes, folder_bytes
 from runner.backends.logcap import tail
-from runner.core import metrics
+from runner.core import jsonio, metrics
 from runner.core.evaluation import ASSOCIATION_TOLERANCE_S, tum_mono
 from runner.core.trajectory import Trajectory, write_tum
 from runner.datasets.cache import verify_view
@@ -155,7 +154,7 @@ def finish_attempt(
             shutil.rmtree(stage, ignore_errors=True)
             raise StorageError(f"{run.key.id}: the disk is full ({failure}: {message})")
         if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
-            damaged = verify_view(view.root)
+            damaged = verify_view(view.root, view.build_id)  # the build it started with, whole
             if damaged:
                 shutil.rmtree(stage, ignore_errors=True)
                 raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
@@ -205,7 +204,7 @@ def finish_attempt(
             **extra,
             **values,
         }
-        RunPaths.run_json(stage).write_text(json.dumps(record, indent=1, default=_json_default))
+        RunPaths.run_json(stage).write_text(jsonio.dumps(record, indent=1))
         final = paths.final
         if final.exists():  # a finished run is never overwritten
             earlier = finished_record(final, run.key.id)
@@ -324,11 +323,3 @@ def _try_read(method: Method, raw: Path, view: PreparedView) -> Trajectory | Non
         return method.read_trajectory(raw, view)
     except (MethodFailure, TrajectoryFormatError):
         return None
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, Path):
-        return str(o)
-    raise TypeError(type(o))

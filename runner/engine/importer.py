@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from runner.core import metrics
+from runner.core import jsonio, metrics
 from runner.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_tum, write_tum
 from runner.datasets.layouts import open_sequence, sequence_identity
 from runner.datasets.view import Direction
@@ -237,7 +237,7 @@ def import_trajectories(
             staged.append((stage, paths.final))
             if traj is not None and len(traj):
                 write_tum(RunPaths.trajectory(stage), traj)
-            RunPaths.run_json(stage).write_text(json.dumps(record, indent=1, default=float))
+            RunPaths.run_json(stage).write_text(jsonio.dumps(record, indent=1))
             rows.append(record | {"run_dir": str(paths.final)})
             report.imported.append(e.source)
         for _, final in staged:

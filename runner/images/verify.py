@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from runner.core import metrics
+from runner.core import jsonio, metrics
 from runner.core.trajectory import Trajectory, read_tum
 from runner.errors import MetricError, SlamRunError
 from runner.images.build import ROOT, BuildOptions, build, buildable, last_record
@@ -235,7 +235,7 @@ def verify_spec(
 def _write_tables(results: Path, rows: list[VerifyRow]) -> list[VerifyRow]:
     results.mkdir(parents=True, exist_ok=True)
     table = merged(results / "verify.json", rows)  # the rows of methods verified earlier stay
-    (results / "verify.json").write_text(json.dumps([asdict(r) | {"passed": r.passed} for r in table], indent=1))
+    (results / "verify.json").write_text(jsonio.dumps([asdict(r) | {"passed": r.passed} for r in table], indent=1))
     (results / "verify.md").write_text(markdown_table(table))
     return rows
 
