@@ -11,7 +11,9 @@ import fcntl
 import hashlib
 import json
 import os
+import secrets
 import shutil
+import time
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -24,7 +26,7 @@ from runner.datasets.sequence import Sequence
 from runner.datasets.view import Direction, PreparedView, Profile
 from runner.errors import DatasetError
 
-VIEW_FORMAT_VERSION = 3  # 3: a manifest of the view's files in view.json
+VIEW_FORMAT_VERSION = 4  # 3: a manifest of the view's files in view.json; 4: each build in a folder of its own
 
 
 FRAME_FORMATS = ("png", "pgm")  # rectified frames: png is compact, pgm is fastest to write and read
@@ -56,9 +58,11 @@ def prepare(
 ) -> PreparedView:
     """The prepared view, built now if the cache lacks it (safe across threads and processes).
 
-    A view found damaged (a file changed, added or removed since it was built: `verify_view`) is not used:
-    a new generation of it is built beside it (`<key>.g<n>`), so a run still reading the old one is not
-    disturbed; `remove_damaged` deletes the old ones when no run is in flight.
+    Each build has a folder of its own, `<key>.<build id>` (the build's time and a random part, also in view.json),
+    never used again, even when the cache was deleted meanwhile: a run compares the build it started with (its
+    view's `build_id`) with what is at its view's folder when it ends. A view found damaged (a file changed, added
+    or removed since it was built: `verify_view`) is not used: a new build is made beside it, so a run still
+    reading the old one is not disturbed; `remove_damaged` deletes the old ones when no run is in flight.
     """
     seq = open_sequence(sequence_dir)
     cache_dir = Path(cache_dir)
@@ -74,8 +78,8 @@ def prepare(
         final = _latest_generation(cache_dir, key)
         if final is not None and verify_view(final) is None:
             return PreparedView.load(final)
-        generation = 0 if final is None else _generation(final.name, key) + 1
-        final = cache_dir / (key if generation == 0 else f"{key}.g{generation}")
+        build_id = new_build_id()
+        final = cache_dir / f"{key}.{build_id}"
         tmp = cache_dir / f".{key}.tmp-{os.getpid()}"
         if tmp.exists():
             _remove(tmp)
@@ -90,7 +94,7 @@ def prepare(
                 frame_format,
                 whole_mirror(cache_dir, seq, direction, profile, frame_format),
             )
-            _seal(tmp)
+            _seal(tmp, build_id)
             os.rename(tmp, final)
         except BaseException:
             _remove(tmp)
@@ -130,24 +134,34 @@ def _link_reversed(mirror: Path, images: Path, names: list[str]) -> bool:
     return True
 
 
-def _generation(name: str, key: str) -> int:
-    return 0 if name == key else int(name[len(key) + 2 :])
+def new_build_id() -> str:
+    """A view build's identity: its time in ns (hex, fixed width: names sort by build time) and a random part."""
+    return f"{time.time_ns():016x}{secrets.token_hex(3)}"
 
 
 def _latest_generation(cache_dir: Path, key: str) -> Path | None:
-    found = [p for p in (cache_dir / key, *cache_dir.glob(f"{key}.g*")) if (p / "view.json").exists()]
-    return max(found, key=lambda p: _generation(p.name, key)) if found else None
+    """The newest build of view `key` in the cache, or None."""
+    prefix = f"{key}."
+    try:
+        names = [n for n in os.listdir(cache_dir) if n.startswith(prefix) and not n.startswith(".")]
+    except FileNotFoundError:
+        return None
+    found = [cache_dir / n for n in sorted(names, reverse=True) if (cache_dir / n / "view.json").exists()]
+    return found[0] if found else None
 
 
-def verify_view(root: Path) -> str | None:
-    """Why a prepared view cannot be trusted (missing, a file changed, added or removed since it was built),
-    or None when it is whole. Compares names, sizes and modification times with the manifest in view.json."""
+def verify_view(root: Path, build_id: str | None = None) -> str | None:
+    """Why a prepared view cannot be trusted (missing, another build than `build_id` where that is given, a file
+    changed, added or removed since it was built), or None when it is whole. Compares names, sizes and
+    modification times with the manifest in view.json."""
     try:
         meta = json.loads((root / "view.json").read_text())
     except FileNotFoundError:
         return f"{root}: missing"
     except (OSError, ValueError) as exc:
         return f"{root}/view.json unreadable ({exc})"
+    if build_id is not None and meta.get("build_id") != build_id:
+        return f"{root}: another build of the view (build {meta.get('build_id')}, the run had {build_id})"
     expected = {rel: (size, mtime) for rel, size, mtime in meta.get("manifest", [])}
     found = _manifest(root)
     if found == expected:
@@ -175,9 +189,11 @@ def _manifest(root: Path) -> dict[str, tuple[int, int]]:
     return out
 
 
-def _seal(root: Path) -> None:
-    """Record the view's files in view.json and make them read-only (a method must not write the view)."""
+def _seal(root: Path, build_id: str) -> None:
+    """Record the build's identity and the view's files in view.json and make them read-only (a method must not
+    write the view)."""
     meta = json.loads((root / "view.json").read_text())
+    meta["build_id"] = build_id
     meta["manifest"] = [[rel, size, mtime] for rel, (size, mtime) in sorted(_manifest(root).items())]
     (root / "view.json").write_text(json.dumps(meta))
     for dirpath, dirs, files in os.walk(root):

@@ -46,6 +46,7 @@ class PreparedView:
     pinhole: tuple[float, float, float, float] | None  # fx fy cx cy in pixels, for rectified views
     frame_suffix: str = ".png"  # frames are images/<6-digit index><suffix>
     photometric: bool = True  # pcalib.txt and vignette.png are in the view (native views of TUM-Mono)
+    build_id: str = ""  # which build of the view (runner.datasets.cache): a rebuilt view is another folder and id
 
     images_dir = "images"
     times = "times.txt"
@@ -106,4 +107,5 @@ class PreparedView:
             pinhole=tuple(meta["pinhole"]) if meta["pinhole"] else None,
             frame_suffix=meta.get("frame_suffix", ".png"),
             photometric=meta.get("photometric", meta["profile"] == Profile.native.value),
+            build_id=meta.get("build_id", ""),
         )

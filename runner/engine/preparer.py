@@ -100,7 +100,7 @@ class ViewPreparer:
         """The view, whole: one found missing or damaged is prepared again first. Returns the view and what
         was wrong with the previous one (None when it was whole)."""
         view = self.get(key)
-        problem = verify_view(view.root)
+        problem = verify_view(view.root, view.build_id)
         if problem is None:
             return view, None
         with self._lock:

@@ -1,0 +1,108 @@
+"""Reliability, round three: doors to a user's files, bad data never charged to a method, bounded on hostile
+input, and the causes of the flaky tests; each with real processes and files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from runner.engine.campaign import run_campaign
+from runner.engine.spec import load_spec
+from tests.conftest import fake_method, one_sequence, write_spec
+from tests.test_campaign import ledger_rows
+
+
+def campaign(spec_path: Path, **kw):
+    return run_campaign(load_spec(spec_path), log=kw.pop("log", lambda *a: None), **kw)
+
+
+# ------------------------------------------------------------ 2: a view rebuilt under a run
+
+
+def test_a_view_prepared_again_while_a_run_reads_it_is_infra_not_the_methods_failure(tmp_path, tiny_dataset):
+    """The cache is deleted and the same view prepared again mid-run (the user's `slamrun prepare`): the run that
+    lost its input is not charged, even though a whole view of the same content is back in the cache."""
+    once = tmp_path / "rebuilt-once"
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method("rebuild-view", extra=["--once", str(once)])],
+        datasets=one_sequence(tiny_dataset),
+        directions=["forward"],
+        lanes=1,
+    )
+    res = campaign(spec)
+    rows = ledger_rows(res.results)
+    assert once.exists(), "the run did not rebuild the view"
+    assert [(r["state"], r["failure"]) for r in rows] == [("done", None)], [(r["state"], r["message"]) for r in rows]
+    assert rows[0]["attempts"] == 2  # the first attempt was infra (its view replaced), retried
+
+
+# ------------------------------------------------------------ 4: bounded on hostile files (the shared guards)
+
+
+def test_reading_refuses_fifos_devices_and_oversized_files_without_blocking(tmp_path):
+    import os
+
+    import pytest
+
+    from runner.core.inputs import read_bounded
+    from runner.errors import DatasetError
+
+    fifo = tmp_path / "frame.png"
+    os.mkfifo(fifo)  # nobody writes it: a plain open() would block for ever
+    with pytest.raises(DatasetError, match="FIFO"):
+        read_bounded(fifo, 2**20, "a frame", DatasetError)
+    zero = tmp_path / "zero.png"
+    zero.symlink_to("/dev/zero")
+    with pytest.raises(DatasetError, match="character device"):
+        read_bounded(zero, 2**20, "a frame", DatasetError)
+    sparse = tmp_path / "sparse.png"
+    with open(sparse, "wb") as fh:
+        fh.truncate(2 * 2**30)  # 2 GiB, no block on disk
+    with pytest.raises(DatasetError, match="at most"):
+        read_bounded(sparse, 64 * 2**20, "a frame", DatasetError)
+    small = tmp_path / "ok.txt"
+    small.write_bytes(b"12345")
+    assert read_bounded(small, 5) == b"12345"
+
+
+def test_yaml_alias_bombs_and_deep_nesting_are_refused_before_anything_is_built(tmp_path):
+    """In a process limited to 1 GiB of address space: the refusal builds nothing."""
+    import subprocess
+    import sys
+
+    levels = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
+    levels += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]" for i in range(1, 9)]
+    bomb = tmp_path / "sensor.yaml"
+    bomb.write_text("\n".join(levels) + "\ncamera_model: *a8\n")  # about 1 KB, 10^9 values expanded
+    deep = tmp_path / "camchain.yaml"
+    deep.write_text("x: " + "[" * 20_000 + "]" * 20_000 + "\n")
+    code = """
+import resource, sys
+resource.setrlimit(resource.RLIMIT_AS, (2**30, resource.RLIM_INFINITY))
+from runner.core.inputs import load_yaml_file
+from runner.errors import DatasetError
+for path in sys.argv[1:]:
+    try:
+        load_yaml_file(path, "calibration", DatasetError)
+    except DatasetError as exc:
+        print(exc)
+"""
+    out = subprocess.run([sys.executable, "-c", code, str(bomb), str(deep)], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    said = out.stdout.splitlines()
+    assert len(said) == 2 and "sensor.yaml: its YAML aliases expand to" in said[0], said
+    assert "camchain.yaml: YAML nested too deeply" in said[1], said
+
+
+def test_a_spec_that_is_a_fifo_is_refused_at_once(tmp_path):
+    import os
+
+    import pytest
+
+    from runner.errors import SpecError
+
+    spec = tmp_path / "spec.yaml"
+    os.mkfifo(spec)
+    with pytest.raises(SpecError, match="FIFO"):
+        load_spec(spec)
