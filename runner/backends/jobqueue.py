@@ -32,7 +32,7 @@ SYSTEMS = {
     "lsf": ("LSFCluster", ("bsub", "bjobs", "bkill")),
 }
 DEATH_TIMEOUT_S = 60  # a worker that cannot reach the scheduler this long exits (its job ends)
-REPLACE_WAIT_S = 5  # how often the cluster compares its jobs with the workers that answer
+REPLACE_WAIT_S = 5  # a job whose worker left (the batch system ended it) is replaced after this long
 
 
 def job_name(results: Path) -> str:
@@ -165,8 +165,12 @@ def start_job_cluster(d: DistributedSpec, results: Path, lanes: int):
     """Cancel what a crashed start of this campaign left, check the job, start the scheduler here and the
     workers as jobs (adaptive between min_workers and max_workers: a job Slurm ends is replaced). Returns
     (cluster, client); the caller closes both, which cancels the jobs."""
+    import dask
     from distributed import Client
 
+    # dask closes and replaces a lost worker's job after `lost-worker-timeout` (15 s by default, in which one
+    # worker may run the whole rest of a campaign of short runs); a worker that left its job does not come back
+    dask.config.set({"distributed.deploy.lost-worker-timeout": f"{REPLACE_WAIT_S}s"})
     preflight(d)
     name = job_name(results)
     cancel_jobs(d.cluster, name)
