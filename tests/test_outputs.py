@@ -60,3 +60,25 @@ def test_a_closed_pipe_ends_a_command_quietly(argv, codes, tmp_path):
         os.close(w)
     assert b"Traceback" not in p.stderr and b"BrokenPipeError" not in p.stderr, p.stderr.decode()
     assert p.returncode in codes, (p.returncode, p.stderr.decode())
+
+
+def test_verify_exits_1_when_a_method_is_not_verified_names_the_spec_backend_and_writes_where_the_user_works(
+    tmp_path,
+):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        "name: vt\nresults: ./res\ndatasets:\n  - {name: s, path: ./data, sequences: [room_a], synthetic: {frames: 30}}\n"
+        "methods:\n  - {name: external, label: crashy, params: {argv: [/bin/false]}}\nbackend: local\n"
+    )
+    p = subprocess.run(
+        SLAMRUN + ["verify", str(spec), "--trials", "1", "--frames", "30"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=tmp_path,
+        env={**os.environ, "COLUMNS": "200"},
+    )
+    assert p.returncode == 1, p.stdout[-2000:] + p.stderr[-2000:]
+    assert "(backend: local)" in p.stdout and "backend: docker" not in p.stdout
+    table = tmp_path / ".cache" / "verify" / "verify.md"
+    assert table.is_file() and "crashy" in table.read_text()

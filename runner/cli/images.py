@@ -45,7 +45,9 @@ def add_commands(sub) -> None:
         action="store_true",
         help="build what is missing, run a short Docker campaign per image, print a table of results",
     )
-    im.add_argument("--results", type=Path, help="results folder of --verify (default .cache/verify)")
+    im.add_argument(
+        "--results", type=Path, help="results folder of --verify (default: .cache/verify under the current directory)"
+    )
     im.add_argument(
         "--export",
         type=Path,
@@ -56,7 +58,7 @@ def add_commands(sub) -> None:
     ve = sub.add_parser("verify", help="verify the methods of a spec on the synthetic rooms (any method)")
     ve.add_argument("spec", type=Path, help="a spec: its methods (built-in, plug-in, external) and backend")
     ve.add_argument("--method", action="append", help="only this method label (repeatable)")
-    ve.add_argument("--results", type=Path, help="results folder (default .cache/verify)")
+    ve.add_argument("--results", type=Path, help="results folder (default: .cache/verify under the current directory)")
     ve.add_argument("--trials", type=int, default=2, help="trials per room and direction")
     ve.add_argument("--frames", type=int, default=300, help="frames of each synthetic room")
     ve.set_defaults(func=cmd_verify)
@@ -122,7 +124,7 @@ def cmd_images(args) -> int:
 
         rows = verify(args.method, opts, args.results, log=lambda m: print(m, flush=True))
         print_table(rows, console)
-        return 0 if all(r.passed for r in rows) else 1
+        return 0 if rows and all(r.passed for r in rows) else 1  # 1: a method not verified
     records = build(args.method, log=lambda m: print(m, flush=True), opts=opts, only_missing=args.missing)
     console.print(f"built {len(records)} image(s): {', '.join(r.tag for r in records) or '-'}")
     return 0
@@ -143,7 +145,7 @@ def cmd_verify(args) -> int:
 
     rows = verify_spec(args.spec, args.method, args.results, lambda m: print(m, flush=True), args.trials, args.frames)
     print_table(rows, console)
-    return 0 if all(r.passed for r in rows) else 1
+    return 0 if rows and all(r.passed for r in rows) else 1  # 1: a method not verified
 
 
 def cmd_new_method(args) -> int:

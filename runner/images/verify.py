@@ -28,9 +28,9 @@ import yaml
 from runner.core import jsonio, metrics
 from runner.core.trajectory import Trajectory, read_tum
 from runner.errors import MetricError, SlamRunError
-from runner.images.build import ROOT, BuildOptions, build, buildable, last_record
+from runner.images.build import BuildOptions, build, buildable, last_record
 
-DEFAULT_RESULTS = ROOT / ".cache" / "verify"
+DEFAULT_RESULTS = Path(".cache") / "verify"  # under the current directory: where the user works
 SEQUENCES = ("room_a", "room_b")
 FRAMES = 300
 TRIALS = 2
@@ -87,6 +87,7 @@ class VerifyRow:
     vocabulary: str | None = None
     note: str = ""
     plumbing_only: bool = False  # an untrained stand-in network: accuracy is not judged
+    backend: str = "docker"  # what ran it: images are verified through docker, a spec's methods through its backend
 
     @property
     def passed(self) -> bool:
@@ -225,7 +226,7 @@ def verify_spec(
         )
     rows = []
     for m in chosen:
-        row = VerifyRow(m.run_label, built=True, bound=BOUNDS.get(m.name, DEFAULT_BOUND))
+        row = VerifyRow(m.run_label, built=True, bound=BOUNDS.get(m.name, DEFAULT_BOUND), backend=spec.backend)
         rows.append(row)
         method = {"name": m.name, "label": m.run_label, "params": m.params}
         _campaign(m.run_label, row, results, trials, frames, log, method=method, backend=spec.backend)
@@ -387,7 +388,8 @@ def markdown_table(rows: list[VerifyRow]) -> str:
 def print_table(rows: list[VerifyRow], console) -> None:
     from rich.table import Table
 
-    table = Table(title="method images, verified on synthetic sequences (backend: docker)")
+    backends = ", ".join(sorted({r.backend for r in rows})) or "docker"
+    table = Table(title=f"methods verified on synthetic sequences (backend: {backends})")
     for _, col in COLUMNS:
         table.add_column(col)
     table.add_column("verified")
