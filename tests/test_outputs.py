@@ -67,7 +67,8 @@ def test_verify_exits_1_when_a_method_is_not_verified_names_the_spec_backend_and
 ):
     spec = tmp_path / "spec.yaml"
     spec.write_text(
-        "name: vt\nresults: ./res\ndatasets:\n  - {name: s, path: ./data, sequences: [room_a], synthetic: {frames: 30}}\n"
+        "name: vt\nresults: ./res\n"
+        "datasets:\n  - {name: s, path: ./data, sequences: [room_a], synthetic: {frames: 30}}\n"
         "methods:\n  - {name: external, label: crashy, params: {argv: [/bin/false]}}\nbackend: local\n"
     )
     p = subprocess.run(
