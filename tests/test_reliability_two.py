@@ -313,14 +313,23 @@ def test_a_run_past_max_output_mb_is_stopped_and_charged(tmp_path, tiny_dataset)
 
 def read_only(folder: Path) -> None:
     """Make `folder` read-only from now on: a read-only bind mount over it (files already open for writing
-    stay writable, as on a filesystem remounted read-only under a running process). `writable` undoes it."""
-    subprocess.run(["mount", "--bind", str(folder), str(folder)], check=True)
-    for _ in range(50):  # "mount point is busy" while the campaign writes at that instant: again, shortly after
-        done = subprocess.run(["mount", "-o", "remount,bind,ro", str(folder)], capture_output=True, text=True)
-        if done.returncode == 0:
-            return
-        time.sleep(0.1)
-    raise AssertionError(f"{folder} could not be made read-only in 5 s: {done.stderr.strip()}")
+    stay writable, as on a filesystem remounted read-only under a running process). `writable` undoes it.
+
+    Made where nothing can write through it, then put in place in one step: a bind of `folder` at a private
+    mount point is made read-only (no process has a file open through that new mount, so the remount is never
+    "busy", as remounting a mount the campaign writes through was, now and then), and that read-only mount is
+    bound over `folder` (a bind keeps the read-only flag)."""
+    private = folder.parent / f".{folder.name}.read-only"
+    private.mkdir()
+    try:
+        subprocess.run(["mount", "--bind", str(folder), str(private)], check=True)
+        try:
+            subprocess.run(["mount", "-o", "remount,bind,ro", str(private)], check=True)
+            subprocess.run(["mount", "--bind", str(private), str(folder)], check=True)
+        finally:
+            subprocess.run(["umount", str(private)], check=True)
+    finally:
+        private.rmdir()
 
 
 def writable(folder: Path) -> None:
