@@ -346,11 +346,16 @@ def test_every_wrong_format_or_combination_is_one_line_naming_the_file(campaign,
     euroc = sequence_folder(data, "euroc")
     garbage = tmp_path / "garbage.bin"
     garbage.write_bytes(bytes(range(256)) * 4)
+    empty = tmp_path / "empty.txt"
+    empty.write_text("# timestamp tx ty tz qx qy qz qw\n")
     cases = [
         (["--gt", gt, "--gt-format", "kitti"], f"{gt}: KITTI poses carry no timestamps"),
         (["--gt", gt, "--gt-format", "euroc"], f"{gt}:1:"),
         (["--gt", gt, "--gt-format", "tum", "--metric", "tum-mono"], "groundtruthSync"),
         (["--gt", garbage], f"{garbage}"),
+        (["--gt", empty, "--metric", "ate"], f"{empty}: no finite pose"),
+        (["--gt", empty], f"{empty}: no pose row"),
+        (["--gt", gt, "--est-format", "kitti"], "give the sequence's times.txt with --times"),
         (["--gt", euroc, "--delta", "2"], f"{euroc}: a sequence folder is evaluated as a campaign does"),
         (["--gt", euroc, "--times", gt], "--times"),
         (["--gt", tmp_path], f"{tmp_path}: no sequence of a layout slamrun reads"),

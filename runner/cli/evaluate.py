@@ -105,11 +105,11 @@ def cmd_evaluate(args) -> int:
     metrics = tuple(dict.fromkeys(args.metric)) if args.metric else None
     if args.gt.is_dir():
         _folder_form_only(args)
+    elif args.est_format == "kitti" and args.times is None:
+        raise SlamRunError("KITTI poses carry no timestamps: give the sequence's times.txt with --times")
     gt = open_groundtruth(args.gt, args.gt_format, metrics, args.times)
     for note in gt.notes:
         print(f"slamrun: note: {note}", file=sys.stderr)
-    if args.est_format == "kitti" and gt.frame_times is None:
-        raise SlamRunError("KITTI poses carry no timestamps: give the sequence's times.txt with --times")
     opts = _options(args, gt, metrics or gt.default_metrics)
     failed = total = 0
     for d in evaluate_files(gt.trajectory, args.traj, args.jobs, opts):

@@ -83,6 +83,8 @@ def open_groundtruth(
         raise DatasetError(f"{path}: KITTI poses carry no timestamps: give the sequence's times.txt with --times")
     frame_times = read_frame_times(times) if times is not None else None
     traj = _read_file(path, fmt, frame_times)
+    if not np.isfinite(traj.positions).all(axis=1).any():
+        raise DatasetError(f"{path}: no finite pose; expected {FORMAT_NAMES[fmt]}")
     notes = (frame_note(path),) if fmt == "euroc" else ()
     return GroundTruth(traj, path, None, FILE_DEFAULT_METRICS[fmt], frame_times, notes)
 
@@ -197,4 +199,4 @@ def _first_bad_line(path: Path, text: str, ncols: int) -> str:
             [float(c) for c in cells]
         except ValueError:
             return f"{path}:{n}: not a number in {line.strip()[:80]!r}"
-    return f"{path}: cannot be read as rows of {ncols} numbers"
+    return f"{path}: no pose row"
