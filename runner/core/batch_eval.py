@@ -160,10 +160,11 @@ def _merged(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
 
 
 def _unreadable(exc: TrajectoryFormatError, opts: Options) -> dict:
+    """A file that could not be read: every figure it would have had present, null."""
     d = {"status": "unreadable", "detail": str(exc)}
     if opts.campaign is not None:
-        return {"status": "unreadable", **{k: None for m in opts.metrics for k in CAMPAIGN_FIELDS[m]}, **d}
-    if opts.metrics == ("tum-mono",):  # every figure present, null
+        return {"status": "unreadable", **dict.fromkeys(k for m in opts.metrics for k in CAMPAIGN_FIELDS[m]), **d}
+    if opts.metrics == ("tum-mono",):
         return dict.fromkeys(EVALUATE_FIELDS) | d
     return d
 
@@ -179,7 +180,7 @@ def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | Traje
     refused = {i: p for i, path in enumerate(paths) if (p := file_problem(path, MAX_FILE_BYTES, "a trajectory file"))}
     readable = [path for i, path in enumerate(paths) if i not in refused]
     if opts.est_format == "tum":
-        read = iter(list(read_tum_many(readable)))
+        read = iter(read_tum_many(readable))
     else:
         read = iter([_read_kitti(p, opts) for p in readable])
     return [TrajectoryFormatError(refused[i]) if i in refused else next(read) for i in range(len(paths))]
