@@ -152,8 +152,10 @@ def test_evaluate_cli_many_files_json(tmp_path, capsys):
     (tmp_path / "bad.txt").write_text("1 2 3\n")
     write_tum(tmp_path / "empty.txt", estimate_from(gt, gt.positions, np.zeros(len(gt), bool)))
     files = [str(tmp_path / n) for n in ("good.txt", "bad.txt", "empty.txt")]
-    assert main(["evaluate", "--gt", str(tmp_path / "gt.txt"), "--json", *files]) == 0
-    out = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert main(["evaluate", "--gt", str(tmp_path / "gt.txt"), "--json", *files]) == 1  # 2 files not evaluated
+    said = capsys.readouterr()
+    assert "2 of 3 file(s) could not be evaluated" in said.err
+    out = [json.loads(line) for line in said.out.splitlines()]
     assert [o["status"] for o in out] == ["ok", "unreadable", "empty"]
     assert out[0]["e_s"] == pytest.approx(1.0) and out[0]["e_align"] == pytest.approx(0, abs=1e-9)
     assert out[1]["e_t"] is None and "bad.txt:1" in out[1]["detail"]

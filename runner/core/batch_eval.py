@@ -3,13 +3,17 @@
 The files are cut into chunks that worker processes read and evaluate (batched reading of TUM files, see
 trajectory.read_tum_many); results come back in input order, each file's error as that file's result.
 One job runs in this process. The numbers are the same whatever the number of jobs.
+
+A file that is not a regular file (a FIFO, a device such as /dev/zero) or is larger than MAX_FILE_BYTES is
+refused unread, as that file's result. With `Options.campaign` (a campaign's own per-run evaluation, given by the
+caller), each file is evaluated exactly as a campaign evaluates a run.
 """
 
 from __future__ import annotations
 
 import ctypes
 import os
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -19,44 +23,150 @@ import numpy as np
 
 from runner.core import metrics
 from runner.core.evaluation import TumMonoResult, tum_mono_file, tum_mono_many
+from runner.core.inputs import regular_file_problem
+from runner.core.metrics import DEFAULT_TOLERANCE_S
 from runner.core.trajectory import Trajectory, read_kitti, read_tum_many
 from runner.errors import MetricError, TrajectoryFormatError
-from runner.results.vocabulary import EVALUATE_FIELDS
+from runner.results.vocabulary import (
+    ATE_COLUMNS,
+    EVALUATE_FIELDS,
+    KITTI_COLUMNS,
+    RPE_COLUMNS,
+    TUM_MONO_METRICS,
+    EvalStatus,
+)
 
 METRICS = ("tum-mono", "ate", "rpe", "kitti")
+ALIGNED = ("ate", "rpe", "kitti")  # the metrics that align the estimate first
 GROUP = 32  # TUM-Mono estimates evaluated together (their arrays stay in the CPU's cache)
+MAX_FILE_BYTES = 256 * 2**20  # a trajectory or ground-truth file: a million poses are about 100 MB
+# the figures a campaign records per metric (results.csv's columns)
+CAMPAIGN_FIELDS = {
+    "tum-mono": (*TUM_MONO_METRICS[:3], "e_s_sym", *TUM_MONO_METRICS[3:]),
+    "ate": ATE_COLUMNS,
+    "rpe": RPE_COLUMNS,
+    "kitti": KITTI_COLUMNS,
+}
+
+# (ground truth, estimate, metrics, alignment) -> (figures with eval_status, why a metric is missing)
+CampaignEvaluation = Callable[[Trajectory, Trajectory, tuple[str, ...], str], tuple[dict, str]]
 
 
 @dataclass(frozen=True)
 class Options:
-    """Which metric, and how: the alignment, RPE's step, the association tolerance; estimates as TUM files, or
-    as KITTI pose files whose rows are the frames at `times`."""
+    """Which metrics, and how: the alignment, RPE's step, the association tolerance; estimates as TUM files, or
+    as KITTI pose files whose rows are the frames at `times`. With `campaign`, each file is evaluated by that
+    function (a campaign's per-run evaluation: its metrics, alignment and association) instead."""
 
-    metric: str = "tum-mono"
+    metrics: tuple[str, ...] = ("tum-mono",)
     alignment: str = "sim3"
     delta: float = 1.0
     delta_unit: str = "frames"
-    tolerance_s: float = metrics.DEFAULT_TOLERANCE_S
+    tolerance_s: float = DEFAULT_TOLERANCE_S
     est_format: str = "tum"
     times: tuple[float, ...] | None = None
+    campaign: CampaignEvaluation | None = None
+
+
+def file_problem(path: str | Path, limit: int, what: str) -> str | None:
+    """Why `path` is not a file slamrun may read whole (not a regular file, or more than `limit` bytes), or None.
+    Never opens it, so never blocks."""
+    if problem := regular_file_problem(Path(path), what):
+        return problem
+    size = os.stat(path).st_size
+    if size > limit:
+        return f"{path}: {size:,} bytes; {what} is at most {limit:,} bytes"
+    return None
 
 
 def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
-    """One estimate's figures for `opts.metric` (status ok), or its status and why not."""
-    if opts.metric == "tum-mono":
+    """One estimate's figures for `opts.metrics` (status ok), or its status and why not."""
+    if problem := alignment_problem(gt, traj, opts):
+        return {"status": "failed", "n_poses": len(traj), "detail": problem}
+    if opts.campaign is not None:
+        return _campaign_fields(gt, traj, opts)
+    if len(opts.metrics) > 1:
+        return _merged(gt, traj, opts)
+    return _single(gt, traj, opts.metrics[0], opts)
+
+
+def _single(gt: Trajectory, traj: Trajectory, metric: str, opts: Options) -> dict:
+    if metric == "tum-mono":
         return _tum_mono_fields(tum_mono_file(gt, traj))
     try:
-        if opts.metric == "ate":
+        if metric == "ate":
             res = metrics.ate(gt, traj, opts.alignment, opts.tolerance_s)
-        elif opts.metric == "rpe":
+        elif metric == "rpe":
             res = metrics.rpe(gt, traj, opts.delta, opts.delta_unit, opts.alignment, opts.tolerance_s)
-        elif opts.metric == "kitti":
+        elif metric == "kitti":
             res = metrics.kitti(gt, traj, opts.alignment, tolerance_s=opts.tolerance_s)
         else:
-            raise MetricError(f"unknown metric {opts.metric!r}; known: {', '.join(METRICS)}")
+            raise MetricError(f"unknown metric {metric!r}; known: {', '.join(METRICS)}")
     except MetricError as exc:
         return {"status": "failed", "n_poses": len(traj), "detail": str(exc)}
     return {"status": "ok", "n_poses": len(traj), **res.to_dict()}
+
+
+def alignment_problem(gt: Trajectory, traj: Trajectory, opts: Options) -> str | None:
+    """Why an alignment over the first N poses cannot be made as asked (fewer than N poses pair with the ground
+    truth: the fit would silently use them all), or None."""
+    align = metrics.Alignment.parse(opts.alignment)
+    if align.first_n is None or not any(m in ALIGNED for m in opts.metrics):
+        return None
+    finite = np.isfinite(gt.positions).all(axis=1) & np.isfinite(gt.quaternions).all(axis=1)
+    try:
+        n = len(metrics.associate(_rows(gt, finite), traj, opts.tolerance_s).est)
+    except MetricError:
+        return None  # the metric says why
+    if n >= align.first_n:
+        return None
+    return (
+        f"alignment {opts.alignment}: needs the first {align.first_n} poses, but {n} of the estimate's {len(traj)} "
+        f"pair with the ground truth (within {opts.tolerance_s:g} s); give N <= {n}"
+    )
+
+
+def _rows(traj: Trajectory, keep: np.ndarray) -> Trajectory:
+    return Trajectory(traj.timestamps[keep], traj.positions[keep], traj.quaternions[keep])
+
+
+def _campaign_fields(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
+    """The campaign's figures of one estimate: every field of the metrics asked for (null where missing). Its
+    status is the campaign's eval_status, or failed where no figure at all came out."""
+    assert opts.campaign is not None
+    figures, detail = opts.campaign(gt, traj, opts.metrics, opts.alignment)
+    fields = {k: figures.get(k) for m in opts.metrics for k in CAMPAIGN_FIELDS[m]}
+    status = figures.get("eval_status", EvalStatus.ok.value)
+    if status == EvalStatus.ok.value and all(v is None for v in fields.values()):
+        status = "failed"
+    return {"status": status, "n_poses": len(traj), **fields} | ({"detail": detail} if detail else {})
+
+
+def _merged(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
+    """Several metrics of one estimate in one result: the first status that is not ok, every figure, each
+    metric's reason."""
+    out: dict = {"status": "ok", "n_poses": len(traj)}
+    details = []
+    for metric in opts.metrics:
+        d = _single(gt, traj, metric, opts)
+        status, detail = d.pop("status"), d.pop("detail", None)
+        d.pop("metric", None)
+        if status != "ok" and out["status"] == "ok":
+            out["status"] = status
+        if detail:
+            details.append(f"{metric}: {detail}")
+        out |= d
+    return out | ({"detail": "; ".join(details)} if details else {})
+
+
+def _unreadable(exc: TrajectoryFormatError, opts: Options) -> dict:
+    """A file that could not be read: every figure it would have had present, null."""
+    d = {"status": "unreadable", "detail": str(exc)}
+    if opts.campaign is not None:
+        return {"status": "unreadable", **dict.fromkeys(k for m in opts.metrics for k in CAMPAIGN_FIELDS[m]), **d}
+    if opts.metrics == ("tum-mono",):
+        return dict.fromkeys(EVALUATE_FIELDS) | d
+    return d
 
 
 def _tum_mono_fields(res: TumMonoResult) -> dict:
@@ -66,15 +176,21 @@ def _tum_mono_fields(res: TumMonoResult) -> dict:
 
 
 def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | TrajectoryFormatError]:
+    """Each file's trajectory or the error naming it; files that are not regular, or too large, unread."""
+    refused = {i: p for i, path in enumerate(paths) if (p := file_problem(path, MAX_FILE_BYTES, "a trajectory file"))}
+    readable = [path for i, path in enumerate(paths) if i not in refused]
     if opts.est_format == "tum":
-        return read_tum_many(paths)
-    out: list[Trajectory | TrajectoryFormatError] = []
-    for p in paths:
-        try:
-            out.append(read_kitti(p, np.asarray(opts.times)))
-        except TrajectoryFormatError as exc:
-            out.append(exc)
-    return out
+        read = iter(read_tum_many(readable))
+    else:
+        read = iter([_read_kitti(p, opts) for p in readable])
+    return [TrajectoryFormatError(refused[i]) if i in refused else next(read) for i in range(len(paths))]
+
+
+def _read_kitti(path: str | Path, opts: Options) -> Trajectory | TrajectoryFormatError:
+    try:
+        return read_kitti(path, np.asarray(opts.times))
+    except TrajectoryFormatError as exc:
+        return exc
 
 
 def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory, opts: Options = Options()) -> list[dict]:
@@ -90,11 +206,8 @@ def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory, opts: Option
     for path, traj in zip(paths, _read(paths, opts), strict=True):
         if isinstance(traj, TrajectoryFormatError):
             flush()
-            d = {"status": "unreadable", "detail": str(traj)}
-            if opts.metric == "tum-mono":  # every figure present, null
-                d = dict.fromkeys(EVALUATE_FIELDS) | d
-            out.append({"file": str(path), **d})
-        elif opts.metric == "tum-mono":
+            out.append({"file": str(path), **_unreadable(traj, opts)})
+        elif opts.metrics == ("tum-mono",) and opts.campaign is None:
             group.append((path, traj))
             if len(group) == GROUP:
                 flush()
