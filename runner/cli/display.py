@@ -9,6 +9,7 @@ from __future__ import annotations
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console, Group
 from rich.progress_bar import ProgressBar
@@ -17,6 +18,11 @@ from rich.text import Text
 
 from runner.engine.progress import Figures, Tracker, duration, one_line
 from runner.engine.session import read_tracker
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from runner.analysis.stats import StudyStats
 
 
 def headline(f: Figures, width: int = 40) -> Table:
@@ -186,7 +192,7 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
 SUMMARY_MEDIANS = ("e_t", "e_r", "e_s_sym", "e_align", "ate_rmse", "rpe_t_rmse")
 
 
-def method_table(summary, title: str) -> Table:
+def method_table(summary: pd.DataFrame, title: str) -> Table:
     """The end-of-campaign table of one dataset's per-method summary (runner.analysis.summary.method_summary):
     counts, success rate, the medians of the metrics its runs have, fps and the failure kinds that occurred."""
     from runner.results.vocabulary import FAILURES
@@ -203,7 +209,7 @@ def method_table(summary, title: str) -> Table:
     return t
 
 
-def pooled_table(pooled, title: str) -> Table:
+def pooled_table(pooled: pd.DataFrame, title: str) -> Table:
     """The pooled view over every dataset (runner.analysis.summary.pooled_summary): counts, success rate and the
     mean rank within sequences; no median in metres."""
     cols = ["method", "runs", "done", "failed", "infra", "success_pct", "mean_rank", "sequences_ranked"]
@@ -225,7 +231,7 @@ def _num(v: float, digits: int = 4) -> str:
     return "-" if v is None or v != v else f"{v:.{digits}g}"
 
 
-def stats_lines(dataset: str, st, adjust: str, alpha: float) -> list[str]:
+def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list[str]:
     """`slamrun stats`' text of one dataset: every test the procedure computed (outliers, Lilliefors, Levene,
     Kruskal-Wallis, pairwise Wilcoxon rank-sum tests adjusted and not), with the medians and letters."""
     lines = [
