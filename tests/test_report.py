@@ -88,6 +88,8 @@ def test_report_files(tmp_path):
 def test_stats_cli_json(tmp_path, shared_data, capsys):
     assert main(["stats", str(shared_data / "stats_golden" / "observations.csv"), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
+    assert list(out["datasets"]) == ["all"]  # a table without a dataset column: one block
+    out = out["datasets"]["all"]
     ref = json.loads((shared_data / "stats_golden" / "r_reference.json").read_text())
     assert set(out) == set(ref) and set(out["metrics"]) == set(ref["metrics"])
     assert out["n_outliers"] == ref["n_outliers"]

@@ -24,13 +24,21 @@ def save(fig, folder: Path, name: str) -> Path:
     return folder / f"{name}.png"
 
 
+def _labelled(label: str, title: str) -> str:
+    """A figure's title headed by its dataset, where it has one."""
+    return f"{label}: {title}" if label else title
+
+
 def _colors(methods: list[str]) -> dict[str, tuple]:
     cmap = plt.get_cmap("tab10" if len(methods) <= 10 else "tab20")
     return {m: cmap(i % cmap.N) for i, m in enumerate(methods)}
 
 
-def cumulative(df: pd.DataFrame, metric: str, folder: Path, name: str | None = None, bold_all: bool = False) -> Path:
-    """Runs (y) whose error is below x (log x), one curve per method: best methods reach the top left."""
+def cumulative(
+    df: pd.DataFrame, metric: str, folder: Path, name: str | None = None, bold_all: bool = False, label: str = ""
+) -> Path:
+    """Runs (y) whose error is below x (log x), one curve per method: best methods reach the top left; `label`
+    (the dataset) heads the title."""
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     methods = sorted(df.method.unique())
     colors = _colors(methods)
@@ -49,14 +57,14 @@ def cumulative(df: pd.DataFrame, metric: str, folder: Path, name: str | None = N
     ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel(LABELS.get(metric, metric))
     ax.set_ylabel("number of runs")
-    title = f"cumulative {LABELS.get(metric, metric)}"
+    title = _labelled(label, f"cumulative {LABELS.get(metric, metric)}")
     ax.set_title(title + (" (dotted forward, dashed backward, bold both)" if bold_all else ""), fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     return save(fig, folder, name or f"cumulative_{metric}")
 
 
-def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align") -> Path:
+def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "") -> Path:
     """Colour-coded error per method (rows) × sequence, direction and run (columns); grey = failed."""
     d = df.copy()
     d["col"] = d.sequence.astype(str) + "/" + d.direction.astype(str).str[0] + "/" + d.trial.astype(str)
@@ -74,11 +82,11 @@ def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align") -> Path:
     starts = [i for i, s in enumerate(seqs) if i == 0 or s != seqs[i - 1]]
     ax.set_xticks(starts, [seqs[i] for i in starts], rotation=90, fontsize=6)
     fig.colorbar(im, ax=ax, label=f"log10 {metric}")
-    ax.set_title(f"{LABELS.get(metric, metric)} per run (grey: no evaluated run)", fontsize=9)
+    ax.set_title(_labelled(label, f"{LABELS.get(metric, metric)} per run (grey: no evaluated run)"), fontsize=9)
     return save(fig, folder, f"heatmap_{metric}")
 
 
-def boxplot(st: StudyStats, metric: str, folder: Path) -> Path:
+def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "") -> Path:
     """Box plots of a metric per method (outliers removed), medians labelled with their letters."""
     s = st.metrics[metric]
     methods = sorted(s.medians, key=lambda m: s.medians[m])
@@ -90,11 +98,15 @@ def boxplot(st: StudyStats, metric: str, folder: Path) -> Path:
     for i, m in enumerate(methods, start=1):
         ax.text(i, top, s.letters.get(m, ""), ha="center", va="bottom", fontsize=10, fontweight="bold")
     ax.set_ylabel(LABELS.get(metric, metric))
-    ax.set_title(f"{LABELS.get(metric, metric)}: Kruskal-Wallis chi2 = {s.kruskal_chi2:.4g}", fontsize=9)
+    ax.set_title(
+        _labelled(label, f"{LABELS.get(metric, metric)}: Kruskal-Wallis chi2 = {s.kruskal_chi2:.4g}"), fontsize=9
+    )
     return save(fig, folder, f"box_{metric}")
 
 
-def trajectories(runs: list[tuple[str, str, object]], gt, full, folder: Path, name: str, metric: str) -> Path:
+def trajectories(
+    runs: list[tuple[str, str, object]], gt, full, folder: Path, name: str, metric: str, label: str = ""
+) -> Path:
     """Per method, its best, median and worst run by `metric` over the ground truth, top view: aligned as the
     metric aligns them (ATE: a Sim(3) over every pose with ground truth; e_align: the start segment's Sim(3)).
     `full` is the whole ground-truth path where the sequence has one (groundtruth_full.txt), else None."""
@@ -129,5 +141,6 @@ def trajectories(runs: list[tuple[str, str, object]], gt, full, folder: Path, na
         ax.legend(fontsize=7)
         ax.set_title(f"{method}", fontsize=9)
     how = "Sim(3) over all poses (ATE)" if metric != "e_align" else "the start segment's Sim(3)"
-    fig.suptitle(f"{name}: best, median and worst run by {metric}, aligned by {how}; dots: ground truth", fontsize=8)
+    title = f"{name}: best, median and worst run by {metric}, aligned by {how}; dots: ground truth"
+    fig.suptitle(_labelled(label, title), fontsize=8)
     return save(fig, folder, f"trajectories_{name}")

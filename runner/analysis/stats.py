@@ -17,7 +17,7 @@ from scipy import stats
 def mahalanobis_sq(x: np.ndarray) -> np.ndarray:
     """Squared Mahalanobis distance of every row to the mean (pooled rows, sample covariance)."""
     centred = x - x.mean(axis=0)
-    cov = np.cov(x, rowvar=False, ddof=1)
+    cov = np.atleast_2d(np.cov(x, rowvar=False, ddof=1))  # one metric: np.cov gives a scalar
     return np.einsum("ij,ij->i", centred @ np.linalg.pinv(cov), centred)
 
 
@@ -30,10 +30,10 @@ def chi2_cutoff(level: float, df: int) -> float:
 
 def lilliefors_p(x: np.ndarray) -> float:
     """Lilliefors (Kolmogorov-Smirnov) normality test p-value, as nortest::lillie.test computes it
-    (Dallal-Wilkinson approximation, Stephens' formulas above 0.1)."""
+    (Dallal-Wilkinson approximation, Stephens' formulas above 0.1); NaN under 5 values or without spread."""
     x = np.sort(np.asarray(x, float)[np.isfinite(x)])
     n = len(x)
-    if n < 5:
+    if n < 5 or not x.std(ddof=1) > 0:  # too few values, or no spread (a deterministic method's trials)
         return math.nan
     p = stats.norm.cdf((x - x.mean()) / x.std(ddof=1))
     i = np.arange(1, n + 1)
@@ -130,6 +130,8 @@ def pairwise_wilcoxon(groups: dict[str, np.ndarray], adjust: str = "holm") -> li
 def compact_letters(groups: list[str], pvalues: dict[frozenset, float], alpha: float = 0.05) -> dict[str, str]:
     """Compact letter display by insert-and-absorb (Piepho 2004, as multcompView::multcompLetters):
     two groups share a letter exactly when their difference is not significant at `alpha`."""
+    if not groups:
+        return {}
     columns: list[set[str]] = [set(groups)]
     for a, b in itertools.combinations(groups, 2):
         if pvalues.get(frozenset((a, b)), 1.0) > alpha:
@@ -217,12 +219,13 @@ def study_statistics(
     adjust: str = "holm",
     alpha: float = 0.05,
 ) -> StudyStats:
-    """The study's procedure on evaluated runs (rows with every metric finite)."""
+    """The study's procedure on evaluated runs (rows with every metric finite); no metric or no run gives no
+    figure (empty medians and tests), not an error."""
     data = df.dropna(subset=metrics).reset_index(drop=True)
     x = data[metrics].to_numpy(float)
-    d2 = mahalanobis_sq(x) if len(data) > len(metrics) else np.zeros(len(data))
-    cutoff = chi2_cutoff(level, len(metrics))
-    kept = data[d2 <= cutoff].reset_index(drop=True)
+    d2 = mahalanobis_sq(x) if metrics and len(data) > len(metrics) else np.zeros(len(data))
+    cutoff = chi2_cutoff(level, len(metrics)) if metrics else math.nan
+    kept = data[~(d2 > cutoff)].reset_index(drop=True)
     order = list(kept.groupby(group, sort=True).groups)
     out = {}
     for metric in metrics:

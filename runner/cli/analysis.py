@@ -7,7 +7,6 @@ from pathlib import Path
 
 from runner.cli.console import console
 from runner.core import jsonio
-from runner.errors import SlamRunError
 
 
 def add_commands(sub) -> None:
@@ -17,7 +16,15 @@ def add_commands(sub) -> None:
     st.add_argument("--level", type=float, default=0.999, help="chi-square quantile of the outlier cut-off")
     st.add_argument("--adjust", default="holm", choices=["holm", "bonferroni", "BH", "none"], help="p-value adjustment")
     st.add_argument("--alpha", type=float, default=0.05, help="significance level of the letters")
-    st.add_argument("--metrics", nargs="+", help="metric columns (default: the study's six)")
+    st.add_argument(
+        "--metrics",
+        nargs="+",
+        help="metric columns (default: per dataset, the metrics its runs have: TUM-Mono's six where it has them, "
+        "then ATE RMSE, RPE and KITTI's errors)",
+    )
+    st.add_argument(
+        "--dataset", help="only this dataset's runs (the spec's dataset name; default: each dataset on its own)"
+    )
     st.set_defaults(func=cmd_stats)
     rp = sub.add_parser("report", help="write report/index.html with tables and figures")
     rp.add_argument("results", type=Path, help="a results directory")
@@ -36,22 +43,23 @@ def add_commands(sub) -> None:
 
 
 def cmd_stats(args) -> int:
-    from runner.analysis.load import evaluated, load_results, metrics_for
-    from runner.analysis.stats import study_statistics
+    from runner.analysis.datasets import dataset_rows, per_dataset_statistics, pooled_json, statistics_json
+    from runner.analysis.load import load_results
 
-    df = load_results(args.results)
-    metrics = args.metrics or metrics_for(df)
-    missing = [m for m in metrics if m not in df.columns]
-    if missing:
-        raise SlamRunError(f"{args.results}: no column(s) {', '.join(missing)}; have {', '.join(df.columns)}")
-    st = study_statistics(evaluated(df, metrics), metrics, level=args.level, adjust=args.adjust, alpha=args.alpha)
+    df = dataset_rows(load_results(args.results), args.dataset, args.results)
+    per = per_dataset_statistics(df, args.results, args.metrics, level=args.level, adjust=args.adjust, alpha=args.alpha)
+    pooled = pooled_json(df)
     if args.json:
-        print(jsonio.dumps(st.to_json()))
+        print(jsonio.dumps(statistics_json(per, pooled)))
         return 0
-    console.print(f"{len(st.kept)} runs kept, {st.n_outliers} outliers above {st.cutoff:.4f}")
-    for name, m in st.metrics.items():
-        meds = ", ".join(f"{g} {v:.4g} {m.letters[g]}" for g, v in sorted(m.medians.items(), key=lambda x: x[1]))
-        console.print(f"{name}: Kruskal-Wallis chi2 {m.kruskal_chi2:.4g} (p {m.kruskal_p:.3g}); {meds}")
+    from runner.cli.display import pooled_lines, stats_lines
+
+    for name, st in per.items():
+        for line in stats_lines(name, st, args.adjust, args.alpha):
+            console.print(line, markup=False, highlight=False)
+    if len(per) > 1:
+        for line in pooled_lines(pooled):
+            console.print(line, markup=False, highlight=False)
     return 0
 
 

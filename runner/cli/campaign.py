@@ -10,7 +10,6 @@ from pathlib import Path
 from runner.cli.console import console
 from runner.core import jsonio
 from runner.errors import SlamRunError
-from runner.results.vocabulary import FAILURES
 
 
 def add_commands(sub) -> None:
@@ -156,28 +155,21 @@ def _print_dry_run(spec) -> int:
 
 
 def _print_summary(campaign: str, results: Path, csv: Path) -> None:
-    import pandas as pd
-
-    from runner.analysis.summary import method_summary
-    from runner.cli.display import failed_runs_table
+    """The end-of-campaign tables: per method within each dataset (medians in metres are never pooled across
+    datasets), the pooled counts, rates and ranks when there are several datasets, and the failed runs."""
+    from runner.analysis.load import by_dataset, read_csv
+    from runner.analysis.summary import method_summary, pooled_summary
+    from runner.cli.display import failed_runs_table, method_table, pooled_table
     from runner.engine.ledger import Ledger
 
-    df = pd.read_csv(csv)
+    df = read_csv(csv)
     if df.empty:
         return
-    summ = method_summary(df)
-    from rich.table import Table
-
-    t = Table(title=f"{campaign}: per method")
-    medians = [f"median_{m}" for m in ("e_t", "e_r", "e_s_sym", "e_align", "ate_rmse", "rpe_t_rmse")]
-    medians = [c for c in medians if summ[c].notna().any()] or medians[:4]  # the metrics this campaign has
-    cols = ["method", "runs", "done", "failed", "success_pct", *medians, "median_fps"]
-    fails = [k for k in FAILURES if summ[k].sum() > 0]
-    for c in cols + fails:
-        t.add_column(c.replace("median_", "med "), justify="right" if c != "method" else "left")
-    for _, r in summ.iterrows():
-        t.add_row(*[_fmt(r[c]) for c in cols + fails])
-    console.print(t)
+    groups = by_dataset(df)
+    for name, part in groups.items():
+        console.print(method_table(method_summary(part), f"{campaign}: per method, dataset {name}"))
+    if len(groups) > 1:
+        console.print(pooled_table(pooled_summary(df), f"{campaign}: per method, all datasets (pooled)"))
     ledger = Ledger(results / "ledger.sqlite", read_only=True)
     try:
         failed, more = failed_runs_table(ledger.rows(), campaign)
@@ -187,12 +179,6 @@ def _print_summary(campaign: str, results: Path, csv: Path) -> None:
         console.print(failed)
         if more:
             console.print(f"... and {more} more failed run(s): `slamrun status {results}` or results.csv")
-
-
-def _fmt(v) -> str:
-    if isinstance(v, float):
-        return "-" if v != v else f"{v:.4g}"
-    return str(v)
 
 
 def cmd_status(args) -> int:

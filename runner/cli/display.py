@@ -9,6 +9,7 @@ from __future__ import annotations
 import threading
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console, Group
 from rich.progress_bar import ProgressBar
@@ -17,6 +18,11 @@ from rich.text import Text
 
 from runner.engine.progress import Figures, Tracker, duration, one_line
 from runner.engine.session import read_tracker
+
+if TYPE_CHECKING:
+    import pandas as pd
+
+    from runner.analysis.stats import StudyStats
 
 
 def headline(f: Figures, width: int = 40) -> Table:
@@ -163,13 +169,14 @@ class LiveProgress:
 
 
 def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple[Table | None, int]:
-    """The failed runs (method failures and infrastructure), at most `limit`; returns the table and how many
-    more there are."""
+    """The failed runs (method failures and infrastructure), at most `limit`, with their dataset where the runs
+    have several; returns the table and how many more there are."""
     failed = sorted((r for r in rows if r["state"] == "failed"), key=lambda r: r["key"])
     if not failed:
         return None, 0
+    several = len({r.get("dataset") for r in rows}) > 1
     t = Table(title=f"{campaign}: failed runs ({len(failed)})")
-    for c in ("method", "sequence", "direction", "trial", "kind", "log"):
+    for c in ("method", *(("dataset",) if several else ()), "sequence", "direction", "trial", "kind", "log"):
         t.add_column(c)
     for r in failed[:limit]:
         log = (
@@ -177,5 +184,96 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
             if r.get("run_dir") and r.get("failure") != "infra"
             else (r.get("message") or "")[:80]
         )
-        t.add_row(r["label"], r["sequence"], r["direction"], str(r["trial"]), r.get("failure") or "?", log)
+        where = (str(r.get("dataset")),) if several else ()
+        t.add_row(r["label"], *where, r["sequence"], r["direction"], str(r["trial"]), r.get("failure") or "?", log)
     return t, max(len(failed) - limit, 0)
+
+
+SUMMARY_MEDIANS = ("e_t", "e_r", "e_s_sym", "e_align", "ate_rmse", "rpe_t_rmse")
+
+
+def method_table(summary: pd.DataFrame, title: str) -> Table:
+    """The end-of-campaign table of one dataset's per-method summary (runner.analysis.summary.method_summary):
+    counts, success rate, the medians of the metrics its runs have, fps and the failure kinds that occurred."""
+    from runner.results.vocabulary import FAILURES
+
+    medians = [f"median_{m}" for m in SUMMARY_MEDIANS]
+    medians = [c for c in medians if summary[c].notna().any()] or medians[:4]  # the metrics the dataset has
+    cols = ["method", "runs", "done", "failed", "success_pct", *medians, "median_fps"]
+    fails = [k for k in FAILURES if summary[k].sum() > 0]
+    t = Table(title=title)
+    for c in cols + fails:
+        t.add_column(c.replace("median_", "med "), justify="right" if c != "method" else "left")
+    for _, r in summary.iterrows():
+        t.add_row(*[_cell(r[c]) for c in cols + fails])
+    return t
+
+
+def pooled_table(pooled: pd.DataFrame, title: str) -> Table:
+    """The pooled view over every dataset (runner.analysis.summary.pooled_summary): counts, success rate and the
+    mean rank within sequences; no median in metres."""
+    cols = ["method", "runs", "done", "failed", "infra", "success_pct", "mean_rank", "sequences_ranked"]
+    t = Table(title=title)
+    for c in cols:
+        t.add_column(c.replace("_", " "), justify="right" if c != "method" else "left")
+    for _, r in pooled.iterrows():
+        t.add_row(*[_cell(r[c]) for c in cols])
+    return t
+
+
+def _cell(v) -> str:
+    if isinstance(v, float):
+        return "-" if v != v else f"{v:.4g}"
+    return str(v)
+
+
+def _num(v: float, digits: int = 4) -> str:
+    return "-" if v is None or v != v else f"{v:.{digits}g}"
+
+
+def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list[str]:
+    """`slamrun stats`' text of one dataset: every test the procedure computed (outliers, Lilliefors, Levene,
+    Kruskal-Wallis, pairwise Wilcoxon rank-sum tests adjusted and not), with the medians and letters."""
+    lines = [
+        f"dataset {dataset}: {len(st.mahalanobis)} evaluated runs, {len(st.kept)} kept, {st.n_outliers} multivariate "
+        f"outlier(s) (squared Mahalanobis distance over {len(st.metrics)} metrics above {_num(st.cutoff, 6)})"
+    ]
+    if not st.metrics:
+        lines.append("  no metric with values: no test")
+    for name, m in st.metrics.items():
+        order = sorted(m.medians, key=lambda g: m.medians[g])
+        lines.append(
+            f"  {name}: median and letters (pairwise tests, {adjust} adjustment, alpha {alpha}): "
+            + (", ".join(f"{g} {_num(m.medians[g])} {m.letters.get(g, '')}" for g in order) or "no run")
+        )
+        lines.append(
+            "    Lilliefors normality p: "
+            + (", ".join(f"{g} {_num(m.lilliefors_p[g], 3)}" for g in order) or "-")
+            + ("  (-: under 5 runs, or no spread)" if any(v != v for v in m.lilliefors_p.values()) else "")
+        )
+        lines.append(f"    Levene (median-centred) F {_num(m.levene_F)}, p {_num(m.levene_p, 3)}")
+        lines.append(f"    Kruskal-Wallis chi2 {_num(m.kruskal_chi2)}, df {m.kruskal_df}, p {_num(m.kruskal_p, 3)}")
+        raw = {frozenset((r["a"], r["b"])): r["p"] for r in m.pairwise_none}
+        pairs = [
+            f"{r['a']} vs {r['b']} {_num(r['p'], 3)}; {_num(raw[frozenset((r['a'], r['b']))], 3)}"
+            for r in m.pairwise_adjusted
+        ]
+        if pairs:
+            lines.append(f"    pairwise Wilcoxon rank-sum p ({adjust}; unadjusted): " + ", ".join(pairs))
+    return lines
+
+
+def pooled_lines(pooled: dict) -> list[str]:
+    """The pooled view's text: counts, success rates and mean ranks within sequences over every dataset."""
+    by = ", ".join(f"{d} by {m}" for d, m in pooled["ranked_by"].items())
+    lines = [
+        f"all datasets, pooled ({', '.join(pooled['datasets'])}): success rates and ranks within sequences "
+        f"({by}); no value in metres is pooled"
+    ]
+    for method, r in pooled["methods"].items():
+        success = "-" if r["success_pct"] != r["success_pct"] else f"{r['success_pct']:.0f} %"
+        lines.append(
+            f"  {method}: {r['runs']} runs, {r['done']} done, {r['failed']} failed, success {success}, "
+            f"mean rank {_num(r['mean_rank'], 3)} over {r['sequences_ranked']} sequence(s)"
+        )
+    return lines
