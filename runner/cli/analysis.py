@@ -32,7 +32,12 @@ def add_commands(sub) -> None:
     im = sub.add_parser("import", help="import published trajectories into a campaign as runs of a method label")
     im.add_argument("sources", type=Path, nargs="+", help="folders, zips, or the first part of split zips (.zip.001)")
     im.add_argument("--campaign", type=Path, required=True, help="the campaign's results directory")
-    im.add_argument("--as", dest="label", required=True, help="the method label of the imported runs, e.g. study:dso")
+    im.add_argument(
+        "--as",
+        dest="label",
+        required=True,
+        help="the label of the imported runs, SOURCE:NAME (e.g. study:dso; a spec's labels never hold ':')",
+    )
     im.add_argument(
         "--pattern",
         help="regular expression with the named groups sequence, direction (fw|bw|forward|backward) and trial, "
@@ -83,13 +88,15 @@ def cmd_import(args) -> int:
             export(ledger, args.campaign)
         finally:
             ledger.close()
-    console.print(
+    lines = [
         f"{args.label}: {len(report.imported)} run(s) imported, {len(report.unchanged)} unchanged (imported before), "
         f"{len(report.kept)} kept (a run of that key exists from another file: not overwritten), "
-        f"{len(report.skipped)} skipped"
-    )
-    for line in report.skipped[:10]:
-        console.print(f"  skipped: {line}")
-    for line in report.kept[:10]:
-        console.print(f"  kept: {line}")
+        f"{len(report.skipped)} skipped",
+        *(f"  skipped: {line}" for line in report.skipped[:10]),
+        *(f"  kept: {line}" for line in report.kept[:10]),
+    ]
+    if report.imported:
+        lines.append(f"results.csv and results.parquet updated, the report not: run `slamrun report {args.campaign}`")
+    for line in lines:  # as written: a label's `:x:` is no emoji, a path's `[...]` no markup
+        console.print(line, soft_wrap=True, markup=False, emoji=False, highlight=False)
     return 0

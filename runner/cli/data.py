@@ -12,7 +12,13 @@ from runner.cli.console import console
 def add_commands(sub) -> None:
     ds = sub.add_parser("dataset", help="dataset tools")
     dsub = ds.add_subparsers()
-    dl = dsub.add_parser("download", help="download dataset sequences (resumable, sizes checked)")
+    dl = dsub.add_parser(
+        "download",
+        help="download dataset sequences (resumable, sizes checked)",
+        description="Download and unpack dataset sequences. Run the same command again to resume an interrupted "
+        "download. A download that gets less than 64 KiB in SLAMRUN_DOWNLOAD_STALL_S seconds (default 60) is ended, "
+        "its part kept; an archive that states more than 100 times its size unpacked (a zip bomb) is refused.",
+    )
     dl.add_argument("name", choices=["tum-mono", "euroc", "tum-rgbd", "tum-vi", "kitti"], help="the dataset")
     dl.add_argument("dest", type=Path, help="folder to download into")
     dl.add_argument(

@@ -4,19 +4,31 @@ TUM-Mono: one zip per sequence (`sequence_XX.zip` holding `sequence_XX/`). EuRoC
 sequence's archive as its authors publish it (a zip holding `mav0/`, a .tgz or a .tar holding the sequence's folder).
 The datasets' addresses live here only, each overridable with an environment variable or --url (a mirror). KITTI
 is not downloaded: its site asks each user to register and agree to its terms first.
+
+Bounded on a hostile or broken server and archive: a download that gets fewer than STALL_BYTES in any stretch of
+SLAMRUN_DOWNLOAD_STALL_S seconds (60 by default; headers included) is ended with a message naming the address, its
+part kept for the next run to resume; an archive is unpacked only if what it states it holds fits in the free space
+and in UNPACK_RATIO times its own size (a zip bomb is refused before anything is inflated), and the bytes inflated
+are counted against what each member states.
 """
 
 from __future__ import annotations
 
+import http.client
+import math
 import os
 import re
 import shutil
+import socket
+import threading
+import time
 import urllib.error
 import urllib.request
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
 
+from runner.core.archives import ZIP_ERRORS, copy_member, files_of, stated_total
 from runner.errors import DatasetError
 
 TUM_MONO_URL = os.environ.get("SLAMRUN_TUM_MONO_URL", "https://vision.in.tum.de/mono/dataset")
@@ -37,6 +49,11 @@ EUROC_SEQUENCES = {
 }
 TUM_VI_ROOMS = {"corridor": 5, "magistrale": 6, "outdoors": 8, "room": 6, "slides": 3}
 CHUNK = 1 << 20
+STALL_S = 60.0  # SLAMRUN_DOWNLOAD_STALL_S overrides it
+STALL_BYTES = 64 * 1024  # fewer than this in STALL_S seconds is a stalled download
+UNPACK_RATIO = 100  # an archive may unpack to this many times its size (a sequence's images barely compress), plus:
+UNPACK_SLACK = 64 * 2**20
+MAX_MEMBERS = 200_000  # files in one archive (a TUM-VI or EuRoC sequence: some thousands)
 
 
 def parse_sequences(text: str) -> list[int]:
@@ -58,37 +75,190 @@ def parse_sequences(text: str) -> list[int]:
     return sorted(set(out))
 
 
-def fetch(url: str, dest: Path, progress: Callable[[int, int], None] | None = None, timeout: float = 60) -> Path:
-    """Download url to dest, resuming a partial `dest.part`; the size must match Content-Length."""
+def stall_seconds() -> float:
+    """The seconds without progress that end a download: SLAMRUN_DOWNLOAD_STALL_S, or STALL_S."""
+    raw = os.environ.get("SLAMRUN_DOWNLOAD_STALL_S")
+    if raw is None:
+        return STALL_S
+    try:
+        value = float(raw)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise DatasetError(f"SLAMRUN_DOWNLOAD_STALL_S={raw!r}: expected a number of seconds above 0 (default 60)")
+    return value
+
+
+class _Watchdog:
+    """Ends a stalled download: when fewer than STALL_BYTES arrive in a stretch of `stall_s` seconds (the wait
+    for the headers included), it shuts the connection's socket down from its own thread, so a read blocked on it
+    returns; `stalled` then holds the bytes of that stretch. A server that sends one byte now and then, or stops
+    after its headers, or never finishes them, is left within two stretches."""
+
+    def __init__(self, stall_s: float):
+        self.stall_s = stall_s
+        self.received = 0  # body bytes, counted by the reader
+        self.stalled: int | None = None
+        self._sock: socket.socket | None = None
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="download-watchdog", daemon=True)
+
+    def __enter__(self) -> _Watchdog:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._done.set()
+        self._thread.join()
+
+    def attach(self, sock: socket.socket) -> None:
+        """The socket to shut down (the latest: a redirect or TLS makes another)."""
+        self._sock = sock
+        if self.stalled is not None:  # stalled while it was connecting
+            self._shut()
+
+    def _watch(self) -> None:
+        mark, since = 0, time.monotonic()
+        while not self._done.wait(min(1.0, self.stall_s / 4)):
+            if time.monotonic() - since < self.stall_s:
+                continue
+            if self.received - mark < STALL_BYTES:
+                self.stalled = self.received - mark
+                self._shut()
+                return
+            mark, since = self.received, time.monotonic()
+
+    def _shut(self) -> None:
+        sock = self._sock
+        if sock is not None:
+            try:  # the plain socket's shutdown, also under TLS: the blocked read sees the end of the stream
+                socket.socket.shutdown(sock, socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+
+def _watched(base: type[http.client.HTTPConnection], watch: _Watchdog) -> type[http.client.HTTPConnection]:
+    """`base` whose sockets (the TCP one, then the TLS one) are handed to `watch`."""
+
+    class Watched(base):
+        def __init__(self, *args, **kw):
+            super().__init__(*args, **kw)
+            create = self._create_connection
+
+            def created(*a, **k):
+                sock = create(*a, **k)
+                watch.attach(sock)
+                return sock
+
+            self._create_connection = created
+
+        def connect(self) -> None:
+            super().connect()
+            watch.attach(self.sock)
+
+    return Watched
+
+
+class _WatchedHTTP(urllib.request.HTTPHandler):
+    def __init__(self, watch: _Watchdog):
+        super().__init__()
+        self.watch = watch
+
+    def http_open(self, req):
+        return self.do_open(_watched(http.client.HTTPConnection, self.watch), req)
+
+
+class _WatchedHTTPS(urllib.request.HTTPSHandler):
+    def __init__(self, watch: _Watchdog):
+        super().__init__()
+        self.watch = watch
+
+    def https_open(self, req):
+        return self.do_open(_watched(http.client.HTTPSConnection, self.watch), req, context=self._context)
+
+
+# what a connection that broke, stalled or answered nonsense raises while it is read
+CONNECTION_ERRORS = (OSError, http.client.HTTPException, ValueError)
+
+
+def _kept(part: Path) -> str:
+    size = part.stat().st_size if part.exists() else 0
+    return f"; the {size:,} bytes received are kept in {part}" if size else ""
+
+
+def _stalled(url: str, part: Path, watch: _Watchdog, exc: BaseException | None) -> DatasetError | None:
+    """The error of a download the watchdog or the socket's timeout ended, or None when it was neither."""
+    if watch.stalled is not None:
+        what = f"the server stalled ({watch.stalled:,} bytes in {watch.stall_s:g} s, fewer than {STALL_BYTES:,})"
+    elif isinstance(exc, TimeoutError) or isinstance(getattr(exc, "reason", None), TimeoutError):
+        what = f"the server sent nothing for {watch.stall_s:g} s"
+    else:
+        return None
+    return DatasetError(
+        f"{url}: {what}{_kept(part)}; run the same command again to resume (or try a mirror with --url; "
+        "SLAMRUN_DOWNLOAD_STALL_S sets the wait)"
+    )
+
+
+def fetch(
+    url: str, dest: Path, progress: Callable[[int, int], None] | None = None, stall_s: float | None = None
+) -> Path:
+    """Download url to dest, resuming a partial `dest.part`; the size must match Content-Length. A download
+    that stalls (`_Watchdog`; `stall_s` seconds, default SLAMRUN_DOWNLOAD_STALL_S or 60) ends with its part kept."""
     part = dest.with_name(dest.name + ".part")
     have = part.stat().st_size if part.exists() else 0
     req = urllib.request.Request(url, headers={"Range": f"bytes={have}-"} if have else {})
-    try:
-        resp = urllib.request.urlopen(req, timeout=timeout)  # noqa: S310 - the dataset's configured address
-    except urllib.error.HTTPError as exc:
-        if exc.code == 416 and have:  # nothing left to fetch: the part is complete
-            part.rename(dest)
-            return dest
-        raise DatasetError(f"{url}: HTTP {exc.code} {exc.reason}; check the address (--url)") from None
-    except (urllib.error.URLError, OSError) as exc:
-        raise DatasetError(f"{url}: cannot download ({exc}); run the same command again to resume") from None
-    with resp:
-        if have and resp.status != 206:  # the server ignored the range: start over
-            have = 0
-        length = resp.headers.get("Content-Length")
-        total = have + int(length) if length is not None else None
-        with open(part, "ab" if have else "wb") as f:
-            done = have
-            while chunk := resp.read(CHUNK):
-                f.write(chunk)
-                done += len(chunk)
-                if progress:
-                    progress(done, total or 0)
+    with _Watchdog(stall_seconds() if stall_s is None else stall_s) as watch:
+        opener = urllib.request.build_opener(_WatchedHTTP(watch), _WatchedHTTPS(watch))
+        try:
+            resp = opener.open(req, timeout=watch.stall_s)
+        except urllib.error.HTTPError as exc:
+            exc.close()
+            if exc.code == 416 and have:  # nothing left to fetch: the part is complete
+                part.rename(dest)
+                return dest
+            raise DatasetError(f"{url}: HTTP {exc.code} {exc.reason}; check the address (--url)") from None
+        except CONNECTION_ERRORS as exc:
+            reason = getattr(exc, "reason", exc)
+            raise _stalled(url, part, watch, exc) or DatasetError(
+                f"{url}: cannot download ({reason}); run the same command again to resume"
+            ) from None
+        with resp:
+            total = _receive(url, resp, part, have, watch, progress)
     size = part.stat().st_size
     if total is not None and size != total:
-        raise DatasetError(f"{url}: got {size} of {total} bytes; run the same command again to resume")
+        raise DatasetError(f"{url}: got {size:,} of {total:,} bytes; run the same command again to resume")
     part.rename(dest)
     return dest
+
+
+def _receive(url, resp, part: Path, have: int, watch: _Watchdog, progress) -> int | None:
+    """Append the response's body to `part` (from `have`, or anew when the server ignored the range); returns the
+    whole file's size as the server states it, if it does."""
+    if have and resp.status != 206:  # the server ignored the range: start over
+        have = 0
+    length = resp.headers.get("Content-Length")
+    total = have + int(length) if length is not None and length.isdigit() else None
+    with open(part, "ab" if have else "wb") as f:
+        done = have
+        while True:
+            try:
+                chunk = resp.read1(CHUNK)  # what has arrived: a slow server is seen between its bytes
+            except CONNECTION_ERRORS as exc:
+                f.flush()
+                raise _stalled(url, part, watch, exc) or DatasetError(
+                    f"{url}: the connection broke ({exc}){_kept(part)}; run the same command again to resume"
+                ) from None
+            if not chunk:
+                break
+            watch.received += len(chunk)
+            f.write(chunk)
+            done += len(chunk)
+            if progress:
+                progress(done, total or 0)
+    if watch.stalled is not None:  # the watchdog's shutdown ends the stream like the server's end
+        raise _stalled(url, part, watch, None)
+    return total
 
 
 def download_tum_mono(
@@ -121,20 +291,15 @@ def unpack(archive: Path, dest: Path, name: str) -> Path:
     """Unpack atomically: into a temporary folder, then renamed; the archive must hold `name/`."""
     tmp = dest / f".{name}.unpack"
     shutil.rmtree(tmp, ignore_errors=True)
+    tmp.mkdir()
     try:
-        with zipfile.ZipFile(archive) as zf:
-            bad = zf.testzip()
-            if bad:
-                raise DatasetError(f"{archive}: member {bad} is corrupt; delete the file and download again")
-            zf.extractall(tmp)
-    except zipfile.BadZipFile:
-        archive.unlink()
-        raise DatasetError(f"{archive}: not a zip file (deleted); run the same command again") from None
-    inner = tmp / name if (tmp / name).is_dir() else tmp
-    if not (inner / "times.txt").exists():
-        raise DatasetError(f"{archive}: holds no {name}/times.txt; is the address right?")
-    os.rename(inner, dest / name)
-    shutil.rmtree(tmp, ignore_errors=True)
+        _extract(archive, tmp)
+        inner = tmp / name if (tmp / name).is_dir() else tmp
+        if not (inner / "times.txt").exists():
+            raise DatasetError(f"{archive}: holds no {name}/times.txt; is the address right?")
+        os.rename(inner, dest / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
     return dest / name
 
 
@@ -227,28 +392,85 @@ def download_archives(
 
 
 def _extract(archive: Path, into: Path) -> None:
-    """A zip, .tgz or .tar, members kept inside `into` (no absolute paths, no `..`, no links out)."""
-    import tarfile
-
+    """A zip, .tgz or .tar, members kept inside `into` (no absolute paths, no `..`, no links out), bounded: what
+    the archive states it holds must fit in the free space and in UNPACK_RATIO times its size (else a bomb: the
+    archive is deleted, nothing is unpacked), and no member may give more than it states."""
+    limit = UNPACK_RATIO * archive.stat().st_size + UNPACK_SLACK
+    free = shutil.disk_usage(into).free
     if archive.suffix == ".zip":
-        try:
-            with zipfile.ZipFile(archive) as zf:
-                bad = zf.testzip()
-                if bad:
-                    raise DatasetError(f"{archive}: member {bad} is corrupt; delete the file and download again")
-                for member in zf.namelist():
-                    if member.startswith("/") or ".." in Path(member).parts:
-                        raise DatasetError(f"{archive}: member {member!r} would land outside the folder; refused")
-                zf.extractall(into)
-        except zipfile.BadZipFile:
-            archive.unlink()
-            raise DatasetError(f"{archive}: not a zip file (deleted); run the same command again") from None
-        return
+        _extract_zip(archive, into, limit, free)
+    else:
+        _extract_tar(archive, into, limit, free)
+
+
+def _bomb(archive: Path, what: str, limit: int, kind: str) -> DatasetError:
+    """The error of an archive that states more than it may hold; the archive is deleted."""
+    size = archive.stat().st_size
+    archive.unlink()
+    return DatasetError(
+        f"{archive}: {what}, more than the {limit:,} bytes an archive of {size:,} bytes may unpack to "
+        f"({UNPACK_RATIO} times its size): a {kind} bomb? (deleted; nothing unpacked); check the address (--url)"
+    )
+
+
+def _no_space(archive: Path, into: Path, needed: int, free: int) -> DatasetError:
+    return DatasetError(
+        f"{archive}: unpacks to {needed:,} bytes or more, and {free:,} are free in {into.parent}; free some space "
+        "and run the same command again"
+    )
+
+
+def _extract_zip(archive: Path, into: Path, limit: int, free: int) -> None:
+    try:
+        zf = zipfile.ZipFile(archive)
+    except ZIP_ERRORS:
+        archive.unlink()
+        raise DatasetError(f"{archive}: not a zip file (deleted); run the same command again") from None
+    with zf:
+        infos = files_of(zf)
+        for member in zf.namelist():
+            if member.startswith("/") or ".." in Path(member).parts:
+                raise DatasetError(f"{archive}: member {member!r} would land outside the folder; refused")
+        if len(infos) > MAX_MEMBERS:
+            raise _bomb(archive, f"{len(infos):,} files (at most {MAX_MEMBERS:,})", limit, "zip")
+        total = stated_total(infos)
+        if total > limit:
+            raise _bomb(archive, f"its members state {total:,} bytes", limit, "zip")
+        if total > free:
+            raise _no_space(archive, into, total, free)
+        for info in infos:
+            target = into / info.filename
+            target.parent.mkdir(parents=True, exist_ok=True)
+            with open(target, "wb") as out:
+                try:
+                    copy_member(zf, info, out, f"{archive}:{info.filename}", DatasetError)
+                except DatasetError as exc:
+                    archive.unlink()
+                    raise DatasetError(f"{exc} (deleted); run the same command again") from None
+
+
+def _extract_tar(archive: Path, into: Path, limit: int, free: int) -> None:
+    """Member by member: each one's stated size (and its header) counted before it is extracted."""
+    import gzip
+    import lzma
+    import tarfile
+    import zlib
+
+    used = count = 0
     try:
         with tarfile.open(archive) as tar:
-            tar.extractall(into, filter="data")
+            for member in tar:
+                used += member.size + tarfile.BLOCKSIZE
+                count += 1
+                if count > MAX_MEMBERS:
+                    raise _bomb(archive, f"more than {MAX_MEMBERS:,} members", limit, "tar")
+                if used > limit:
+                    raise _bomb(archive, f"{member.name} states {member.size:,} bytes", limit, "tar")
+                if used > free:
+                    raise _no_space(archive, into, used, free)
+                tar.extract(member, into, filter="data")
     except tarfile.FilterError as exc:
         raise DatasetError(f"{archive}: {exc}; refused") from None
-    except (tarfile.TarError, EOFError) as exc:
+    except (tarfile.TarError, EOFError, zlib.error, gzip.BadGzipFile, lzma.LZMAError) as exc:
         archive.unlink()
         raise DatasetError(f"{archive}: not a readable archive ({exc}; deleted); run the same command again") from None

@@ -363,7 +363,8 @@ def _resolve(spec: CampaignSpec, base: Path) -> CampaignSpec:
 
 
 def _name_problems(raw: dict) -> list[str]:
-    """Sequence names and method labels become path parts: none may hold a separator or be '..'."""
+    """Sequence names and method labels become path parts: none may hold a separator or be '..'; a label holds no
+    ':' either (imported runs' labels are SOURCE:NAME, so the two never meet)."""
     problems = []
     datasets = raw.get("datasets") if isinstance(raw.get("datasets"), list) else []
     for d, ds in enumerate(datasets):
@@ -376,6 +377,11 @@ def _name_problems(raw: dict) -> list[str]:
         label = (m.get("label") or m.get("name")) if isinstance(m, dict) else None
         if isinstance(label, str) and (why := path_part_problem(label)):
             problems.append(f"methods[{i}].label: the label (a folder name in the results) {why}")
+        elif isinstance(label, str) and ":" in label:
+            problems.append(
+                f"methods[{i}].label: {label!r} holds ':', which marks runs imported with `slamrun import --as "
+                "SOURCE:NAME` (their runs and this method's would be pooled in one row); choose a label without ':'"
+            )
     return problems
 
 
