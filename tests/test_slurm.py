@@ -10,6 +10,7 @@ import threading
 import time
 from pathlib import Path
 
+import psutil
 import pytest
 
 from runner.backends.jobqueue import job_name
@@ -86,13 +87,17 @@ REPLACEMENT_DEADLINE_S = 120  # the test gives up waiting for a job replacing th
 def test_a_campaign_runs_on_slurm_jobs_and_a_cancelled_job_costs_no_run(tmp_path, rooms, slurm):
     """A job scancelled mid-run is replaced by a new job and its run redone; no run is lost or written twice.
 
-    Every run holds its result until the test releases it, which it does once a job replacing the cancelled one
-    runs: so the campaign cannot end before the replacement is due, however fast the runs are on this machine
+    Every run holds its result until the test releases it. The test cancels a job once both jobs' runs have
+    started, and releases the runs once a job replacing it runs and the cancelled job's run process has ended
+    with its job (a worker given SIGTERM may still finish its run within Slurm's KillWait, which would be a valid
+    result, not a lost one): so that run is lost and redone, and the campaign cannot end before the replacement
+    is due, however fast the runs are on this machine
     (the cause of the earlier flakiness: on a fast machine the other job finished every run within dask's 15 s
     lost-worker timeout, before any replacement was submitted). Without a replacement the runs are released
     after REPLACEMENT_DEADLINE_S and the test fails."""
     release = tmp_path / "release"
-    method = fake_method(extra=["--wait-for", str(release)])
+    started = tmp_path / "pids.txt"
+    method = fake_method(extra=["--wait-for", str(release), "--marker", str(started)])
     spec = load_spec(slurm_spec(tmp_path, rooms, [method]))
     results = spec.results
     seen: set[str] = set()
@@ -101,13 +106,30 @@ def test_a_campaign_runs_on_slurm_jobs_and_a_cancelled_job_costs_no_run(tmp_path
     timing: dict[str, float] = {"start": time.monotonic()}
     stop = threading.Event()
 
+    def running_processes() -> dict[str, int]:  # run staging folder -> its method's pid, once started
+        found = {}
+        for txt in results.rglob("process.txt") if results.exists() else []:
+            try:
+                found[str(txt.parent)] = int(txt.read_text().split()[1])
+            except (OSError, IndexError, ValueError):  # being written or removed at this instant
+                pass
+        return found
+
+    def dead(pid: int) -> bool:
+        try:
+            return psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
+        except psutil.NoSuchProcess:
+            return True
+
+    held: dict[str, int] = {}
+
     def watch_cancel_release() -> None:
         while not stop.is_set():
             jobs = [j for j in our_jobs(slurm, results) if j[2] == "RUNNING"]
             seen.update(j[0] for j in jobs)
             now = time.monotonic()
-            in_flight = list(results.rglob("worker.txt")) if results.exists() else []
-            if not cancelled and len(jobs) == 2 and in_flight:  # both jobs hold a run: one is cancelled
+            if not cancelled and len(jobs) == 2 and len(running := running_processes()) == 2:
+                held.update(running)  # both jobs hold a started run (held until released): one job is cancelled
                 before_cancel.update(seen)
                 slurm.run("scancel", jobs[0][0])
                 cancelled.append(jobs[0][0])
@@ -115,8 +137,10 @@ def test_a_campaign_runs_on_slurm_jobs_and_a_cancelled_job_costs_no_run(tmp_path
             replaced = cancelled and any(j[0] not in before_cancel for j in jobs)
             if replaced and "replaced" not in timing:
                 timing["replaced"] = now
+            if held and "killed" not in timing and any(dead(pid) for pid in held.values()):
+                timing["killed"] = now  # the cancelled job's run ended with its job: it cannot finish there
             too_long = now - timing.get("cancelled", timing["start"]) > REPLACEMENT_DEADLINE_S
-            if (replaced or too_long) and not release.exists():
+            if (("replaced" in timing and "killed" in timing) or too_long) and not release.exists():
                 release.touch()
             time.sleep(0.2)
 
@@ -132,11 +156,14 @@ def test_a_campaign_runs_on_slurm_jobs_and_a_cancelled_job_costs_no_run(tmp_path
     assert len(rows) == 8  # 2 sequences x 2 directions x 2 trials, each once
     assert [r["state"] for r in rows] == ["done"] * 8, [(r["state"], r["message"]) for r in rows]
     assert cancelled, f"no job was cancelled mid-run (jobs seen: {sorted(seen)})"
-    assert any(r["attempts"] > 1 for r in rows), "the cancelled job's run was not retried"
+    assert any(r["attempts"] > 1 for r in rows), f"the cancelled job's run was not retried ({timing}, {cancelled})"
     assert "replaced" in timing, (
         f"no job replaced the cancelled one within {REPLACEMENT_DEADLINE_S} s: {sorted(seen)} (cancelled {cancelled})"
     )
     print(f"replacement job running {timing['replaced'] - timing['cancelled']:.1f} s after the scancel")
+    pids = [int(line.split()[0]) for line in started.read_text().splitlines()]
+    alive = [p for p in pids if psutil.pid_exists(p) and psutil.Process(p).status() != "zombie"]
+    assert len(pids) >= 8 and not alive, f"processes of runs outlived the campaign: {alive}"  # the cancelled one too
     finished = sorted(res.results.glob("runs/*/*/*/*/run.json"))
     assert len(finished) == 8, finished  # one folder per run: none written twice, no half-written one left
     assert our_jobs(slurm, results) == []  # the campaign cancelled its jobs at the end
