@@ -2,13 +2,17 @@
 
 The spec validator, the CLI's method list, the image build targets and the tests all read REGISTRY. Methods from
 other Python packages join it through the entry-point group `slamrun.methods` (`name = "package.module:Class"`, a
-subclass of methods.base.Method with the same contract as the built-in ones); a plug-in that cannot be loaded is
-named with its reason when a spec asks for it (PLUGIN_ERRORS), and never breaks the others.
+subclass of methods.base.Method with the same contract as the built-in ones); a plug-in that cannot be loaded, or a
+name two installed packages register, is named with its reason when a spec asks for it (PLUGIN_ERRORS), and never
+breaks the others. A registered plug-in's calls are guarded (methods.base.guarded): whatever it raises is its own
+failure, never slamrun's; its distribution and version (PLUGINS) key its runs and are recorded in run.json.
 """
 
 from __future__ import annotations
 
-from methods.base import Method
+import functools
+
+from methods.base import Method, Provider, guarded, one_line
 from methods.cnn_dso import CnnDso
 from methods.cnn_svo import CnnSvo
 from methods.colmap import Colmap
@@ -47,30 +51,56 @@ REGISTRY: dict[str, type[Method]] = {
 
 PLUGIN_GROUP = "slamrun.methods"
 PLUGIN_ERRORS: dict[str, str] = {}  # entry-point name -> why it could not be registered
-PLUGINS: dict[str, str] = {}  # method name -> the distribution that provides it
+PLUGINS: dict[str, Provider] = {}  # method name -> the installed distribution that provides it
 
 
 def _load_plugins() -> None:
+    """Register the group's entry points: a name two distributions register is refused (naming both), as is one a
+    built-in has; each other one is imported, checked and registered, or named with why not. Nothing a plug-in does
+    at import (an exception, sys.exit) stops slamrun."""
     from importlib.metadata import entry_points
 
+    found: dict[str, dict[tuple[Provider, str], object]] = {}
     for ep in entry_points(group=PLUGIN_GROUP):
-        where = f"{ep.value} (from {ep.dist.name if ep.dist else 'an unknown distribution'})"
-        try:
-            cls = ep.load()
-        except Exception as exc:  # noqa: BLE001 - any error of someone else's package is reported, not raised
-            PLUGIN_ERRORS[ep.name] = f"plug-in {where} cannot be imported: {type(exc).__name__}: {exc}"
-            continue
-        if not (isinstance(cls, type) and issubclass(cls, Method)):
-            PLUGIN_ERRORS[ep.name] = f"plug-in {where} is not a subclass of methods.base.Method"
-        elif getattr(cls, "name", None) != ep.name:
-            PLUGIN_ERRORS[ep.name] = (
-                f"plug-in {where}: its class's name is {getattr(cls, 'name', None)!r}, not {ep.name!r}"
+        found.setdefault(ep.name, {})[(_provider(ep), ep.value)] = ep
+    for name, eps in found.items():
+        where = ", ".join(f"{value} from {provider}" for provider, value in eps)
+        if name in REGISTRY:
+            PLUGIN_ERRORS[name] = f"plug-in {where}: {name!r} is taken by a built-in method"
+        elif len(eps) > 1:
+            PLUGIN_ERRORS[name] = (
+                f"{name!r} is registered by {len(eps)} installed plug-ins ({where}), so slamrun cannot tell which "
+                f"one to run: uninstall all but one (pip uninstall {' or '.join(p.distribution for p, _ in eps)})"
             )
-        elif ep.name in REGISTRY:
-            PLUGIN_ERRORS[ep.name] = f"plug-in {where}: {ep.name!r} is taken by a built-in method"
         else:
-            REGISTRY[ep.name] = cls
-            PLUGINS[ep.name] = ep.dist.name if ep.dist else "?"
+            (provider, _value), ep = next(iter(eps.items()))
+            _register(name, ep, provider, where)
+
+
+def _provider(ep) -> Provider:
+    dist = ep.dist
+    if dist is None:
+        return Provider("an unknown distribution", "?")
+    return Provider(dist.name or "an unnamed distribution", dist.version or "?")
+
+
+def _register(name: str, ep, provider: Provider, where: str) -> None:
+    try:
+        cls = ep.load()
+    except KeyboardInterrupt:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - sys.exit() or any error of someone else's package: named, not raised
+        PLUGIN_ERRORS[name] = f"plug-in {where} cannot be imported: {one_line(exc)}"
+        return
+    if not (isinstance(cls, type) and issubclass(cls, Method)):
+        PLUGIN_ERRORS[name] = f"plug-in {where} is not a subclass of methods.base.Method"
+    elif getattr(cls, "name", None) != name:
+        PLUGIN_ERRORS[name] = f"plug-in {where}: its class's name is {getattr(cls, 'name', None)!r}, not {name!r}"
+    elif missing := sorted(getattr(cls, "__abstractmethods__", ())):
+        PLUGIN_ERRORS[name] = f"plug-in {where}: {cls.__name__} does not implement {', '.join(missing)}"
+    else:
+        REGISTRY[name] = guarded(cls, f"plug-in {name} ({provider})")
+        PLUGINS[name] = provider
 
 
 _load_plugins()
@@ -83,3 +113,25 @@ def get(name: str) -> type[Method]:
         if name in PLUGIN_ERRORS:
             raise KeyError(PLUGIN_ERRORS[name]) from None
         raise KeyError(f"unknown method {name!r} (known: {', '.join(sorted(REGISTRY))})") from None
+
+
+def describe(name: str) -> str:
+    """A method as messages name it: the plug-in with its distribution, or the built-in's name."""
+    provider = PLUGINS.get(name)
+    return f"plug-in {name} ({provider})" if provider else name
+
+
+def provider_record(name: str) -> dict[str, str]:
+    """The distribution that provides method `name` (run.json): the plug-in's package, or slamrun itself."""
+    provider = PLUGINS.get(name) or _slamrun()
+    return {"distribution": provider.distribution, "version": provider.version}
+
+
+@functools.cache
+def _slamrun() -> Provider:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return Provider("slamrun", version("slamrun"))
+    except PackageNotFoundError:
+        return Provider("slamrun", "?")

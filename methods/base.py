@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import functools
+import os
 import re
+import shutil
 import sys
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
@@ -12,7 +16,7 @@ from pydantic import BaseModel, ConfigDict
 
 from runner.core.trajectory import Trajectory, read_tum
 from runner.datasets.view import PreparedView, Profile
-from runner.errors import MethodFailure
+from runner.errors import MethodFailure, TrajectoryFormatError
 
 MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (MAX_ARG_STRLEN)
 
@@ -81,6 +85,16 @@ class Method(ABC):
                 )
         return out
 
+    def executable_problems(self, backend: str) -> list[str]:
+        """Why the program of `params.executable` (a local build) cannot be started by the local backend ([] when
+        it can, or when the method has no such parameter or runs in a container); checked before any run, so a
+        missing program is a spec error, never an infrastructure retry at every start."""
+        program = getattr(self.params, "executable", None)
+        if backend != "local" or not isinstance(program, str):
+            return []
+        why = executable_problem(program)
+        return [f"{self.name}: params.executable: {why}"] if why else []
+
     @abstractmethod
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         """The argv that runs the method (never a shell string)."""
@@ -102,6 +116,28 @@ class Method(ABC):
         return None
 
 
+def executable_problem(program: str) -> str | None:
+    """Why `program` cannot be started as a run's argv[0] (a run's working folder is its own work folder), or None:
+    a name is looked up on PATH; a path must be absolute, a file, and executable."""
+    if not program:
+        return "empty; give the program's full path"
+    if "/" not in program:
+        return None if shutil.which(program) else f"{program!r} is no program on PATH; give its full path"
+    path = Path(program)
+    if not path.is_absolute():
+        return (
+            f"{program!r} is a relative path, which a run would look up in its own work folder (it holds only the "
+            "method's config files); give the full path"
+        )
+    if not path.exists():
+        return f"{program} not found"
+    if not path.is_file():
+        return f"{program} is not a file"
+    if not os.access(path, os.X_OK):
+        return f"{program} is not executable (chmod +x it)"
+    return None
+
+
 def read_tum_output(path: Path) -> Trajectory:
     """A method's TUM output, with the method-failure kinds for a missing or empty file."""
     if not path.exists():
@@ -117,6 +153,63 @@ def require_poses(traj: Trajectory, path: Path) -> Trajectory:
             raise MethodFailure("no_output", f"{path.name}: all {traj.report.n_rows} rows are NaN or infinite")
         raise MethodFailure("not_initialized", f"{path.name} holds no pose")
     return traj
+
+
+@dataclass(frozen=True)
+class Provider:
+    """The installed distribution a plug-in method comes from."""
+
+    distribution: str
+    version: str
+
+    def __str__(self) -> str:
+        return f"{self.distribution} {self.version}"
+
+
+GUARDED_CALLS = (
+    "__init__",
+    "configure",
+    "command",
+    "read_trajectory",
+    "environment",
+    "accepts_exit",
+    "failure_from_log",
+    "for_backend",
+    "problems",
+    "launch_problems",
+    "executable_problems",
+)
+
+
+def one_line(exc: BaseException, limit: int = 300) -> str:
+    """`Type: message` on one line, at most `limit` characters of message."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text[:limit]}" if text else type(exc).__name__
+
+
+def guarded(cls: type[Method], who: str) -> type[Method]:
+    """`cls` (someone else's method class) whose calls never raise anything but MethodFailure (and
+    TrajectoryFormatError from read_trajectory): any other exception, sys.exit() included (not Ctrl-C), becomes
+    MethodFailure('crashed') with one line naming `who`, the call and the exception. A plug-in's bug is then its own
+    failure, recorded as a result, never an infrastructure fault retried at every start nor a stopped slamrun."""
+
+    def wrap(attr: str):
+        inner = getattr(cls, attr)
+
+        @functools.wraps(inner)
+        def call(self, *args, **kwargs):
+            try:
+                return inner(self, *args, **kwargs)
+            except (MethodFailure, TrajectoryFormatError, KeyboardInterrupt, GeneratorExit):
+                raise
+            except BaseException as exc:  # noqa: BLE001 - whatever a plug-in raises is its own failure
+                raise MethodFailure("crashed", f"{who}: {cls.__name__}.{attr}() raised {one_line(exc)}") from None
+
+        return call
+
+    namespace = {attr: wrap(attr) for attr in GUARDED_CALLS}
+    namespace.update(__module__=cls.__module__, __qualname__=cls.__qualname__, __doc__=cls.__doc__)
+    return type(cls.__name__, (cls,), namespace)
 
 
 class PythonProcess:

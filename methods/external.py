@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from methods.base import MAX_ARG_BYTES, Method, read_tum_output, require_poses
+from methods.base import MAX_ARG_BYTES, Method, executable_problem, read_tum_output, require_poses
 from runner.core.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
 from runner.datasets.view import PreparedView, Profile
 from runner.errors import MethodFailure
@@ -74,6 +74,14 @@ class External(Method):
                     "write {{ and }} for literal braces)"
                 )
         return out
+
+    def executable_problems(self, backend: str) -> list[str]:
+        """argv[0] as the local backend starts it, when it names its program without placeholders ({python} aside)."""
+        program = self.params.argv[0]
+        if backend != "local" or program == "{python}" or "{" in program:
+            return []
+        why = executable_problem(program)
+        return [f"params.argv[0]: {why}"] if why else []
 
     @property
     def not_initialized_pattern(self) -> str | None:  # type: ignore[override]

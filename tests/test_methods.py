@@ -309,16 +309,22 @@ def test_local_backend_needs_a_local_build(tiny_dataset, tmp_path):
     from runner.engine.spec import validate_spec
     from runner.errors import SpecError
 
+    build = tmp_path / "mono_tum"  # a local build: a program that exists
+    build.write_text("#!/bin/sh\n")
+    build.chmod(0o755)
     raw = {
         "name": "x",
         "datasets": [{"name": "d", "path": str(tiny_dataset), "sequences": ["seq_a"]}],
-        "methods": [{"name": "dso"}, {"name": "orb_slam2", "params": {"executable": "/opt/orb/mono_tum"}}],
+        "methods": [{"name": "dso"}, {"name": "orb_slam2", "params": {"executable": str(build)}}],
     }
     with pytest.raises(SpecError) as err:
         validate_spec(raw, tmp_path)
     assert "methods[0]: dso runs natively only from a local build" in str(err.value)
     assert "methods[1]" not in str(err.value)
     assert validate_spec({**raw, "backend": "docker"}, tmp_path)
+    raw["methods"][1]["params"]["executable"] = "/opt/orb/mono_tum"  # not here: refused before any run
+    with pytest.raises(SpecError, match="methods\\[1\\]: orb_slam2: params.executable: /opt/orb/mono_tum not found"):
+        validate_spec(raw, tmp_path)
     assert (
         instance("orb_slam2", executable="/opt/orb/mono_tum")
         .for_backend("local")

@@ -70,8 +70,13 @@ def cmd_stats(args) -> int:
 
 def cmd_report(args) -> int:
     from runner.analysis.report import write_report
+    from runner.engine.folders import REPORT, claim_output_folder, require_output_folder
 
-    console.print(f"report: {write_report(args.results)}")
+    folder = args.results / "report"
+    require_output_folder(folder, REPORT)  # never over a report/ of someone else's
+    path = write_report(args.results)
+    claim_output_folder(folder, REPORT)
+    console.print(f"report: {path}")
     return 0
 
 

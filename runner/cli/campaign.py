@@ -47,10 +47,8 @@ def cmd_campaign(args) -> int:
     from runner.engine.campaign import run_campaign
     from runner.engine.spec import load_spec
 
-    spec = load_spec(args.spec)
+    spec = load_spec(args.spec, results=args.results)  # the flag is checked as the spec's key is
     updates = {}
-    if args.results:
-        updates["results"] = args.results.resolve()
     if args.lanes:
         updates["lanes"] = args.lanes
     if args.no_report:
@@ -115,10 +113,7 @@ def cmd_campaign(args) -> int:
 def cmd_plan(args) -> int:
     from runner.engine.spec import load_spec
 
-    spec = load_spec(args.spec)
-    if args.results:
-        spec = spec.model_copy(update={"results": args.results.resolve()})
-    return _print_dry_run(spec)
+    return _print_dry_run(load_spec(args.spec, results=args.results))
 
 
 def _print_dry_run(spec) -> int:

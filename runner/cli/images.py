@@ -85,7 +85,7 @@ def cmd_list_methods(args) -> int:
             "optional" if cls.gpu_capable else "no",
             "yes" if cls.native else "no",
             cls.loop_closure_switch or "-",
-            methods.PLUGINS.get(name, "slamrun"),
+            str(methods.PLUGINS.get(name, "slamrun")),
         )
     console.print(t)
     for name, why in sorted(methods.PLUGIN_ERRORS.items()):
@@ -122,7 +122,7 @@ def cmd_images(args) -> int:
     if args.verify:
         from runner.images.verify import print_table, verify
 
-        rows = verify(args.method, opts, args.results, log=lambda m: print(m, flush=True))
+        rows = verify(args.method, opts, _verify_folder(args.results), log=lambda m: print(m, flush=True))
         print_table(rows, console)
         return 0 if rows and all(r.passed for r in rows) else 1  # 1: a method not verified
     records = build(args.method, log=lambda m: print(m, flush=True), opts=opts, only_missing=args.missing)
@@ -143,9 +143,22 @@ def _pair(text: str, default_key: str | None = None) -> tuple[str, Path | str]:
 def cmd_verify(args) -> int:
     from runner.images.verify import print_table, verify_spec
 
-    rows = verify_spec(args.spec, args.method, args.results, lambda m: print(m, flush=True), args.trials, args.frames)
+    folder = _verify_folder(args.results)
+    rows = verify_spec(args.spec, args.method, folder, lambda m: print(m, flush=True), args.trials, args.frames)
     print_table(rows, console)
     return 0 if rows and all(r.passed for r in rows) else 1  # 1: a method not verified
+
+
+def _verify_folder(results: Path | None) -> Path:
+    """Verify's results folder (--results or the default), checked by the guard of every output folder and marked
+    as slamrun's before anything is built or written."""
+    from runner.engine.folders import VERIFY, claim_output_folder, require_output_folder
+    from runner.images.verify import DEFAULT_RESULTS
+
+    folder = Path(results or DEFAULT_RESULTS).resolve()
+    require_output_folder(folder, VERIFY)
+    claim_output_folder(folder, VERIFY)
+    return folder
 
 
 def cmd_new_method(args) -> int:

@@ -17,7 +17,7 @@ from runner.core import jsonio
 from runner.datasets.cache import prepare, remove_damaged
 from runner.datasets.layouts import GROUNDTRUTH_FILES, open_sequence
 from runner.datasets.layouts import holds_sequence as generated
-from runner.engine.folders import claim_results_folder
+from runner.engine.folders import CACHE, FolderRefused, claim_output_folder, claim_results_folder, require_output_folder
 from runner.engine.importer import reimport_lost
 from runner.engine.ledger import Ledger, ResultsLock
 from runner.engine.plan import PlannedRun, plan
@@ -25,7 +25,7 @@ from runner.engine.preparer import ViewPreparer
 from runner.engine.recovery import collect_leftovers, import_finished, recover
 from runner.engine.scheduler import Event, Scheduler
 from runner.engine.session import session_record
-from runner.engine.spec import CampaignSpec
+from runner.engine.spec import CampaignSpec, output_problems
 from runner.errors import BackendUnreachable, DatasetError, LedgerLostError, StorageError, storage_problem
 from runner.results.vocabulary import is_infra
 
@@ -71,6 +71,8 @@ def ensure_datasets(spec: CampaignSpec, log=print) -> None:
 
 def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], log=print) -> dict:
     """The views the runs `keys` need, prepared (and checked) now; damaged ones left from earlier go first."""
+    require_output_folder(spec.cache, CACHE)
+    claim_output_folder(spec.cache, CACHE)
     removed = remove_damaged(spec.cache)
     if removed:
         log(f"removed {removed} damaged view(s) from {spec.cache}")
@@ -146,6 +148,8 @@ def _storage_advice(spec: CampaignSpec, why: str) -> str:
 def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) -> CampaignResult:
     results = spec.results
     assert results is not None
+    if problems := output_problems(spec):  # every door to a campaign (spec, --results, a caller's spec) ends here
+        raise FolderRefused("\n".join(problems))
     ensure_datasets(spec, log)
     for warning in check_sequences(spec):
         log(f"warning: {warning}")
@@ -153,6 +157,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
     lock.acquire()
     try:
         claim_results_folder(results)
+        claim_output_folder(spec.cache, CACHE)
         ledger = Ledger(results / "ledger.sqlite")
         ledger.set_meta("campaign", spec.name)
         ledger.set_meta("spec", spec.model_dump(mode="json"))

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+import methods
 from methods.base import Method
 from runner.backends.base import Backend, ExecRequest, ExecResult, disk_reserve_bytes, folder_bytes
 from runner.backends.logcap import tail
@@ -37,6 +38,8 @@ from runner.errors import (
     storage_problem,
 )
 from runner.results.vocabulary import TUM_MONO_METRICS, EvalStatus
+
+METHOD_ERROR = "method_error"  # in Launched.extra: (kind, message) of a method that failed before its process started
 
 
 @dataclass(frozen=True)
@@ -80,8 +83,8 @@ def launch_run(
         raw.mkdir(parents=True)
         started = time.time()
         pview, pwork = backend.process_paths(view, raw)  # as the method's process sees them
-        try:
-            for rel, content in method.configure(pview, pwork).items():
+        try:  # the method's own calls: what they raise (a plug-in's bug too) is its failure, recorded as a result
+            for rel, content in config_files(method, pview, pwork):
                 target = raw / rel
                 target.parent.mkdir(parents=True, exist_ok=True)
                 if isinstance(content, bytes):
@@ -89,9 +92,11 @@ def launch_run(
                 else:
                     target.write_text(content)
             argv = method.command(pview, pwork)
+            env = method.environment()
         except MethodFailure as exc:
-            shutil.rmtree(stage, ignore_errors=True)
-            raise InfraError(f"{run.key.id}: cannot configure {run.method}: {exc}") from None
+            RunPaths.log(stage).write_text(f"slamrun: the run was not started: {exc}\n")
+            failed = {"backend": backend.name, "engine": backend.engine, METHOD_ERROR: [exc.kind, str(exc)]}
+            return Launched(ExecResult(exit_code=None, wall_s=0.0), started, failed)
         req = ExecRequest(
             argv=argv,
             workdir=raw,
@@ -105,7 +110,7 @@ def launch_run(
             max_output_bytes=max_output_bytes,
             image=method.image,
             needs_gpu=method.needs_gpu,
-            env=method.environment(),
+            env=env,
             labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id, "slamrun.attempt": str(attempt)},
             token=paths.token(attempt),
         )
@@ -143,7 +148,14 @@ def finish_attempt(
         stage = paths.staging(attempt)
         raw = RunPaths.raw(stage)
         log_tail = tail(RunPaths.log(stage))
-        failure, message, traj = _classify(result, method, raw, view, log_tail)
+        extra = dict(extra)
+        if refused := extra.pop(METHOD_ERROR, None):  # the method failed before its process could start
+            failure, message, traj = refused[0], refused[1], None
+        else:
+            try:
+                failure, message, traj = _classify(result, method, raw, view, log_tail)
+            except MethodFailure as exc:  # a plug-in's accepts_exit or failure_from_log raised
+                failure, message, traj = exc.kind, str(exc), None
         if failure and failure != "output_limit" and _out_of_space(raw, log_tail):
             if (size := folder_bytes(raw)) >= disk_reserve_bytes(raw):  # it filled the disk itself
                 failure, message, traj = "output_limit", f"it filled the disk ({size / 2**20:.0f} MB written)", None
@@ -192,6 +204,7 @@ def finish_attempt(
             "trial": run.key.trial,
             "settings": run.key.settings,
             "params": method.params.model_dump(mode="json"),
+            "provider": methods.provider_record(run.method),  # which package's implementation made this run
             "state": state,
             "attempt": attempt,
             "started_at": started,
@@ -216,6 +229,40 @@ def finish_attempt(
         os.rename(stage, final)
         values["run_dir"] = str(final)
         return RunOutcome(state, values)
+
+
+def config_files(method: Method, view: PreparedView, workdir: Path) -> list[tuple[Path, str | bytes]]:
+    """The method's config files (`configure`), each checked before any is written: a path that is absolute or
+    leads out with '..' would be written outside the run's work folder, so it is refused as the method's failure
+    (MethodFailure 'crashed', naming the method, a plug-in with its package)."""
+    files = method.configure(view, workdir)
+    who = methods.describe(method.name)
+    if not isinstance(files, dict):
+        raise MethodFailure("crashed", f"{who}: configure() returned a {type(files).__name__}, not {{path: content}}")
+    out = []
+    for rel, content in files.items():
+        if why := config_path_problem(rel):
+            raise MethodFailure("crashed", f"{who}: configure() returned the path {rel!r}: {why}; nothing was written")
+        if not isinstance(content, str | bytes):
+            raise MethodFailure(
+                "crashed", f"{who}: configure() gave {rel!r} a {type(content).__name__}, not text or bytes"
+            )
+        out.append((Path(rel), content))
+    return out
+
+
+def config_path_problem(rel) -> str | None:
+    """Why `rel` is not a file path inside a run's work folder, or None."""
+    if not isinstance(rel, str | os.PathLike):
+        return "not a path"
+    path = Path(rel)
+    if path.is_absolute():
+        return "an absolute path, outside the run's work folder"
+    if ".." in path.parts:
+        return "'..' leads outside the run's work folder"
+    if not path.parts:
+        return "no file name"
+    return None
 
 
 def evaluate(gt: Trajectory, traj: Trajectory, wanted: tuple[str, ...], alignment: str) -> tuple[dict, str]:

@@ -6,6 +6,7 @@ import fcntl
 import json
 import os
 import sqlite3
+import stat
 import threading
 import time
 from collections.abc import Iterable
@@ -49,6 +50,35 @@ _REAL = set(METRIC_COLUMNS + RESOURCE_COLUMNS + ("started_at", "ended_at", "pid_
 
 def _coltype(c: str) -> str:
     return _TYPES.get(c, "REAL" if c in _REAL else "TEXT")
+
+
+class LedgerDamaged(SlamRunError):
+    """The ledger file is not a readable SQLite database (overwritten, truncated, a folder)."""
+
+
+def damaged_ledger(path: Path, why: str) -> LedgerDamaged:
+    """The one error every command gives for a ledger it cannot read, with what to do."""
+    return LedgerDamaged(
+        f"{path}: not a readable ledger ({why}): damaged, or not slamrun's; move it aside (mv {path} "
+        f"{path}.damaged) and run `slamrun campaign SPEC` again: every finished run is imported from its folder "
+        "under runs/ into a new ledger, nothing is redone"
+    )
+
+
+def _not_a_file(path: Path) -> str | None:
+    """Why an existing ledger path is no regular file (a folder, a FIFO, a device), or None. Never blocks."""
+    mode = os.stat(path).st_mode
+    return None if stat.S_ISREG(mode) else "a folder" if stat.S_ISDIR(mode) else "not a regular file"
+
+
+def campaign_name(path: Path) -> str | None:
+    """The campaign name a ledger records (None when it records none); LedgerDamaged when it cannot be read."""
+    ledger = Ledger(path, read_only=True)
+    try:
+        name = ledger.meta("campaign")
+    finally:
+        ledger.close()
+    return name if isinstance(name, str) else None
 
 
 class ResultsLock:
@@ -101,24 +131,27 @@ class Ledger:
         if read_only:
             if not self.path.exists():
                 raise SlamRunError(f"{self.path}: no ledger; is this a results directory of `slamrun campaign`?")
+            if why := _not_a_file(self.path):
+                raise damaged_ledger(self.path, why)
             # Without a -wal file no process writes it now: `immutable` then reads without creating the -shm
             # and -wal files a read-only open of a WAL database would otherwise leave behind.
             writer = Path(f"{self.path}-wal").exists()
             mode = "mode=ro" if writer else "mode=ro&immutable=1"
             self._db = sqlite3.connect(f"file:{self.path}?{mode}", uri=True, check_same_thread=False, timeout=30)
             self._db.row_factory = sqlite3.Row
+            self._check_whole()
             self._inode = os.stat(self.path).st_ino
             return
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.exists() and (why := _not_a_file(self.path)):
+            raise damaged_ledger(self.path, why)
         try:
             self._db = sqlite3.connect(self.path, check_same_thread=False, timeout=30, isolation_level=None)
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
         except sqlite3.DatabaseError as exc:
-            raise SlamRunError(
-                f"{self.path}: not a readable ledger ({exc}); move it aside and run the same command again: "
-                "every finished run is imported from its folder under runs/, nothing is redone"
-            ) from None
+            raise damaged_ledger(self.path, str(exc)) from None
+        self._check_whole()
         self._db.row_factory = sqlite3.Row
         cols = ", ".join(f"{c} {_coltype(c)}" for c in ALL_COLUMNS if c != "key")
         self._inode = os.stat(self.path).st_ino
@@ -130,6 +163,20 @@ class Ledger:
                     self._db.execute(f"ALTER TABLE runs ADD COLUMN {c} {_coltype(c)}")
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT)")
             self._db.execute("CREATE INDEX IF NOT EXISTS runs_state ON runs(active, state)")
+
+    def _check_whole(self) -> None:
+        """LedgerDamaged (closed) when SQLite finds the file is no database or a damaged one (overwritten,
+        truncated): every reader and writer gets the same one line instead of an error from deep in a query."""
+        try:
+            found = [row[0] for row in self._db.execute("PRAGMA quick_check(3)").fetchall()]
+        except sqlite3.OperationalError:
+            raise  # locked, busy, cannot open: not a damaged file
+        except sqlite3.DatabaseError as exc:
+            self._db.close()
+            raise damaged_ledger(self.path, str(exc)) from None
+        if found != ["ok"]:
+            self._db.close()
+            raise damaged_ledger(self.path, "; ".join(found)[:300])
 
     def close(self) -> None:
         self._db.close()

@@ -55,10 +55,15 @@ class PlannedRun:
 
 
 def settings_hash(m: MethodSpec) -> str:
-    """Hash of what changes a method's results: its name and its (validated, defaulted) parameters."""
+    """Hash of what changes a method's results: its name, its (validated, defaulted) parameters, and for a plug-in
+    the distribution and version that provide it (another package or release under the same name is another
+    implementation: its runs are never pooled with these)."""
     cls = methods.get(m.name)
     params = cls.Params.model_validate(m.params).model_dump(mode="json")
-    blob = json.dumps({"method": m.name, "params": params}, sort_keys=True)
+    settings: dict = {"method": m.name, "params": params}
+    if (provider := methods.PLUGINS.get(m.name)) is not None:
+        settings["provider"] = [provider.distribution, provider.version]
+    blob = json.dumps(settings, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:10]
 
 

@@ -19,7 +19,14 @@ from runner.core.inputs import expanded_size, read_text_bounded
 from runner.datasets.generated import target_problem
 from runner.datasets.layouts import holds_sequence
 from runner.datasets.view import Direction
-from runner.engine.folders import path_part_problem, results_folder_problem
+from runner.engine.folders import (
+    CACHE,
+    RESULTS,
+    cache_overlap_problem,
+    campaign_owner_problem,
+    output_folder_problem,
+    path_part_problem,
+)
 from runner.errors import SlamRunError, SpecError
 
 
@@ -248,8 +255,9 @@ MAX_SPEC_BYTES = 2**20  # a spec is a page of YAML
 MAX_SPEC_VALUES = 100_000  # values in the document once its aliases are expanded
 
 
-def load_spec(path: str | Path, check_files: bool = True) -> CampaignSpec:
-    """Read, validate and resolve a spec file; raises SpecError listing every problem, each with its line."""
+def load_spec(path: str | Path, check_files: bool = True, results: Path | None = None) -> CampaignSpec:
+    """Read, validate and resolve a spec file; raises SpecError listing every problem, each with its line.
+    `results` (the command line's --results) replaces the spec's results folder and is checked as it is."""
     path = Path(path)
     try:  # a regular file of at most a page: a FIFO or a device is refused without blocking on it
         text = read_text_bounded(path, MAX_SPEC_BYTES, "spec file")
@@ -272,7 +280,9 @@ def load_spec(path: str | Path, check_files: bool = True) -> CampaignSpec:
     if not isinstance(raw, dict):
         raise SpecError(str(path), ["expected a mapping at the top (name, datasets, methods, ...)"])
     try:
-        return validate_spec(raw, base_dir=path.resolve().parent, source=str(path), check_files=check_files)
+        return validate_spec(
+            raw, base_dir=path.resolve().parent, source=str(path), check_files=check_files, results=results
+        )
     except SpecError as exc:
         raise SpecError(exc.source, [_with_line(p, node) for p in exc.problems]) from None
 
@@ -281,7 +291,7 @@ def _with_line(problem: str, root: yaml.Node | None) -> str:
     """'methods[0].params.x: msg' -> 'line 12: methods[0].params.x: msg', the line of the deepest part of the
     location that the document has."""
     where, sep, msg = problem.partition(": ")
-    if not sep or root is None:
+    if not sep or root is None or where.startswith("-"):  # a command-line flag's problem has no line
         return problem
     node, line = root, None
     for key, index in re.findall(r"([A-Za-z_][\w-]*)|\[(\d+)\]", where):
@@ -297,7 +307,9 @@ def _with_line(problem: str, root: yaml.Node | None) -> str:
     return f"line {line}: {problem}" if line else problem
 
 
-def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files: bool = True) -> CampaignSpec:
+def validate_spec(
+    raw: dict, base_dir: Path, source: str = "<spec>", check_files: bool = True, results: Path | None = None
+) -> CampaignSpec:
     problems: list[str] = []
     try:
         spec = CampaignSpec.model_validate(raw)
@@ -328,7 +340,8 @@ def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files
         else:
             backend = raw.get("backend", "local")
             method = cls(params)
-            problems += [f"methods[{i}]: {p}" for p in method.problems(backend) + method.launch_problems()]
+            found = method.problems(backend) + method.launch_problems() + method.executable_problems(backend)
+            problems += [f"methods[{i}]: {p}" for p in found]
         label = m.get("label") or m["name"]
         if label in labels:
             problems.append(f"methods[{i}].label: {label!r} used by methods[{labels[label]}] too; give a label")
@@ -336,9 +349,9 @@ def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files
     names = _name_problems(raw)
     problems += names
     if spec is not None:
-        spec = _resolve(spec, base_dir)
+        spec = _resolve(spec, base_dir, results)
         if check_files and not names:
-            problems += _file_problems(spec)
+            problems += _file_problems(spec, "--results" if results is not None else "results")
         seen: dict[str, str] = {}
         for d, ds in enumerate(spec.datasets):
             for s, seq in enumerate(ds.sequences):
@@ -351,13 +364,18 @@ def validate_spec(raw: dict, base_dir: Path, source: str = "<spec>", check_files
     return spec
 
 
-def _resolve(spec: CampaignSpec, base: Path) -> CampaignSpec:
+def _resolve(spec: CampaignSpec, base: Path, results_flag: Path | None = None) -> CampaignSpec:
+    """Absolute paths; `results_flag` (--results, relative to the working directory) replaces the results folder
+    (the default cache stays beside the spec's own results)."""
+
     def res(p: Path) -> Path:
         p = Path(os.path.expanduser(str(p)))
         return p if p.is_absolute() else (base / p).resolve()
 
     results = res(spec.results) if spec.results else (Path.cwd() / "results" / spec.name).resolve()
     cache = res(spec.cache) if spec.cache else results.parent / ".cache" / "views"
+    if results_flag is not None:
+        results = Path(os.path.expanduser(str(results_flag))).resolve()
     datasets = [ds.model_copy(update={"path": res(ds.path)}) for ds in spec.datasets]
     return spec.model_copy(update={"results": results, "cache": cache, "datasets": datasets})
 
@@ -385,10 +403,20 @@ def _name_problems(raw: dict) -> list[str]:
     return problems
 
 
-def _file_problems(spec: CampaignSpec) -> list[str]:
+def output_problems(spec: CampaignSpec, results_source: str = "results") -> list[str]:
+    """Why the campaign may not write where the resolved spec says (results, view cache), each with the key or flag
+    that named the folder: the one guard of every door to where a campaign writes. Reads only."""
     problems = []
-    if why := results_folder_problem(spec.results):
-        problems.append(f"results: {why}")
+    if why := output_folder_problem(spec.results, RESULTS) or campaign_owner_problem(spec.results, spec.name):
+        problems.append(f"{results_source}: {why}")
+    datasets = [ds.path for ds in spec.datasets]
+    if why := cache_overlap_problem(spec.cache, spec.results, datasets) or output_folder_problem(spec.cache, CACHE):
+        problems.append(f"cache: {why}")
+    return problems
+
+
+def _file_problems(spec: CampaignSpec, results_source: str = "results") -> list[str]:
+    problems = output_problems(spec, results_source)
     for d, ds in enumerate(spec.datasets):
         if ds.synthetic is not None:
             if ds.path.exists() and not ds.path.is_dir():
