@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import copy
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -258,3 +259,37 @@ def test_a_file_with_a_repeated_or_backward_time_keeps_its_rows_as_read(evo, fil
         (many,) = read_tum_many([files[name]])
         assert np.array_equal(many.rows_as_read().positions, rows.positions)
     assert read_tum(files["control: far from the repeated time"]).as_read is None  # nothing kept twice
+
+
+def test_tum_rgbd_ground_truth_at_frames_follows_evo(evo, tmp_path):
+    """The campaign's TUM RGB-D ground truth (the sequence's poses at its frames): a frame 1 ms after the repeated
+    time and one exactly at it get the row evo pairs with them (the second), so ATE on the frames equals evo's on
+    the raw files."""
+    import cv2
+
+    from runner.datasets.layouts import open_sequence
+
+    metrics = evo[0]
+    gt = _gt_rows()
+    dup = int(np.flatnonzero(gt[:, 0] == REPEATED)[0])
+    times = np.round(np.concatenate([gt[dup - 150 : dup - 3 : 3, 0] + 0.0012, [REPEATED, REPEATED + 0.001]]), 6)
+    times = np.concatenate([times, np.round(gt[dup + 3 : dup + 150 : 3, 0] - 0.0007, 6)])
+    root = tmp_path / "rgbd_dataset_freiburg2_desk"
+    (root / "rgb").mkdir(parents=True)
+    names = [f"rgb/{t:.6f}.png" for t in times]
+    cv2.imwrite(str(root / names[0]), np.zeros((480, 640, 3), np.uint8))
+    for n in names[1:]:
+        shutil.copyfile(root / names[0], root / n)
+    (root / "rgb.txt").write_text("# timestamp filename\n" + "".join(f"{n[4:-4]} {n}\n" for n in names))
+    shutil.copyfile(GT, root / "groundtruth.txt")
+    rng = np.random.default_rng(11)
+    nearest = np.abs(gt[:, 0][None, :] - times[:, None]).argmin(axis=1)
+    est_rows = _sim3(_noisy(gt[nearest], rng), seed=11, scale=0.5)
+    est_rows[:, 0] = times
+    est_path = _write(tmp_path / "est.txt", est_rows)
+    at_frames = open_sequence(root).groundtruth()
+    ours = ate(at_frames, read_tum(est_path), "sim3", 1e-3)  # the campaign's association: exact frame times
+    ref, est = _evo_aligned(evo, est_path, "sim3")
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data((ref, est))
+    _assert_stats(ours.translation, ape, ref.num_poses)
