@@ -56,3 +56,29 @@ def test_slamrun_equals_the_official_tum_mono_evaluator(tmp_path):
         assert ours.n_poses == theirs["n_poses"]
         for name in ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse"):
             assert getattr(ours, name) == pytest.approx(theirs[name], rel=1e-6, abs=1e-9), (f.name, name)
+
+
+@pytest.mark.skipif(official.octave() is None, reason="GNU Octave not installed (apt-get install octave; .ci/run does)")
+def test_a_repeated_timestamp_counts_every_row_as_the_official_evaluator_does(tmp_path):
+    """An estimate that repeats two of its times with other poses (and one written backward): the official code
+    sorts the rows and keeps every one, so slamrun's figures and pose count take every row too."""
+    from runner.core.evaluation import tum_mono_many
+
+    require_upstream(UPSTREAM / official.SOURCES["mono_dataset_code"].filename)
+    gt_path, files = sequences(tmp_path, n_estimates=2)
+    rows = np.loadtxt(files[0])
+    again = rows[[10, 300]].copy()
+    again[:, 1:4] += 0.3
+    repeated = tmp_path / "repeated.txt"
+    np.savetxt(repeated, np.insert(rows, [11, 301], again, axis=0), fmt="%.17g")
+    backward = tmp_path / "repeated_backward.txt"
+    np.savetxt(backward, np.insert(rows, [11, 301], again, axis=0)[::-1], fmt="%.17g")
+    ref = official.evaluate(gt_path, [repeated, backward], tmp_path, UPSTREAM)
+    data = np.loadtxt(gt_path)
+    gt = Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
+    for f in (repeated, backward):
+        theirs = ref[str(f.resolve())]
+        for ours in (tum_mono_file(gt, read_tum(f)), tum_mono_many(gt, [read_tum(f)])[0]):
+            assert ours.n_poses == theirs["n_poses"] == len(rows) + 2
+            for name in ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse"):
+                assert getattr(ours, name) == pytest.approx(theirs[name], rel=1e-6, abs=1e-9), (f.name, name)

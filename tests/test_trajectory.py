@@ -71,6 +71,10 @@ def test_sorts_drops_duplicates_and_normalises(tmp_path):
     np.testing.assert_array_equal(traj.timestamps, [1, 2, 3])
     assert traj.positions[0, 0] == 1  # the first of the duplicates is kept
     assert traj.report.was_unsorted and traj.report.n_duplicates_dropped == 1
+    rows = traj.rows_as_read()  # every row as the file holds it, for the metrics that follow evo
+    np.testing.assert_array_equal(rows.timestamps, [3, 1, 1, 2])
+    np.testing.assert_array_equal(rows.positions[:, 0], [0, 1, 9, 2])
+    np.testing.assert_allclose(rows.quaternions[0], [0, 0, 0, 1])
     assert traj.report.n_quat_non_unit == 1 and traj.report.n_quat_far_from_unit == 1
     np.testing.assert_allclose(np.linalg.norm(traj.quaternions, axis=1), 1.0)
 
@@ -212,6 +216,10 @@ def test_read_tum_many_matches_read_tum_file_by_file(tmp_path, monkeypatch, read
                 assert np.array_equal(a, b), path.name
             assert np.array_equal(item.quaternions, want.quaternions), path.name
             assert item.report == want.report, path.name
+            assert (item.as_read is None) == (want.as_read is None), path.name
+            for a, b in ((item.rows_as_read(), want.rows_as_read()),):
+                assert np.array_equal(a.timestamps, b.timestamps) and np.array_equal(a.positions, b.positions)
+                assert np.array_equal(a.quaternions, b.quaternions), path.name
         return got
 
     got = check(paths, batch_bytes=2000)  # small batches: several flushes

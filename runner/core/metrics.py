@@ -4,6 +4,10 @@ alignment they need. Pure functions on Trajectory values.
 Definitions follow the reference tools: ATE and RPE as evo computes them (Grupp 2017; Sturm et al. 2012 for
 the RPE's error pose), KITTI's segment errors as the KITTI odometry development kit's evaluate_odometry.cpp
 (Geiger et al. 2012). tests/test_metrics.py checks them against evo's Python API on real files.
+
+Association is evo's sync.associate_trajectories on the rows as the files hold them (`Trajectory.rows_as_read`):
+a repeated timestamp's every row, a file's order where its timestamps go backward, so such files give evo's figures
+(tests/test_association.py, on fr2/desk's ground truth, which repeats a timestamp).
 """
 
 from __future__ import annotations
@@ -27,39 +31,86 @@ KITTI_STEP_FRAMES = 10
 
 @dataclass(frozen=True)
 class Pairs:
-    """Ground truth and estimate reduced to their associated poses, in the estimate's order."""
+    """Ground truth and estimate reduced to their associated poses, in the order of the one with fewer rows."""
 
     gt: Trajectory
     est: Trajectory
 
 
 def associate(gt: Trajectory, est: Trajectory, tolerance_s: float = DEFAULT_TOLERANCE_S) -> Pairs:
-    """Pair each pose of the shorter trajectory with the nearest pose in time of the longer one, when within
-    `tolerance_s` (evo's sync.associate_trajectories, nearest_time; a tie goes to the earlier pose). A
-    tolerance of 0 pairs exactly equal times only. MetricError when no pose pairs."""
+    """evo's sync.associate_trajectories(gt, est) (nearest_time, max_diff = `tolerance_s`), on the rows as the
+    files hold them (`Trajectory.rows_as_read`: a repeated timestamp's every row, in the file's order) and the
+    ground truth's finite rows: each row of the one with fewer rows (the estimate at equal counts), in its order,
+    is paired with the row of the other that `matching_time_indices` finds within `tolerance_s` (a row of the
+    longer one may pair several times). A tolerance of 0 pairs exactly equal times only. MetricError when no
+    pose pairs."""
+    gt, est = _finite(gt.rows_as_read()), est.rows_as_read()
     gt_t, est_t = gt.timestamps, est.timestamps
+    if not len(est_t) or not len(gt_t):
+        raise MetricError(f"no pose to pair: the estimate has {len(est_t)}, the ground truth {len(gt_t)}")
     est_shorter = len(est_t) <= len(gt_t)
     short_t, long_t = (est_t, gt_t) if est_shorter else (gt_t, est_t)
-    if not len(short_t) or not len(long_t):
-        raise MetricError(f"no pose to pair: the estimate has {len(est_t)}, the ground truth {len(gt_t)}")
-    if np.any(np.diff(long_t) < 0):
-        raise MetricError("timestamps are not increasing; sort the trajectory first")
-    idx = np.clip(np.searchsorted(long_t, short_t, side="right"), 0, len(long_t) - 1)
+    short_ids, long_ids = matching_time_indices(short_t, long_t, tolerance_s)
+    if not len(short_ids):
+        raise MetricError(
+            f"the estimate and the ground truth share no timestamp within {tolerance_s} s (estimate "
+            f"{est_t.min():.6f}..{est_t.max():.6f}, ground truth {gt_t.min():.6f}..{gt_t.max():.6f}); wrong file "
+            "or time base?"
+        )
+    est_ids, gt_ids = (short_ids, long_ids) if est_shorter else (long_ids, short_ids)
+    return Pairs(_take(gt, gt_ids), _take(est, est_ids))
+
+
+def matching_time_indices(short_t: np.ndarray, long_t: np.ndarray, tolerance_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """evo's sync.matching_time_indices(short_t, long_t, max_diff=tolerance_s): for each time of `short_t`, in
+    order, the row of `long_t` nearest to it, where within `tolerance_s`; the indices of both. Where `long_t`
+    never decreases, evo's binary search: of two rows at the same distance the earlier, and of rows at one
+    repeated time the last, but the first when the time is approached from below. Otherwise evo's linear
+    search: the first row in `long_t`'s order at the smallest distance."""
+    if np.all(np.diff(long_t) >= 0):
+        best, keep = _binary_search(short_t, long_t, tolerance_s)
+    else:
+        best, distance = _first_nearest(short_t, long_t)
+        keep = distance <= tolerance_s
+    return np.flatnonzero(keep), best[keep]
+
+
+def _binary_search(short_t: np.ndarray, long_t: np.ndarray, tolerance_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """evo's binary-search branch, vectorised: the row of sorted `long_t` matched to each time, and whether any is."""
+    idx = np.minimum(np.searchsorted(long_t, short_t, side="right"), len(long_t) - 1)
     upper = long_t[idx] - short_t
     lower = np.where(idx > 0, short_t - long_t[np.maximum(idx - 1, 0)], np.inf)
     take_upper = (upper <= tolerance_s) & (upper < lower)
     take_lower = ~take_upper & (lower <= tolerance_s) & (lower <= upper)
-    inside = (short_t >= long_t[0] - tolerance_s) & (short_t <= long_t[-1] + tolerance_s)
-    keep = inside & (take_upper | take_lower)
-    short_ids = np.flatnonzero(keep)
-    long_ids = np.where(take_upper, idx, idx - 1)[keep]
-    if not len(short_ids):
-        raise MetricError(
-            f"the estimate and the ground truth share no timestamp within {tolerance_s} s (estimate "
-            f"{est_t[0]:.6f}..{est_t[-1]:.6f}, ground truth {gt_t[0]:.6f}..{gt_t[-1]:.6f}); wrong file or time base?"
-        )
-    est_ids, gt_ids = (short_ids, long_ids) if est_shorter else (long_ids, short_ids)
-    return Pairs(_take(gt, gt_ids), _take(est, est_ids))
+    inside = ~((short_t < long_t[0] - tolerance_s) | (short_t > long_t[-1] + tolerance_s))
+    return np.where(take_upper, idx, idx - 1), inside & (take_upper | take_lower)
+
+
+def _first_nearest(short_t: np.ndarray, long_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """evo's linear search (argmin of |long_t - t|: the first row at the smallest distance) for each time of
+    `short_t`, by sorting instead of a pass over `long_t` per time: the row and its distance."""
+    order = np.argsort(long_t, kind="stable")  # equal times keep their order: a time's first row leads its group
+    times = long_t[order]
+    starts = np.flatnonzero(np.concatenate(([True], times[1:] != times[:-1])))
+    distinct, first_row = times[starts], order[starts]
+    k = np.searchsorted(distinct, short_t)
+    lo, hi = np.maximum(k - 1, 0), np.minimum(k, len(distinct) - 1)
+    d_lo, d_hi = np.abs(distinct[lo] - short_t), np.abs(distinct[hi] - short_t)
+    take_hi = (d_hi < d_lo) | ((d_hi == d_lo) & (first_row[hi] < first_row[lo]))
+    return np.where(take_hi, first_row[hi], first_row[lo]), np.where(take_hi, d_hi, d_lo)
+
+
+def poses_at(gt: Trajectory, times: np.ndarray, tolerance_s: float) -> Trajectory:
+    """The ground truth's pose that evo pairs with each of `times` (a trajectory at those times with fewer rows
+    than `gt`, associated with it: `matching_time_indices` on `gt`'s rows as read), put at that time; NaN rows
+    where none is within `tolerance_s`."""
+    times = np.asarray(times, float)
+    rows = gt.rows_as_read()
+    pos, quat = np.full((len(times), 3), np.nan), np.full((len(times), 4), np.nan)
+    if len(rows) and len(times):
+        ids, best = matching_time_indices(times, rows.timestamps, tolerance_s)
+        pos[ids], quat[ids] = rows.positions[best], rows.quaternions[best]
+    return Trajectory(times, pos, quat)
 
 
 def _take(traj: Trajectory, ids: np.ndarray) -> Trajectory:
@@ -188,7 +239,7 @@ def ate(
 ) -> AteResult:
     """ATE of `est` against `gt` (evo's APE w.r.t. the translation part, after its Umeyama alignment)."""
     alignment = Alignment.parse(alignment) if isinstance(alignment, str) else alignment
-    pairs = associate(_finite(gt), est, tolerance_s)
+    pairs = associate(gt, est, tolerance_s)
     sim = alignment.fit(pairs.est.positions, pairs.gt.positions)
     errors = np.linalg.norm(sim.apply(pairs.est.positions) - pairs.gt.positions, axis=1)
     return AteResult(ErrorStats.of(errors), float(sim.scale), str(alignment), errors)
@@ -235,7 +286,7 @@ def rpe(
         what = "whole number of frames" if unit == "frames" else "distance in metres"
         raise MetricError(f"RPE delta {delta}: expected a positive {what}")
     alignment = Alignment.parse(alignment) if isinstance(alignment, str) else alignment
-    pairs = associate(_finite(gt), est, tolerance_s)
+    pairs = associate(gt, est, tolerance_s)
     sim = alignment.fit(pairs.est.positions, pairs.gt.positions)
     p = aligned(pairs.est, sim)
     q = matrices(pairs.gt)
@@ -310,7 +361,7 @@ def kitti(
     """KITTI's segment errors (evaluate_odometry.cpp's calcSequenceErrors) after the alignment; segments are
     measured along the ground truth's path, over the associated poses (one per frame for KITTI files)."""
     alignment = Alignment.parse(alignment) if isinstance(alignment, str) else alignment
-    pairs = associate(_finite(gt), est, tolerance_s)
+    pairs = associate(gt, est, tolerance_s)
     q = matrices(pairs.gt)
     p = aligned(pairs.est, alignment.fit(pairs.est.positions, pairs.gt.positions))
     dist = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q[:, :3, 3], axis=0), axis=1))])

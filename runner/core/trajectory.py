@@ -2,6 +2,10 @@
 
 A `Trajectory` holds camera-to-world poses sorted by time: timestamps (N,), positions (N, 3) and
 unit quaternions (N, 4) in `qx qy qz qw` order. The `qx qy qz qw` convention lives only here.
+
+A file whose timestamps repeat or go backward is read into time order, one pose per timestamp (the first in
+the file), and its rows as the file holds them are kept beside (`Trajectory.as_read`): the rows evo reads,
+which ATE, RPE and KITTI's metric associate as evo does (runner.core.metrics).
 """
 
 from __future__ import annotations
@@ -41,15 +45,25 @@ class ReadReport:
 
 @dataclass(frozen=True, eq=False)
 class Trajectory:
-    """Camera-to-world poses, sorted by strictly increasing timestamp."""
+    """Camera-to-world poses, sorted by strictly increasing timestamp.
+
+    `as_read`: a file's rows in the file's order, a repeated timestamp's every row included, where they differ
+    from these (a file out of time order or with a repeated timestamp); None where they are the same rows, and for
+    a trajectory built in memory."""
 
     timestamps: np.ndarray
     positions: np.ndarray
     quaternions: np.ndarray  # qx qy qz qw, unit length
     report: ReadReport = field(default_factory=ReadReport)
+    as_read: Trajectory | None = None
 
     def __len__(self) -> int:
         return len(self.timestamps)
+
+    def rows_as_read(self) -> Trajectory:
+        """The rows as the file held them (what evo reads from it): `as_read`, or these rows where the file's
+        were in strictly increasing time order."""
+        return self if self.as_read is None else self.as_read
 
     @cached_property
     def finite_rows(self) -> np.ndarray:
@@ -83,9 +97,10 @@ def from_matrices(timestamps: np.ndarray, matrices: np.ndarray) -> Trajectory:
 
 
 def read_tum(path: str | Path) -> Trajectory:
-    """Read a TUM file (`timestamp tx ty tz qx qy qz qw`, `#` comments, blank lines allowed)."""
+    """Read a TUM file (`timestamp tx ty tz qx qy qz qw`, `#` comments, blank lines allowed); the file's own rows
+    in `as_read` where its timestamps repeat or go backward."""
     data = _read_table(path, ncols=8)
-    return _normalise(data, source=str(path))
+    return _normalise(data, source=str(path), keep_as_read=True)
 
 
 def read_tum_many(
@@ -124,7 +139,7 @@ def read_tum_many(
                 yield traj
                 continue
             try:
-                yield _normalise(_read_table(path, ncols=8, data=data), source=str(path))
+                yield _normalise(_read_table(path, ncols=8, data=data), source=str(path), keep_as_read=True)
             except TrajectoryFormatError as exc:
                 yield exc
 
@@ -218,7 +233,7 @@ def read_euroc_csv(path: str | Path) -> Trajectory:
     ns = np.array(stamps, dtype=np.int64)
     t = (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000).astype(float) * 1e-9
     data = np.array(rows)
-    return _normalise(np.column_stack([t, data[:, 0:3], data[:, 4:7], data[:, 3]]), str(path))
+    return _normalise(np.column_stack([t, data[:, 0:3], data[:, 4:7], data[:, 3]]), str(path), keep_as_read=True)
 
 
 def read_times(path: str | Path) -> np.ndarray:
@@ -238,8 +253,10 @@ def read_times(path: str | Path) -> np.ndarray:
 
 
 def write_tum(path: str | Path, traj: Trajectory) -> None:
-    """Write a TUM file with full precision; `read_tum` reads it back exactly."""
-    data = np.column_stack([traj.timestamps, traj.positions, traj.quaternions])
+    """Write a TUM file with full precision, the rows as read where a file's were out of time order or repeated
+    a timestamp (`as_read`); `read_tum` reads it back exactly."""
+    rows = traj.rows_as_read()
+    data = np.column_stack([rows.timestamps, rows.positions, rows.quaternions])
     buf = io.StringIO()
     buf.write("# timestamp tx ty tz qx qy qz qw\n")
     np.savetxt(buf, data, fmt="%.17g")
@@ -463,7 +480,10 @@ def _normalise_batch(columns: list[np.ndarray], rows: np.ndarray) -> list[Trajec
     return out
 
 
-def _normalise(data: np.ndarray, source: str) -> Trajectory:
+def _normalise(data: np.ndarray, source: str, keep_as_read: bool = False) -> Trajectory:
+    """Rows of `t x y z qx qy qz qw` into a Trajectory: rows with a NaN or infinity dropped, quaternions normalised,
+    sorted by time with one row per timestamp (the first); with `keep_as_read` (a file's rows), the finite rows
+    in their order as `as_read` where that differs."""
     n_rows = len(data)
     finite = np.isfinite(data).all(axis=1)
     n_nonfinite = 0
@@ -473,21 +493,22 @@ def _normalise(data: np.ndarray, source: str) -> Trajectory:
     if len(data) == 0:
         empty = np.zeros((0, 3)), np.zeros((0, 4))
         return Trajectory(np.zeros(0), *empty, report=ReadReport(n_rows=n_rows, n_nonfinite_dropped=n_nonfinite))
-    step = np.diff(data[:, 0])
-    was_unsorted = bool(np.any(step < 0))
-    n_dup = 0
-    if not np.all(step > 0):  # sort and drop duplicates only when needed (most files are in order)
-        data = data[np.argsort(data[:, 0], kind="stable")]
-        keep = np.ones(len(data), bool)
-        keep[1:] = np.diff(data[:, 0]) != 0
-        n_dup = int(np.count_nonzero(~keep))
-        data = data[keep]
-    quat = data[:, 4:8]
-    norm = _quat_norms(*quat.T)
+    norm = _quat_norms(*data[:, 4:8].T)
     if (norm < 1e-12).any():
         bad = int(np.flatnonzero(norm < 1e-12)[0])
         raise TrajectoryFormatError(f"{source}: zero quaternion at timestamp {data[bad, 0]!r}")
-    finite_err = np.abs(norm - 1.0)
+    step = np.diff(data[:, 0])
+    was_unsorted = bool(np.any(step < 0))
+    n_dup = 0
+    rows = None  # the rows in time order, one per timestamp, where that is not every row in the file's order
+    if not np.all(step > 0):  # sort and drop duplicates only when needed (most files are in order)
+        order = np.argsort(data[:, 0], kind="stable")
+        keep = np.ones(len(data), bool)
+        keep[1:] = np.diff(data[order, 0]) != 0
+        n_dup = int(np.count_nonzero(~keep))
+        rows = order[keep]
+    kept_norm = norm if rows is None else norm[rows]
+    finite_err = np.abs(kept_norm - 1.0)
     report = ReadReport(
         n_rows=n_rows,
         was_unsorted=was_unsorted,
@@ -497,5 +518,8 @@ def _normalise(data: np.ndarray, source: str) -> Trajectory:
         max_quat_norm_error=float(finite_err.max()) if finite_err.size else 0.0,
         n_nonfinite_dropped=n_nonfinite,
     )
-    quat = quat / norm[:, None]
-    return Trajectory(data[:, 0].copy(), data[:, 1:4].copy(), quat, report=report)
+    quat = data[:, 4:8] / norm[:, None]
+    if rows is None:
+        return Trajectory(data[:, 0].copy(), data[:, 1:4].copy(), quat, report=report)
+    as_read = Trajectory(data[:, 0], data[:, 1:4], quat, report=report) if keep_as_read else None
+    return Trajectory(data[rows, 0], data[rows, 1:4], quat[rows], report=report, as_read=as_read)

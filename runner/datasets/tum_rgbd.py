@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from runner.core.camera import CameraFile, FovCamera, PinholeCamera, RadTanCamera
+from runner.core.metrics import poses_at
 from runner.core.trajectory import Trajectory, read_tum
 from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
@@ -19,7 +20,6 @@ from runner.datasets.sequence import (
     check_first_frame,
     check_regular,
     folder_sequence,
-    nearest_poses,
     read_text,
 )
 from runner.errors import DatasetError, TrajectoryFormatError
@@ -81,7 +81,7 @@ def open_tum_rgbd(root: str | Path) -> Sequence:
             gt = read_tum(gt_path)
         except TrajectoryFormatError as exc:
             raise DatasetError(str(exc)) from None
-        return nearest_poses(gt, times, ASSOCIATION_S)
+        return poses_at(gt, times, ASSOCIATION_S)  # evo's association: a repeated time's rows kept
 
     return folder_sequence(root, "tum-rgbd", names, times, camera, root, (listing,), gt_path, groundtruth)
 
