@@ -37,7 +37,6 @@ from runner.results.vocabulary import (
 )
 
 METRICS = ("tum-mono", "ate", "rpe", "kitti")
-ALIGNED = ("ate", "rpe", "kitti")  # the metrics that align the estimate first
 GROUP = 32  # TUM-Mono estimates evaluated together (their arrays stay in the CPU's cache)
 MAX_FILE_BYTES = 256 * 2**20  # a trajectory or ground-truth file: a million poses are about 100 MB
 # the figures a campaign records per metric (results.csv's columns)
@@ -81,8 +80,6 @@ def file_problem(path: str | Path, limit: int, what: str) -> str | None:
 
 def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     """One estimate's figures for `opts.metrics` (status ok), or its status and why not."""
-    if problem := alignment_problem(gt, traj, opts):
-        return {"status": "failed", "n_poses": len(traj), "detail": problem}
     if opts.campaign is not None:
         return _campaign_fields(gt, traj, opts)
     if len(opts.metrics) > 1:
@@ -105,29 +102,6 @@ def _single(gt: Trajectory, traj: Trajectory, metric: str, opts: Options) -> dic
     except MetricError as exc:
         return {"status": "failed", "n_poses": len(traj), "detail": str(exc)}
     return {"status": "ok", "n_poses": len(traj), **res.to_dict()}
-
-
-def alignment_problem(gt: Trajectory, traj: Trajectory, opts: Options) -> str | None:
-    """Why an alignment over the first N poses cannot be made as asked (fewer than N poses pair with the ground
-    truth: the fit would silently use them all), or None."""
-    align = metrics.Alignment.parse(opts.alignment)
-    if align.first_n is None or not any(m in ALIGNED for m in opts.metrics):
-        return None
-    finite = np.isfinite(gt.positions).all(axis=1) & np.isfinite(gt.quaternions).all(axis=1)
-    try:
-        n = len(metrics.associate(_rows(gt, finite), traj, opts.tolerance_s).est)
-    except MetricError:
-        return None  # the metric says why
-    if n >= align.first_n:
-        return None
-    return (
-        f"alignment {opts.alignment}: needs the first {align.first_n} poses, but {n} of the estimate's {len(traj)} "
-        f"pair with the ground truth (within {opts.tolerance_s:g} s); give N <= {n}"
-    )
-
-
-def _rows(traj: Trajectory, keep: np.ndarray) -> Trajectory:
-    return Trajectory(traj.timestamps[keep], traj.positions[keep], traj.quaternions[keep])
 
 
 def _campaign_fields(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:

@@ -162,7 +162,12 @@ class Alignment:
         """The transformation taking the estimate onto the ground truth."""
         if self.kind == "none":
             return Sim3(np.eye(3), np.zeros(3), 1.0)
-        n = len(est_positions) if self.first_n is None else min(self.first_n, len(est_positions))
+        n = len(est_positions) if self.first_n is None else self.first_n
+        if n > len(est_positions):  # never a fit over fewer poses than asked for
+            raise MetricError(
+                f"alignment over the first {n} poses, but {len(est_positions)} pair with the ground truth: "
+                f"give N <= {len(est_positions)}"
+            )
         if n < 3:
             raise MetricError(f"{n} associated pose(s): an alignment needs at least 3")
         src, dst = est_positions[:n], gt_positions[:n]
