@@ -119,7 +119,7 @@ def _read_frame_list(csv: Path, problems: list[str]) -> tuple[list[str], np.ndar
                 f"{csv}:{n}: timestamp {cells[0][:40]!r} is not a whole number of nanoseconds (ASCII digits 0-9)"
             )
             return [], None
-        if int(cells[0]) > MAX_NS:
+        if len(cells[0].lstrip("0")) > 19 or int(cells[0]) > MAX_NS:  # 19 digits: int() is quick and bounded
             problems.append(f"{csv}:{n}: timestamp {cells[0][:40]} ns is beyond 2^63 - 1 (EuRoC's are int64)")
             return [], None
         name = cells[1]
