@@ -422,3 +422,13 @@ def test_euroc_stamps_beyond_int64_or_in_other_digits_are_named_with_their_line(
     name = csv.read_text().splitlines()[n - 1].split(",")[1]
     set_line(csv, n, f"{stamp},{name}")
     refused(root, "euroc", tmp_path, f"data.csv:{n}", why)
+
+
+@pytest.mark.parametrize(("stamp", "why"), [("9223372036854775808", "2^63"), ("١٤٠٣٦٣٦٥٧٩٧٦٣٥٥٥٥٨٤", "ASCII digits")])
+def test_euroc_ground_truth_stamps_beyond_int64_or_in_other_digits_are_named_with_their_line(seq, tmp_path, stamp, why):
+    root = seq("euroc")
+    csv = root / "mav0/state_groundtruth_estimate0/data.csv"
+    n = data_lines(csv)[-1]
+    cells = csv.read_text().splitlines()[n - 1].split(",")
+    set_line(csv, n, ",".join([stamp, *cells[1:]]))
+    refused(root, "euroc", tmp_path, f"data.csv:{n}", why)
