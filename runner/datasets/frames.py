@@ -66,15 +66,38 @@ def _jpeg_size(head: bytes) -> tuple[int, int] | None:
 def frame_file_problem(path: Path) -> str | None:
     """Why `path` cannot be a frame (missing, not a regular file, empty, beyond MAX_FRAME_BYTES), or None. Never
     opens it."""
-    problem = regular_file_problem(path, "a frame")
-    if problem is not None:
-        return problem
-    size = os.stat(path).st_size
-    if size == 0:
-        return f"{path}: empty (0 bytes); expected an image"
-    if size > MAX_FRAME_BYTES:
-        return f"{path}: {size:,} bytes; a frame is at most {MAX_FRAME_BYTES:,} bytes"
-    return None
+    return _frame_stat(path)[0]
+
+
+def _frame_stat(path: Path) -> tuple[str | None, os.stat_result | None]:
+    try:
+        st = os.stat(path)
+    except (OSError, ValueError):
+        st = None
+    if st is None or not stat.S_ISREG(st.st_mode):
+        return regular_file_problem(path, "a frame") or f"{path}: cannot be read as a frame", None
+    if st.st_size == 0:
+        return f"{path}: empty (0 bytes); expected an image", None
+    if st.st_size > MAX_FRAME_BYTES:
+        return f"{path}: {st.st_size:,} bytes; a frame is at most {MAX_FRAME_BYTES:,} bytes", None
+    return None, st
+
+
+# The size each frame's header announces, per file version (path, size, modification time, inode): a sequence is
+# opened many times in one process (planning, validation, preparation), its frames' headers are read once.
+_ANNOUNCED: dict[tuple, tuple[int, int] | None] = {}
+_MAX_REMEMBERED = 1_000_000
+
+
+def announced_size(path: Path, st: os.stat_result) -> tuple[int, int] | None:
+    """The size the header of frame `path` (a regular file, `st` its status) announces, or None."""
+    key = (str(path), st.st_size, st.st_mtime_ns, st.st_ino)
+    if key not in _ANNOUNCED:
+        if len(_ANNOUNCED) >= _MAX_REMEMBERED:
+            _ANNOUNCED.clear()
+        head = read_head(path)
+        _ANNOUNCED[key] = header_size(head) if head else None
+    return _ANNOUNCED[key]
 
 
 def read_head(path: Path, n: int = HEAD_BYTES) -> bytes | None:
@@ -165,10 +188,9 @@ def check_files(
     found: list[str] = []
     for name in names:
         path = images / name
-        problem = frame_file_problem(path)
-        if problem is None and size is not None:
-            head = read_head(path)
-            announced = header_size(head) if head is not None else None
+        problem, st = _frame_stat(path)
+        if st is not None and size is not None:
+            announced = announced_size(path, st)
             if announced is not None and announced != size:
                 problem = size_problem(str(path), announced, size, source)
         if problem is not None:

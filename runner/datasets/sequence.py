@@ -167,9 +167,10 @@ def check_regular(paths: list[Path], text_files: set[Path]) -> list[str]:
     for p in paths:
         if not (p.exists() or p.is_symlink()):
             continue
-        problem = regular_file_problem(p, "the file itself")
-        if problem is not None:
-            problems.append(problem)
+        if regular_file_problem(p) is not None:  # a stat: never opens it
+            problems.append(
+                f"{p}: not a regular file (a device, pipe, folder or broken link); expected the file itself"
+            )
         elif p in text_files and p.stat().st_size > MAX_TEXT_BYTES:
             problems.append(f"{p}: {p.stat().st_size / 2**20:.0f} MB, more than a sequence's {p.name} can be")
     return problems
