@@ -145,16 +145,50 @@ def test_tum_rgbd_nan_time_is_named_with_its_line(seq, tmp_path):
     refused(root, "tum-rgbd", tmp_path, f"rgb.txt:{n}", "nan")
 
 
-def test_an_infinite_last_time_never_reaches_a_method(seq, tmp_path):
-    """The probe's case: `inf` as the last time made the backward view all nan/inf and a good method was charged
-    `no_output`. The campaign now refuses the sequence before any run: nothing is written, nothing charged."""
+def damage_p0(root: Path) -> None:
+    p0 = (root / "calib.txt").read_text().splitlines()[0].split()
+    set_line(root / "calib.txt", 1, " ".join(["P0:", p0[1], p0[2], "nan", *p0[4:11], "inf", p0[12]]))
+
+
+def damage_distortion(root: Path) -> None:
+    sensor = root / "mav0/cam0/sensor.yaml"
+    lines = sensor.read_text().splitlines()
+    lines = [
+        "distortion_coefficients: [-30.0, 500.0, 0.0, 0.0]" if x.startswith("distortion_coefficients:") else x
+        for x in lines
+    ]
+    sensor.write_text("\n".join(lines) + "\n")
+
+
+def damage_kitti_pose(root: Path) -> None:
+    poses = root.parent.parent / "poses" / "00.txt"
+    row = poses.read_text().splitlines()[2].split()
+    set_line(poses, 3, " ".join([*row[:3], "1e308", *row[4:]]))
+
+
+@pytest.mark.parametrize(
+    ("layout", "damage", "named"),
+    [
+        ("kitti", lambda root: set_line(root / "times.txt", 12, "inf"), "times.txt:12"),
+        ("tum-rgbd", lambda root: set_line(root / "rgb.txt", 4, "nan rgb/x.png"), "rgb.txt:4"),
+        ("kitti", damage_p0, "calib.txt:1"),
+        ("euroc", damage_distortion, "sensor.yaml"),
+        ("kitti", damage_kitti_pose, "poses/00.txt:3"),
+    ],
+    ids=["inf-last-time", "nan-rgb-time", "nan-p0", "degenerate-distortion", "pose-1e308"],
+)
+def test_bad_data_never_reaches_a_method(seq, tmp_path, layout, damage, named):
+    """The probe's campaigns: `inf` as the last time made the backward view all nan/inf and a good method was
+    charged `no_output`; a `nan` in rgb.txt crashed the report; a nan P0 or degenerate distortion gave a nan camera
+    and `not_initialized`; a 1e308 translation gave `done` with ATE = Inf. The campaign now refuses the sequence
+    before any run, naming the file: nothing is written, nothing charged."""
     from runner.engine.campaign import run_campaign
     from runner.engine.spec import load_spec
 
-    root = seq("kitti")
-    set_line(root / "times.txt", 12, "inf")
-    spec = spec_for(root, "kitti", tmp_path, directions=["forward", "backward"], lanes=1)
-    with pytest.raises(DatasetError, match=r"times.txt:12"):
+    root = seq(layout)
+    damage(root)
+    spec = spec_for(root, layout, tmp_path, directions=["forward", "backward"], lanes=1)
+    with pytest.raises(DatasetError, match=named):
         run_campaign(load_spec(spec), log=lambda *a: None)
     assert not (tmp_path / "results").exists()
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import functools
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -351,7 +352,8 @@ def rectification_problem(cam: CameraFile) -> str | None:
     if not all(math.isfinite(v) for v in (p.fx, p.fy, p.cx, p.cy)) or min(p.fx, p.fy) <= 0:
         return f"focal lengths {p.fx:g}, {p.fy:g}, centre {p.cx:g}, {p.cy:g}: expected finite, positive focal lengths"
     mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
-    with np.errstate(all="ignore"):
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # numpy's "All-NaN slice": the values are checked below
         try:
             dst = rectified_pinhole(src, mode, cam.out_width, cam.out_height)
         except (ValueError, ZeroDivisionError, OverflowError):
