@@ -6,13 +6,19 @@ cx * width - 0.5 in pixels (and back with + 0.5).
 
 from __future__ import annotations
 
+import functools
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from runner.core.inputs import read_bounded
 from runner.errors import DatasetError
+
+MAX_SIDE = 16384  # pixels: no camera's image (or rectified view) is wider or taller
+MIN_INSIDE = 0.5  # a cropped (or unrectified) view samples the frame for at least this share of its pixels
 
 
 @dataclass(frozen=True)
@@ -199,10 +205,11 @@ class CameraFile:
 def read_camera_txt(path: str | Path) -> CameraFile:
     """Parse a TUM-Mono camera.txt (4 lines; an optional model name such as `FOV` may lead line 1)."""
     path = Path(path)
+    if not (path.exists() or path.is_symlink()):
+        raise DatasetError(f"{path}: missing; expected the FOV calibration (4 lines)")
     try:
-        lines = [ln.split() for ln in path.read_bytes().decode("ascii").splitlines() if ln.strip()]
-    except FileNotFoundError:
-        raise DatasetError(f"{path}: missing; expected the FOV calibration (4 lines)") from None
+        data = read_bounded(path, 2**16, "the camera calibration", DatasetError)
+        lines = [ln.split() for ln in data.decode("ascii").splitlines() if ln.strip()]
     except UnicodeDecodeError as exc:
         raise DatasetError(
             f"{path}: not a text file (byte {exc.start} is not ASCII); expected the FOV calibration as 4 text lines "
@@ -227,8 +234,8 @@ def read_camera_txt(path: str | Path) -> CameraFile:
         raise DatasetError(f"{path}:1: {len(vals)} values, expected 'fx fy cx cy omega'")
     if not all(math.isfinite(v) for v in vals):
         raise DatasetError(f"{path}:1: {' '.join(first)}: every value must be a finite number (no nan or inf)")
-    if min(w, h, ow, oh) <= 0:
-        raise DatasetError(f"{path}: image sizes must be positive (input {w}x{h}, output {ow}x{oh})")
+    if min(w, h, ow, oh) <= 0 or max(w, h, ow, oh) > MAX_SIDE:
+        raise DatasetError(f"{path}: image sizes must be 1 to {MAX_SIDE} pixels (input {w}x{h}, output {ow}x{oh})")
     fx, fy, cx, cy, omega = vals
     if cx < 1 and cy < 1:  # relative to the image size
         fx, fy, cx, cy = fx * w, fy * h, cx * w - 0.5, cy * h - 0.5
@@ -328,6 +335,50 @@ def _rectified_numeric(cam: CameraModel, mode: str, out_width: int, out_height: 
     cx = (out_width - 1) / 2 - f * (xmin + xmax) / 2
     cy = (out_height - 1) / 2 - f * (ymin + ymax) / 2
     return PinholeCamera(out_width, out_height, float(f), float(f), float(cx), float(cy))
+
+
+@functools.lru_cache(maxsize=256)
+def rectification_problem(cam: CameraFile) -> str | None:
+    """Why a calibration cannot give a usable view, or None: a size beyond 1..MAX_SIDE, a focal length that is not
+    positive, a rectified pinhole or rectification maps that are not finite (degenerate distortion, a focal length
+    of 1e-300), or, for `crop` (and `explicit`, rectified as crop) and `none`, a view that samples outside the frame
+    for more than half of its pixels. Checked on a 33x33 grid of the view: cheap enough for every validation."""
+    src = cam.camera
+    p = src.pinhole
+    if not (0 < src.width <= MAX_SIDE and 0 < src.height <= MAX_SIDE):
+        return f"image size {src.width}x{src.height}; expected 1 to {MAX_SIDE} pixels a side"
+    if not (0 < cam.out_width <= MAX_SIDE and 0 < cam.out_height <= MAX_SIDE):
+        return f"output size {cam.out_width}x{cam.out_height}; expected 1 to {MAX_SIDE} pixels a side"
+    if not all(math.isfinite(v) for v in (p.fx, p.fy, p.cx, p.cy)) or min(p.fx, p.fy) <= 0:
+        return f"focal lengths {p.fx:g}, {p.fy:g}, centre {p.cx:g}, {p.cy:g}: expected finite, positive focal lengths"
+    mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # numpy's "All-NaN slice": the values are checked below
+        try:
+            dst = rectified_pinhole(src, mode, cam.out_width, cam.out_height)
+        except (ValueError, ZeroDivisionError, OverflowError):
+            dst = None
+        values = (dst.fx, dst.fy, dst.cx, dst.cy) if dst is not None else (math.nan,) * 4
+        if not all(math.isfinite(v) for v in values) or min(values[:2]) <= 0:
+            return (
+                "the camera cannot be rectified: the rectified pinhole is not finite "
+                f"(fx {values[0]:g}, fy {values[1]:g}, cx {values[2]:g}, cy {values[3]:g}); check its intrinsics and "
+                "distortion"
+            )
+        assert dst is not None
+        u, v = np.meshgrid(np.linspace(0, dst.width - 1, 33), np.linspace(0, dst.height - 1, 33))
+        uv = src.pinhole.project(src.distort(dst.unproject(np.column_stack([u.ravel(), v.ravel()]))))
+    if not np.isfinite(uv).all():
+        return "the camera cannot be rectified: its rectification maps are not finite; check its distortion"
+    inside = np.mean(
+        (uv[:, 0] >= -0.5) & (uv[:, 0] <= src.width - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= src.height - 0.5)
+    )
+    if mode in ("crop", "none") and inside < MIN_INSIDE:
+        return (
+            f"the camera cannot be rectified: the {mode} view samples outside the frame for {100 * (1 - inside):.0f}% "
+            f"of its pixels (at most {100 * (1 - MIN_INSIDE):.0f}%); check its intrinsics and distortion"
+        )
+    return None
 
 
 def rectification_maps(src: CameraModel, dst: PinholeCamera) -> tuple[np.ndarray, np.ndarray]:

@@ -220,8 +220,12 @@ def read_euroc_csv(path: str | Path) -> Trajectory:
                 f"{path}:{n}: {len(cells)} columns; expected at least 8 (#timestamp [ns], p_RS_R_x, p_RS_R_y, "
                 "p_RS_R_z, q_RS_w, q_RS_x, q_RS_y, q_RS_z, ...)"
             )
-        if not cells[0].isdigit():
-            raise TrajectoryFormatError(f"{path}:{n}: timestamp {cells[0]!r} is not a whole number of nanoseconds")
+        if not (cells[0].isascii() and cells[0].isdigit()):
+            raise TrajectoryFormatError(
+                f"{path}:{n}: timestamp {cells[0][:40]!r} is not a whole number of nanoseconds (ASCII digits 0-9)"
+            )
+        if len(cells[0].lstrip("0")) > 19 or int(cells[0]) >= 2**63:  # 19 digits: int() is quick and bounded
+            raise TrajectoryFormatError(f"{path}:{n}: timestamp {cells[0][:40]} ns is beyond 2^63 - 1 (int64)")
         try:
             values = [float(c) for c in cells[1:8]]
         except ValueError:

@@ -20,9 +20,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from runner.core.camera import rectification_maps, rectified_pinhole, write_camera_txt
+from runner.core.camera import rectification_maps, rectification_problem, rectified_pinhole, write_camera_txt
 from runner.datasets.layouts import open_sequence
-from runner.datasets.sequence import Sequence
+from runner.datasets.sequence import Sequence, key_bytes
 from runner.datasets.view import Direction, PreparedView, Profile
 from runner.errors import DatasetError
 
@@ -39,7 +39,7 @@ def view_key(seq: Sequence, direction: Direction, profile: Profile, frame_format
     layout = "" if seq.layout == "tum-mono" else f"|{seq.layout}"
     h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}|{fmt}{layout}".encode())
     for p in seq.key_files:
-        h.update(p.read_bytes() if p.exists() else b"-")
+        h.update(key_bytes(p))
     h.update(seq.frames_stamp().encode())
     if seq.vignette is not None and seq.vignette.exists():
         st = seq.vignette.stat()
@@ -258,9 +258,15 @@ def _build(
         ext = Path(seq.frame_names[0]).suffix.lower()
         names = [f"{i:06d}{ext}" for i in range(n)]
         inverse = {orig: i for i, orig in enumerate(order)}
+
+        def copy(item: tuple[int, tuple[str, bytes]]) -> None:
+            j, (name, data) = item
+            seq.decode(name, data, cv2.IMREAD_UNCHANGED)  # a frame a method cannot read is the dataset's problem
+            (images / names[inverse[j]]).write_bytes(data)
+
         if mirror is None or not _link_reversed(mirror, images, names):
-            for j, (_, data) in enumerate(seq.read_bytes()):
-                (images / names[inverse[j]]).write_bytes(data)
+            with ThreadPoolExecutor(max(1, workers)) as pool:
+                list(pool.map(copy, enumerate(seq.read_bytes())))
         if seq.camera_txt is not None:
             shutil.copyfile(seq.camera_txt, out / PreparedView.camera)
         else:
@@ -271,16 +277,19 @@ def _build(
         width, height, pinhole = cam.camera.width, cam.camera.height, None
     else:  # rectified; also the native view of a camera model that methods' calibration files cannot express
         mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
+        problem = rectification_problem(cam)
+        if problem is not None:
+            raise DatasetError(f"{seq.root}: {problem}")
         dst = rectified_pinhole(cam.camera, mode, cam.out_width, cam.out_height)
         map_x, map_y = rectification_maps(cam.camera, dst)
+        if not (np.isfinite(map_x).all() and np.isfinite(map_y).all()):
+            raise DatasetError(f"{seq.root}: the camera cannot be rectified: its rectification maps are not finite")
         names = [f"{i:06d}.{frame_format}" for i in range(n)]
         inverse = {orig: i for i, orig in enumerate(order)}
 
         def work(item: tuple[int, tuple[str, bytes]]) -> None:
             j, (name, data) = item
-            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise DatasetError(f"{seq.root}: frame {name} cannot be decoded")
+            img = seq.decode(name, data)
             rect = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
             params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if frame_format == "png" else []
             cv2.imwrite(str(images / names[inverse[j]]), rect, params)

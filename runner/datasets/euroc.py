@@ -10,17 +10,21 @@ Camera poses are body poses times the camera's extrinsics, interpolated at the f
 
 from __future__ import annotations
 
+import reprlib
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from runner.core.camera import CameraFile, EquidistantCamera, FovCamera, PinholeCamera, RadTanCamera
+from runner.core.inputs import load_yaml_file
 from runner.core.trajectory import Trajectory, read_euroc_csv
+from runner.datasets import frames
 from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
+    MAX_POSITION_M,
     Sequence,
-    check_first_frame,
+    camera_problem,
+    check_positions,
     check_regular,
     folder_sequence,
     interpolate_poses,
@@ -34,6 +38,7 @@ EUROC_GT = Path("mav0/state_groundtruth_estimate0/data.csv")
 TUMVI_GT = Path("mav0/mocap0/data.csv")
 TUMVI_CALIB = Path("dso/camchain.yaml")
 GT_MAX_GAP_S = 0.02  # ground truth is interpolated between samples at most this far from a frame
+MAX_NS = 2**63 - 1  # EuRoC's stamps are int64 nanoseconds
 
 
 def open_euroc(root: str | Path) -> Sequence:
@@ -61,16 +66,20 @@ def _open(root: Path, layout: str) -> Sequence:
             camera, t_body_cam = read_sensor_yaml(calib) if layout == "euroc" else read_camchain(calib)
         except DatasetError as exc:
             problems.append(str(exc))
+        if camera is not None and (problem := camera_problem(calib, camera)):
+            problems.append(problem)
+            camera = None
     names, ns = ([], None)
     if csv.is_file():
         names, ns = _read_frame_list(csv, problems)
     images = root / CAM / "data"
     if names:
-        missing = [n for n in names if not (images / n).is_file()]
+        missing = [n for n in names if not ((images / n).exists() or (images / n).is_symlink())]
         if missing:
             problems.append(f"{images}: {len(missing)} frame(s) listed in {csv.name} missing (e.g. {missing[0]})")
-        elif camera is not None:
-            check_first_frame(root, images, names[0], (camera.camera.width, camera.camera.height), problems)
+        else:
+            size = (camera.camera.width, camera.camera.height) if camera is not None else None
+            frames.check_files(images, names, size, problems, calib.name)
     if problems:
         raise DatasetError(f"{root}: invalid {layout} sequence:\n  " + "\n  ".join(problems))
     assert camera is not None and ns is not None and t_body_cam is not None
@@ -83,10 +92,13 @@ def _open(root: Path, layout: str) -> Sequence:
         )
 
     def groundtruth() -> Trajectory:
+        if problem := check_regular([gt_path], {gt_path}):
+            raise DatasetError(problem[0])
         try:
             body = read_euroc_csv(gt_path)
         except TrajectoryFormatError as exc:
             raise DatasetError(str(exc)) from None
+        check_positions(body, gt_path)
         return transform_poses(interpolate_poses(body, times, GT_MAX_GAP_S), t_body_cam)
 
     return folder_sequence(root, layout, names, times, camera, images, (csv, calib), gt_path, groundtruth, notes)
@@ -102,11 +114,17 @@ def _read_frame_list(csv: Path, problems: list[str]) -> tuple[list[str], np.ndar
         if len(cells) != 2:
             problems.append(f"{csv}:{n}: {len(cells)} columns; expected '#timestamp [ns],filename'")
             return [], None
-        if not cells[0].isdigit():
-            problems.append(f"{csv}:{n}: timestamp {cells[0]!r} is not a whole number of nanoseconds")
+        if not (cells[0].isascii() and cells[0].isdigit()):
+            problems.append(
+                f"{csv}:{n}: timestamp {cells[0][:40]!r} is not a whole number of nanoseconds (ASCII digits 0-9)"
+            )
             return [], None
-        if not cells[1].lower().endswith(IMAGE_SUFFIXES) or "/" in cells[1] or cells[1] in (".", ".."):
-            problems.append(f"{csv}:{n}: {cells[1]!r} is not an image file name in data/")
+        if len(cells[0].lstrip("0")) > 19 or int(cells[0]) > MAX_NS:  # 19 digits: int() is quick and bounded
+            problems.append(f"{csv}:{n}: timestamp {cells[0][:40]} ns is beyond 2^63 - 1 (EuRoC's are int64)")
+            return [], None
+        name = cells[1]
+        if not name.lower().endswith(IMAGE_SUFFIXES) or "/" in name or name in (".", "..") or not name.isprintable():
+            problems.append(f"{csv}:{n}: {name[:80]!r} is not an image file name in data/")
             return [], None
         stamps.append(int(cells[0]))
         names.append(cells[1])
@@ -122,10 +140,8 @@ def _read_frame_list(csv: Path, problems: list[str]) -> tuple[list[str], np.ndar
 
 
 def _yaml(path: Path) -> dict:
-    try:
-        data = yaml.safe_load(read_text(path))
-    except yaml.YAMLError as exc:
-        raise DatasetError(f"{path}: not YAML ({exc})") from None
+    """A calibration YAML, read with runner.core.inputs' bounds (size, aliases, nesting)."""
+    data = load_yaml_file(path, "the camera calibration", DatasetError)
     if not isinstance(data, dict):
         raise DatasetError(f"{path}: expected a mapping of calibration keys")
     return data
@@ -142,7 +158,7 @@ def _numbers(path: Path, data: dict, key: str, count: int | tuple[int, ...]) -> 
         or not all(isinstance(v, int | float) and np.isfinite(v) for v in value)
     ):
         want = " or ".join(str(c) for c in counts)
-        raise DatasetError(f"{path}: {key}: expected a list of {want} finite numbers, found {value!r}"[:300])
+        raise DatasetError(f"{path}: {key}: expected a list of {want} finite numbers, found {_short(value)}")
     return [float(v) for v in value]
 
 
@@ -153,13 +169,13 @@ def read_sensor_yaml(path: Path) -> tuple[CameraFile, np.ndarray]:
     fx, fy, cx, cy = _numbers(path, data, "intrinsics", 4)
     model = data.get("camera_model", "pinhole")
     if model != "pinhole":
-        raise DatasetError(f"{path}: camera_model {model!r}; expected pinhole")
+        raise DatasetError(f"{path}: camera_model {_short(model)}; expected pinhole")
     distortion = data.get("distortion_model", "radial-tangential")
     if distortion not in ("radial-tangential", "radtan"):
-        raise DatasetError(f"{path}: distortion_model {distortion!r}; expected radial-tangential")
+        raise DatasetError(f"{path}: distortion_model {_short(distortion)}; expected radial-tangential")
     k = _numbers(path, data, "distortion_coefficients", (4, 5))
     t_bs = np.array(_numbers(path, data, "T_BS", 16)).reshape(4, 4)
-    return _camera(w, h, fx, fy, cx, cy, RadTanCamera, k), _rigid(path, t_bs, "T_BS")
+    return _camera(path, (w, h), (fx, fy, cx, cy), RadTanCamera, k), _rigid(path, t_bs, "T_BS")
 
 
 def read_camchain(path: Path) -> tuple[CameraFile, np.ndarray]:
@@ -171,18 +187,27 @@ def read_camchain(path: Path) -> tuple[CameraFile, np.ndarray]:
     w, h = (int(v) for v in _numbers(path, cam0, "resolution", 2))
     fx, fy, cx, cy = _numbers(path, cam0, "intrinsics", 4)
     if cam0.get("distortion_model") != "equidistant":
-        raise DatasetError(f"{path}: cam0 distortion_model {cam0.get('distortion_model')!r}; expected equidistant")
+        found = _short(cam0.get("distortion_model"))
+        raise DatasetError(f"{path}: cam0 distortion_model {found}; expected equidistant")
     k = _numbers(path, cam0, "distortion_coeffs", 4)
     rows = cam0.get("T_cam_imu")
     if not (isinstance(rows, list) and len(rows) == 4 and all(isinstance(r, list) and len(r) == 4 for r in rows)):
         raise DatasetError(f"{path}: cam0 T_cam_imu: expected 4 rows of 4 numbers")
     t_cam_imu = _rigid(path, np.array(rows, float), "T_cam_imu")
-    return _camera(w, h, fx, fy, cx, cy, EquidistantCamera, k), np.linalg.inv(t_cam_imu)
+    return _camera(path, (w, h), (fx, fy, cx, cy), EquidistantCamera, k), np.linalg.inv(t_cam_imu)
 
 
-def _camera(w: int, h: int, fx: float, fy: float, cx: float, cy: float, model, k: list[float]) -> CameraFile:
+def _short(value: object) -> str:
+    """A value from a user's YAML as a message shows it: its repr, bounded."""
+    short = reprlib.Repr()
+    short.maxstring, short.maxother, short.maxlist, short.maxdict, short.maxlevel = 60, 60, 6, 4, 2
+    return short.repr(value)
+
+
+def _camera(path: Path, size: tuple[int, int], intrinsics: tuple[float, ...], model, k: list[float]) -> CameraFile:
+    (w, h), (fx, fy, cx, cy) = size, intrinsics
     if min(w, h) <= 0 or min(fx, fy) <= 0:
-        raise DatasetError(f"image size {w}x{h} and focal lengths {fx}, {fy} must be positive")
+        raise DatasetError(f"{path}: image size {w}x{h} and focal lengths {fx}, {fy} must be positive")
     pinhole = PinholeCamera(w, h, fx, fy, cx, cy)
     if not any(k):
         return CameraFile(FovCamera(w, h, fx, fy, cx, cy, 0.0), "none", w, h)
@@ -195,4 +220,6 @@ def _rigid(path: Path, t: np.ndarray, key: str) -> np.ndarray:
         raise DatasetError(
             f"{path}: {key} is not a rigid transform (rotation not orthonormal, or last row not 0 0 0 1)"
         )
+    if np.abs(t[:3, 3]).max() > MAX_POSITION_M:
+        raise DatasetError(f"{path}: {key} moves the camera {np.abs(t[:3, 3]).max():g} m; expected a rigid mount")
     return t

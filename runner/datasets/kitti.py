@@ -11,13 +11,16 @@ import numpy as np
 
 from runner.core.camera import CameraFile, FovCamera
 from runner.core.trajectory import Trajectory, from_matrices
+from runner.datasets import frames
 from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
+    MAX_POSITION_M,
     Sequence,
-    check_first_frame,
+    camera_problem,
     check_regular,
     folder_sequence,
     read_text,
+    time_problem,
 )
 from runner.errors import DatasetError
 
@@ -47,8 +50,11 @@ def open_kitti(root: str | Path) -> Sequence:
         problems.append(
             f"{times_path}: {len(times)} times but {len(names)} images in {images.name}/; expected one each"
         )
-    if names and camera is not None:
-        check_first_frame(root, images, names[0], (camera.camera.width, camera.camera.height), problems)
+    if camera is not None and (problem := camera_problem(calib, camera)):
+        problems.append(problem)
+    elif names:  # every frame of the first one's size (which gives the camera's)
+        size = (camera.camera.width, camera.camera.height) if camera is not None else None
+        frames.check_files(images, names, size, problems, f"the first frame ({names[0]})")
     if gt_path.is_file() and times is not None and not problems:
         n_poses = sum(1 for line in read_text(gt_path).splitlines() if line.strip())
         if n_poses != len(times):
@@ -75,10 +81,25 @@ def read_poses(path: Path, times: np.ndarray) -> Trajectory:
             raise DatasetError(f"{path}:{n}: not numbers: {line.strip()[:60]!r}") from None
         if len(values) != 12 or not np.isfinite(values).all():
             raise DatasetError(f"{path}:{n}: {len(values)} values; expected 12 finite numbers (a 3x4 [R|t] row)")
+        _check_pose(path, n, np.array(values).reshape(3, 4))
         rows.append(values)
     if len(rows) != len(times):
         raise DatasetError(f"{path}: {len(rows)} poses but {len(times)} frames; KITTI's poses are one per frame")
     return from_matrices(times, np.array(rows).reshape(-1, 3, 4))
+
+
+def _check_pose(path: Path, n: int, pose: np.ndarray) -> None:
+    """A ground-truth row: a rotation (orthonormal within 0.01; KITTI's are within 1e-6) and a position within
+    MAX_POSITION_M of the origin."""
+    far = np.abs(pose[:, 3]) > MAX_POSITION_M
+    if far.any():
+        raise DatasetError(
+            f"{path}:{n}: a position of {pose[:, 3][far][0]:g} m; ground truth must be finite and within "
+            f"{MAX_POSITION_M:.0e} m of the origin"
+        )
+    r = pose[:, :3]
+    if np.abs(r @ r.T - np.eye(3)).max() > 0.01:
+        raise DatasetError(f"{path}:{n}: its 3x3 part is not a rotation (not orthonormal)")
 
 
 def _read_times(path: Path, problems: list[str]) -> np.ndarray | None:
@@ -86,10 +107,14 @@ def _read_times(path: Path, problems: list[str]) -> np.ndarray | None:
     for n, line in enumerate(read_text(path).splitlines(), start=1):
         if not line.strip():
             continue
+        token = line.split()[0]
         try:
-            out.append(float(line.split()[0]))
+            out.append(float(token))
         except ValueError:
             problems.append(f"{path}:{n}: {line.strip()[:60]!r} is not a time in seconds")
+            return None
+        if problem := time_problem(path, n, token[:60], out[-1]):
+            problems.append(problem)
             return None
     t = np.array(out)
     bad = np.flatnonzero(np.diff(t) <= 0)
@@ -111,8 +136,11 @@ def _read_calib(path: Path, problems: list[str]) -> CameraFile | None:
             except ValueError:
                 problems.append(f"{path}:{n}: P0 holds a value that is not a number")
                 return None
-            if len(p) != 12 or p[0] <= 0 or p[5] <= 0:
-                problems.append(f"{path}:{n}: P0 has {len(p)} values; expected 12 with positive focal lengths")
+            if len(p) != 12 or not np.isfinite(p).all() or p[0] <= 0 or p[5] <= 0:
+                problems.append(
+                    f"{path}:{n}: P0 is {' '.join(line[3:].split())[:120]!r}; expected 12 finite numbers with "
+                    "positive focal lengths"
+                )
                 return None
             size = _first_frame_size(path.parent / "image_0")
             if size is None:
@@ -124,10 +152,19 @@ def _read_calib(path: Path, problems: list[str]) -> CameraFile | None:
 
 
 def _first_frame_size(images: Path) -> tuple[int, int] | None:
-    import cv2
-
+    """The first frame's size, from its header (or its decoding); None when it has none (the frames' check
+    names the problem)."""
     if not images.is_dir():
         return None
     first = min((p for p in images.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES), default=None)
-    img = cv2.imread(str(first), cv2.IMREAD_UNCHANGED) if first is not None else None
-    return None if img is None else (img.shape[1], img.shape[0])
+    if first is None or frames.frame_file_problem(first) is not None:
+        return None
+    head = frames.read_head(first)
+    size = frames.header_size(head) if head else None
+    if size is None:
+        try:
+            img = frames.decode(frames.read_frame(first), str(first), None)
+        except DatasetError:
+            return None
+        size = (img.shape[1], img.shape[0])
+    return size

@@ -5,6 +5,7 @@ ground truth at the frames' times. The view cache builds prepared views from it,
 from __future__ import annotations
 
 import hashlib
+import math
 import zipfile
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
@@ -13,14 +14,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from runner.core.camera import CameraFile, FovCamera
+from runner.core.camera import CameraFile, FovCamera, rectification_problem
+from runner.core.inputs import read_bounded, read_text_bounded, regular_file_problem
 from runner.core.trajectory import Trajectory
-from runner.errors import DatasetError
+from runner.datasets.frames import decode, read_frame, read_head, read_member
+from runner.errors import DatasetError, SlamRunError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
 # The text files' size limit: far above any real sequence's (a times.txt of a million frames is 40 MB), far below
 # what would exhaust memory.
 MAX_TEXT_BYTES = 256 * 2**20
+# Frame times are seconds (Unix time, or from the sequence's start): finite, and within 1e10 s (the year 2286).
+MAX_TIME_S = 1e10
+# Ground-truth positions: finite (NaN only where a file marks a frame without a pose) and within 1000 km of the
+# origin; a trajectory of a car, a drone or a hand-held camera stays far inside.
+MAX_POSITION_M = 1e6
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,28 +74,51 @@ class Sequence:
         other models (radial-tangential, fisheye) reach every method rectified."""
         return isinstance(self.camera.camera, FovCamera)
 
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of every frame: the calibration's input size."""
+        return (self.camera.camera.width, self.camera.camera.height)
+
     def groundtruth(self) -> Trajectory | None:
-        """The ground truth at the frames' times (NaN rows where the dataset has no pose), or None."""
-        return None if self.groundtruth_reader is None else self.groundtruth_reader()
+        """The ground truth at the frames' times (NaN rows where the dataset has no pose), or None; DatasetError
+        naming the file where its poses are not plausible (`check_positions`)."""
+        if self.groundtruth_reader is None:
+            return None
+        gt = self.groundtruth_reader()
+        assert self.groundtruth_path is not None
+        check_positions(gt, self.groundtruth_path)
+        return gt
+
+    def where(self, name: str) -> str:
+        """A frame as messages name it: its file, or its zip and member."""
+        if self.zip_path is not None:
+            return f"{self.zip_path}: member {name}"
+        assert self.images_dir is not None
+        return str(self.images_dir / name)
 
     def read_bytes(self) -> Iterator[tuple[str, bytes]]:
-        """(name, encoded bytes) of every frame, in order."""
+        """(name, encoded bytes) of every frame, in order; each read with the bounds of runner.datasets.frames
+        (DatasetError naming the frame otherwise)."""
         if self.zip_path is not None:
-            with zipfile.ZipFile(self.zip_path) as zf:
-                for name in self.frame_names:
-                    yield name, zf.read(name)
+            try:
+                with zipfile.ZipFile(self.zip_path) as zf:
+                    for name in self.frame_names:
+                        yield name, read_member(zf, self.zip_path, name)
+            except (zipfile.BadZipFile, OSError) as exc:
+                raise DatasetError(f"{self.zip_path}: not a readable zip ({exc}); re-download the sequence") from None
         else:
             assert self.images_dir is not None
             for name in self.frame_names:
-                yield name, (self.images_dir / name).read_bytes()
+                yield name, read_frame(self.images_dir / name)
+
+    def decode(self, name: str, data: bytes, flags: int = cv2.IMREAD_GRAYSCALE) -> np.ndarray:
+        """Frame `name` decoded; DatasetError naming it when it does not decode or is not the calibration's size."""
+        return decode(data, self.where(name), self.size, flags)
 
     def frames(self) -> Iterator[np.ndarray]:
         """Decoded 8-bit grayscale frames, in order."""
         for name, data in self.read_bytes():
-            img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                raise DatasetError(f"{self.root}: frame {name} cannot be decoded")
-            yield img
+            yield self.decode(name, data)
 
     def frames_stamp(self) -> str:
         """The frames' container as a key part: the zip's or the folder's name, size and modification time."""
@@ -131,12 +162,12 @@ def folder_sequence(
 
 def check_regular(paths: list[Path], text_files: set[Path]) -> list[str]:
     """The files among `paths` that exist but cannot be read to an end: not regular files (a device such as
-    /dev/zero, a pipe, a folder) or text files beyond MAX_TEXT_BYTES."""
+    /dev/zero, a pipe, a folder) or text files beyond MAX_TEXT_BYTES. Never opens them."""
     problems = []
     for p in paths:
         if not (p.exists() or p.is_symlink()):
             continue
-        if not p.is_file():
+        if regular_file_problem(p) is not None:  # a stat: never opens it
             problems.append(
                 f"{p}: not a regular file (a device, pipe, folder or broken link); expected the file itself"
             )
@@ -146,38 +177,87 @@ def check_regular(paths: list[Path], text_files: set[Path]) -> list[str]:
 
 
 def read_text(path: Path) -> str:
-    """A small text file as text, or DatasetError naming it (binary, not UTF-8)."""
+    """A sequence's text file (a regular file of at most MAX_TEXT_BYTES, UTF-8), or DatasetError naming it."""
+    return read_text_bounded(path, MAX_TEXT_BYTES, "a text file", DatasetError)
+
+
+def key_bytes(path: Path) -> bytes:
+    """A key file's content for identities and cache keys: "-" when missing, a marker when it cannot be read (a
+    FIFO, a device, too large: validation names it). Never blocks."""
+    if not (path.exists() or path.is_symlink()):
+        return b"-"
     try:
-        return path.read_bytes().decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise DatasetError(f"{path}: not a text file (byte {exc.start} is not UTF-8)") from None
+        return read_bounded(path, MAX_TEXT_BYTES)
+    except SlamRunError:
+        return b"-unreadable-"
 
 
-def check_first_frame(seq_root: Path, images_dir: Path, name: str, size: tuple[int, int], problems: list[str]) -> None:
-    """The first frame decodes and has the calibration's size."""
-    img = cv2.imread(str(images_dir / name), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        problems.append(f"{images_dir / name}: cannot be decoded as an image")
+def time_problem(path: Path, lineno: int, token: str, value: float) -> str | None:
+    """Why `value` (written `token` on line `lineno`) cannot be a frame time in seconds, or None."""
+    if not math.isfinite(value):
+        return f"{path}:{lineno}: {token!r} is not a finite time in seconds"
+    if abs(value) > MAX_TIME_S:
+        return f"{path}:{lineno}: {token!r} s is beyond {MAX_TIME_S:.0e} s; expected a time in seconds"
+    return None
+
+
+def camera_problem(calibration: Path, camera: CameraFile) -> str | None:
+    """Why the calibration in `calibration` cannot give a method a usable view (runner.core.camera's
+    rectification_problem), named with the file; None when it can."""
+    problem = rectification_problem(camera)
+    return None if problem is None else f"{calibration}: {problem}"
+
+
+def check_positions(traj: Trajectory, path: Path, columns: tuple[int, ...] = (1, 2, 3)) -> None:
+    """DatasetError naming `path` (and the line: the first whose values at `columns` are not plausible) when a
+    position of `traj` is infinite or beyond MAX_POSITION_M (NaN marks a frame without a pose)."""
+    pos = traj.positions
+    with np.errstate(invalid="ignore"):
+        bad = np.isinf(pos) | (np.abs(pos) > MAX_POSITION_M)
+    if not bad.any():
         return
-    h, w = img.shape[:2]
-    if (w, h) != size:
-        problems.append(f"{images_dir / name}: {w}x{h}, but the calibration of {seq_root} is for {size[0]}x{size[1]}")
+    value = float(pos[bad][0])
+    line = implausible_line(path, columns)
+    where = f"{path}:{line[0]}" if line else str(path)
+    value = line[1] if line else value
+    raise DatasetError(
+        f"{where}: a position of {value:g} m; ground truth must be finite and within {MAX_POSITION_M:.0e} m of the "
+        "origin"
+    )
+
+
+def implausible_line(path: Path, columns: tuple[int, ...]) -> tuple[int, float] | None:
+    """(line number, value) of the first row of a ground-truth file whose values at `columns` are infinite or
+    beyond MAX_POSITION_M, or None."""
+    try:
+        text = read_text(path)
+    except DatasetError:
+        return None
+    for n, line in enumerate(text.splitlines(), start=1):
+        cells = line.split("#", 1)[0].replace(",", " ").split()
+        for c in columns:
+            try:
+                v = float(cells[c])
+            except (IndexError, ValueError):
+                continue
+            if math.isinf(v) or abs(v) > MAX_POSITION_M:
+                return n, v
+    return None
 
 
 def folder_identity(key_files: list[Path], images_dir: Path, names: list[str]) -> str:
     """A digest of a sequence whose frames are files: the key files in full, the frames by name, size and first
-    4 KiB (independent of paths and dates, so a moved or copied dataset keeps its runs)."""
+    4 KiB (independent of paths and dates, so a moved or copied dataset keeps its runs). Never blocks."""
     h = hashlib.sha256()
     for p in key_files:
-        h.update(p.name.encode() + b"\0" + (p.read_bytes() if p.is_file() else b"-") + b"\0")
+        h.update(p.name.encode() + b"\0" + key_bytes(p) + b"\0")
     for name in names:
         p = images_dir / name
-        try:
-            with open(p, "rb") as f:
-                head = f.read(4096)
-            h.update(f"{name}|{p.stat().st_size}|".encode() + hashlib.sha256(head).digest())
-        except OSError:
+        head = read_head(p)
+        if head is None:
             h.update(f"{name}|missing".encode())
+        else:
+            h.update(f"{name}|{p.stat().st_size}|".encode() + hashlib.sha256(head).digest())
     return h.hexdigest()[:10]
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import io
 import zipfile
 from pathlib import Path
 
@@ -10,12 +11,24 @@ import cv2
 import numpy as np
 
 from runner.core.camera import CameraFile, read_camera_txt
+from runner.core.inputs import read_bounded
 from runner.core.trajectory import Trajectory
-from runner.datasets.sequence import IMAGE_SUFFIXES, Sequence, check_regular
+from runner.datasets import frames
+from runner.datasets.sequence import (
+    IMAGE_SUFFIXES,
+    Sequence,
+    camera_problem,
+    check_positions,
+    check_regular,
+    key_bytes,
+    read_text,
+    time_problem,
+)
 from runner.errors import DatasetError
 
 REQUIRED = ("times.txt", "camera.txt", "pcalib.txt", "vignette.png")
 TEXT_FILES = ("times.txt", "camera.txt", "pcalib.txt", "groundtruthSync.txt")
+MAX_TESTED_BYTES = 512 * 2**20  # images.zip's members are all inflated to test their CRCs up to this total
 
 
 def unusable_files(root: Path) -> list[str]:
@@ -26,13 +39,19 @@ def unusable_files(root: Path) -> list[str]:
 
 
 def read_groundtruth_sync(p: Path) -> Trajectory:
-    """groundtruthSync.txt, NaN rows kept (they split the segments by row count)."""
-    data = np.loadtxt(p, comments="#", ndmin=2)
+    """groundtruthSync.txt, NaN rows kept (they split the segments by row count); positions checked
+    (`check_positions`)."""
+    try:
+        data = np.loadtxt(io.StringIO(read_text(p)), comments="#", ndmin=2)
+    except ValueError as exc:
+        raise DatasetError(f"{p}: not rows of 8 numbers ({str(exc)[:120]})") from None
     if data.shape[1] != 8:
         raise DatasetError(f"{p}: {data.shape[1]} columns, expected 'timestamp tx ty tz qx qy qz qw'")
     if np.any(np.diff(data[:, 0]) <= 0):
         raise DatasetError(f"{p}: timestamps are not strictly increasing")
-    return Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
+    traj = Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
+    check_positions(traj, p)
+    return traj
 
 
 def open_sequence(root: str | Path) -> Sequence:
@@ -56,6 +75,9 @@ def open_sequence(root: str | Path) -> Sequence:
             camera = read_camera_txt(root / "camera.txt")
         except DatasetError as exc:
             problems.append(str(exc))
+        if camera is not None and (problem := camera_problem(root / "camera.txt", camera)):
+            problems.append(problem)
+            camera = None
 
     if names is not None and timestamps is not None and len(names) != len(timestamps):
         problems.append(
@@ -65,8 +87,8 @@ def open_sequence(root: str | Path) -> Sequence:
     if timestamps is not None and len(timestamps) > 1 and np.any(np.diff(timestamps) <= 0):
         i = int(np.flatnonzero(np.diff(timestamps) <= 0)[0]) + 2
         problems.append(f"{root / 'times.txt'}:{i}: timestamps not strictly increasing")
-    if names and camera is not None:
-        _check_image_size(root, names, zip_path, camera, problems)
+    if names:
+        _check_frames(root, names, zip_path, camera, problems)
     _check_pcalib(root / "pcalib.txt", problems)
     if camera is not None:
         _check_vignette(root / "vignette.png", camera, problems)
@@ -98,7 +120,8 @@ def _frame_names(root: Path, problems: list[str]) -> tuple[list[str] | None, Pat
         try:
             with zipfile.ZipFile(zip_path) as zf:
                 names = sorted(n for n in zf.namelist() if n.lower().endswith(IMAGE_SUFFIXES))
-                bad = zf.testzip() if zip_path.stat().st_size < 50_000_000 else None
+                small = zip_path.stat().st_size < 50_000_000
+                bad = zf.testzip() if small and sum(i.file_size for i in zf.infolist()) <= MAX_TESTED_BYTES else None
             if bad:
                 problems.append(f"{zip_path}: member {bad} is corrupt; re-download the sequence")
         except (zipfile.BadZipFile, OSError) as exc:
@@ -121,7 +144,7 @@ def _read_times(path: Path, problems: list[str]) -> tuple[np.ndarray | None, np.
     if not path.exists():
         return None, None
     rows = []
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+    for lineno, line in enumerate(read_text(path).splitlines(), start=1):
         body = line.split("#", 1)[0].split()
         if not body:
             continue
@@ -132,6 +155,12 @@ def _read_times(path: Path, problems: list[str]) -> tuple[np.ndarray | None, np.
             return None, None
         if len(rows[-1]) not in (2, 3):
             problems.append(f"{path}:{lineno}: {len(rows[-1])} values, expected 'id timestamp [exposure_ms]'")
+            return None, None
+        if problem := time_problem(path, lineno, body[1][:60], rows[-1][1]):
+            problems.append(problem)
+            return None, None
+        if len(body) == 3 and not (0 < rows[-1][2] < 1e6):  # NaN fails it too
+            problems.append(f"{path}:{lineno}: exposure {body[2][:60]!r}; expected a positive, finite number of ms")
             return None, None
     if not rows:
         problems.append(f"{path}: empty")
@@ -144,60 +173,59 @@ def _read_times(path: Path, problems: list[str]) -> tuple[np.ndarray | None, np.
     return data[:, 1], (data[:, 2] if data.shape[1] == 3 else None)
 
 
-def _check_image_size(root: Path, names: list[str], zip_path: Path | None, cam: CameraFile, problems: list[str]):
+def _check_frames(root: Path, names: list[str], zip_path: Path | None, cam: CameraFile | None, problems: list[str]):
+    """Every frame (a member of images.zip, or a file of images/) within the frame bounds and of camera.txt's input
+    size (runner.datasets.frames)."""
+    size = (cam.camera.width, cam.camera.height) if cam is not None else None
+    if zip_path is None:
+        frames.check_files(root / "images", names, size, problems, "camera.txt")
+        return
     try:
-        if zip_path is not None:
-            with zipfile.ZipFile(zip_path) as zf:
-                data = zf.read(names[0])
-        else:
-            data = (root / "images" / names[0]).read_bytes()
-    except (zipfile.BadZipFile, OSError, KeyError) as exc:
-        problems.append(f"{root}: first image {names[0]} unreadable ({exc})")
-        return
-    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        problems.append(f"{root}: first image {names[0]} cannot be decoded")
-        return
-    h, w = img.shape[:2]
-    if (w, h) != (cam.camera.width, cam.camera.height):
-        problems.append(
-            f"{root / 'camera.txt'}: input size {cam.camera.width}x{cam.camera.height} but {names[0]} is {w}x{h}"
-        )
+        with zipfile.ZipFile(zip_path) as zf:
+            frames.check_members(zf, zip_path, names, size, problems, "camera.txt")
+    except (zipfile.BadZipFile, OSError) as exc:
+        problems.append(f"{zip_path}: not a readable zip ({exc}); re-download or unpack it into images/")
 
 
 def _check_pcalib(path: Path, problems: list[str]) -> None:
     if not path.exists():
         return
     try:
-        values = np.array(path.read_text().split(), dtype=float)
+        values = read_pcalib(path)
     except ValueError:
         problems.append(f"{path}: not numbers; expected 256 values of the inverse response")
         return
-    if len(values) != 256:
+    if not np.isfinite(values).all():
+        problems.append(f"{path}: values that are not finite; expected 256 numbers of the inverse response")
+    elif len(values) != 256:
         problems.append(f"{path}: {len(values)} values, expected 256")
     elif np.any(np.diff(values) <= 0):
         problems.append(f"{path}: values not strictly increasing (the inverse response must be)")
 
 
 def _check_vignette(path: Path, cam: CameraFile, problems: list[str]) -> None:
+    """vignette.png decodes and is of camera.txt's input size (a header announcing another is refused before it is
+    decoded)."""
     if not path.exists():
         return
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None:
-        problems.append(f"{path}: cannot be decoded as an image")
-        return
-    h, w = img.shape[:2]
-    if (w, h) != (cam.camera.width, cam.camera.height):
-        problems.append(f"{path}: {w}x{h}, expected the input size {cam.camera.width}x{cam.camera.height}")
+    try:
+        _vignette_image(path, (cam.camera.width, cam.camera.height))
+    except DatasetError as exc:
+        problems.append(str(exc))
 
 
 def read_pcalib(path: Path) -> np.ndarray:
-    return np.array(path.read_text().split(), dtype=float)
+    return np.array(read_text(path).split(), dtype=float)
+
+
+def _vignette_image(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
+    data = read_bounded(path, frames.MAX_FRAME_BYTES, "the vignette", DatasetError)
+    return frames.decode(data, str(path), size, cv2.IMREAD_UNCHANGED, "camera.txt")
 
 
 def read_vignette(path: Path) -> np.ndarray:
     """Vignette normalised to a maximum of 1."""
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED).astype(np.float32)
+    img = _vignette_image(path).astype(np.float32)
     return img / img.max()
 
 
@@ -233,8 +261,7 @@ def _identity(root: Path, stamp: tuple) -> str:
         return "none"
     h = hashlib.sha256()
     for name in ("times.txt", "camera.txt", "pcalib.txt", "vignette.png"):
-        p = root / name
-        h.update(name.encode() + b"\0" + (p.read_bytes() if p.exists() else b"-") + b"\0")
+        h.update(name.encode() + b"\0" + key_bytes(root / name) + b"\0")
     zip_path = root / "images.zip"
     if zip_path.exists():
         try:
@@ -245,7 +272,7 @@ def _identity(root: Path, stamp: tuple) -> str:
             h.update(b"unreadable zip|%d" % zip_path.stat().st_size)
     elif (root / "images").is_dir():
         for p in sorted((root / "images").iterdir()):
-            with open(p, "rb") as f:
-                head = f.read(4096)
-            h.update(f"{p.name}|{p.stat().st_size}|".encode() + hashlib.sha256(head).digest())
+            head = frames.read_head(p) if p.suffix.lower() in IMAGE_SUFFIXES else None
+            if head is not None:  # a frame (a FIFO or a device is never opened: validation names it)
+                h.update(f"{p.name}|{p.stat().st_size}|".encode() + hashlib.sha256(head).digest())
     return h.hexdigest()[:10]

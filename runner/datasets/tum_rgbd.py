@@ -14,13 +14,14 @@ import numpy as np
 from runner.core.camera import CameraFile, FovCamera, PinholeCamera, RadTanCamera
 from runner.core.metrics import poses_at
 from runner.core.trajectory import Trajectory, read_tum
+from runner.datasets import frames
 from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
     Sequence,
-    check_first_frame,
     check_regular,
     folder_sequence,
     read_text,
+    time_problem,
 )
 from runner.errors import DatasetError, TrajectoryFormatError
 
@@ -67,11 +68,11 @@ def open_tum_rgbd(root: str | Path) -> Sequence:
     else:
         names, times = _read_listing(listing, problems)
     if names:
-        missing = [n for n in names if not (root / n).is_file()]
+        missing = [n for n in names if not ((root / n).exists() or (root / n).is_symlink())]
         if missing:
             problems.append(f"{root}: {len(missing)} frame(s) listed in rgb.txt missing (e.g. {missing[0]})")
-        elif camera is not None:
-            check_first_frame(root, root, names[0], (WIDTH, HEIGHT), problems)
+        else:
+            frames.check_files(root, names, (WIDTH, HEIGHT), problems, "the TUM RGB-D camera")
     if problems:
         raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
     assert camera is not None and times is not None
@@ -98,11 +99,19 @@ def _read_listing(path: Path, problems: list[str]) -> tuple[list[str], np.ndarra
         try:
             stamps.append(float(cells[0]))
         except ValueError:
-            problems.append(f"{path}:{n}: {cells[0]!r} is not a time in seconds")
+            problems.append(f"{path}:{n}: {cells[0][:60]!r} is not a time in seconds")
+            return [], None
+        if problem := time_problem(path, n, cells[0][:60], stamps[-1]):
+            problems.append(problem)
             return [], None
         name = cells[1]
-        if not name.lower().endswith(IMAGE_SUFFIXES) or ".." in Path(name).parts or Path(name).is_absolute():
-            problems.append(f"{path}:{n}: {name!r} is not an image path inside the sequence folder")
+        if (
+            not name.lower().endswith(IMAGE_SUFFIXES)
+            or ".." in Path(name).parts
+            or Path(name).is_absolute()
+            or not name.isprintable()
+        ):
+            problems.append(f"{path}:{n}: {name[:80]!r} is not an image path inside the sequence folder")
             return [], None
         names.append(name)
     if not names:
