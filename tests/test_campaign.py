@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import sqlite3
@@ -158,7 +159,12 @@ def test_resources_sampled(tmp_path, tiny_dataset):
     row = pd.read_csv(res.results_csv).iloc[0]
     series = pd.read_csv(Path(row.run_dir) / "resources.csv")
     assert len(series) >= 4  # >= 2 Hz over ~2 s
-    assert row.cpu_peak_pct > 50 and row.ram_peak_mb > 5 and row.wall_s >= 2.0
+    # the CPU the process really got (its own process_time: less than a core when the machine is loaded); the
+    # sampled peak is at least the mean over its burn
+    burnt = re.search(r"burnt cpu_s=([\d.]+) in wall_s=([\d.]+)", (Path(row.run_dir) / "log.txt").read_text())
+    got_pct = 100 * float(burnt[1]) / float(burnt[2])
+    assert got_pct > 5 and row.cpu_peak_pct > 0.8 * got_pct, (row.cpu_peak_pct, got_pct)
+    assert row.ram_peak_mb > 5 and row.wall_s >= 2.0
     assert row.fps == pytest.approx(40 / row.wall_s)
 
 
