@@ -19,6 +19,7 @@ import pandas as pd
 import pytest
 
 from runner.datasets.synth import generate
+from tests.test_dataset_layouts import EUROC_SENSOR
 
 ROOT = Path(__file__).resolve().parents[1]
 LAYOUT_SEQUENCES = {
@@ -123,21 +124,6 @@ def test_euroc_raw_state_csv_says_its_frame_and_names_the_folder(campaign):
 # ---------------------------------------------------------------- real ground truth: evo's test data
 
 
-EUROC_V1_SENSOR = """sensor_type: camera
-T_BS:
-  cols: 4
-  rows: 4
-  data: [0.0148655429818, -0.999880929698, 0.00414029679422, -0.0216401454975,
-         0.999557249008, 0.0149672133247, 0.025715529948, -0.064676986768,
-        -0.0257744366974, 0.00375618835797, 0.999660727178, 0.00981073058949,
-         0.0, 0.0, 0.0, 1.0]
-rate_hz: 20
-resolution: [752, 480]
-camera_model: pinhole
-intrinsics: [458.654, 457.296, 367.215, 248.375]
-distortion_model: radial-tangential
-distortion_coefficients: [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05]
-"""
 T_BS = np.array(
     [
         [0.0148655429818, -0.999880929698, 0.00414029679422, -0.0216401454975],
@@ -176,7 +162,7 @@ def v1_02(shared_data, tmp_path) -> tuple[Path, Path]:
     cam = root / "mav0" / "cam0"
     image_files(cam / "data", [f"{v}.png" for v in ns], (752, 480))
     (cam / "data.csv").write_text("#timestamp [ns],filename\n" + "".join(f"{v},{v}.png\n" for v in ns))
-    (cam / "sensor.yaml").write_text(EUROC_V1_SENSOR)
+    (cam / "sensor.yaml").write_text(EUROC_SENSOR)
     (root / "mav0" / "state_groundtruth_estimate0").mkdir(parents=True)
     shutil.copyfile(evo_data / "V102_groundtruth.csv", root / "mav0" / "state_groundtruth_estimate0" / "data.csv")
     frame_t = body.timestamps[nearest[keep]]

@@ -6,6 +6,7 @@ naming the archive and the member, in bounded time and memory; a corrupt member 
 
 from __future__ import annotations
 
+import io
 import zipfile
 import zlib
 from pathlib import Path
@@ -50,32 +51,30 @@ def read_member(
     (its CRC, its data) is `error` naming `where`."""
     if info.file_size > limit:
         raise error(_too_large(where, info.file_size, limit, what))
-    chunks, size = [], 0
-    try:
-        with zf.open(info) as src:
-            while chunk := src.read(CHUNK):
-                size += len(chunk)
-                if size > info.file_size:
-                    raise error(f"{where}: holds more than the {info.file_size:,} bytes it states; refused")
-                chunks.append(chunk)
-    except ZIP_ERRORS as exc:
-        raise error(f"{where}: a damaged member ({exc})") from None
-    return b"".join(chunks)
+    out = io.BytesIO()
+    copy_member(zf, info, out, where, error)
+    return out.getvalue()
 
 
 def copy_member(
     zf: zipfile.ZipFile, info: zipfile.ZipInfo, out: BinaryIO, where: str, error: type[SlamRunError]
 ) -> int:
     """Inflate a member into `out`, counting its bytes against its stated size (a member that gives more is
-    `error`, as is a damaged one); returns the bytes written."""
+    `error`, as is a damaged one: an error reading it, never one writing `out`); returns the bytes written."""
     size = 0
     try:
-        with zf.open(info) as src:
-            while chunk := src.read(CHUNK):
-                size += len(chunk)
-                if size > info.file_size:
-                    raise error(f"{where}: holds more than the {info.file_size:,} bytes it states; refused")
-                out.write(chunk)
-    except (zipfile.BadZipFile, zlib.error, EOFError, RuntimeError, NotImplementedError) as exc:
+        src = zf.open(info)
+    except ZIP_ERRORS as exc:
         raise error(f"{where}: a damaged member ({exc})") from None
-    return size
+    with src:
+        while True:
+            try:
+                chunk = src.read(CHUNK)
+            except ZIP_ERRORS as exc:
+                raise error(f"{where}: a damaged member ({exc})") from None
+            if not chunk:
+                return size
+            size += len(chunk)
+            if size > info.file_size:
+                raise error(f"{where}: holds more than the {info.file_size:,} bytes it states; refused")
+            out.write(chunk)
