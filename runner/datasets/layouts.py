@@ -8,7 +8,9 @@ a validated `Sequence`.
 | tum-vi    | mav0/cam0/ and dso/camchain.yaml          | mav0/mocap0/data.csv + T_cam_imu (partial)           |
 | euroc     | mav0/cam0/ (no dso/camchain.yaml)         | mav0/state_groundtruth_estimate0/data.csv + T_BS     |
 | kitti     | image_0/ or calib.txt                     | ../../poses/NN.txt (00-10)                           |
+| icl-nuim  | a *.gt.freiburg, or associations.txt      | the *.gt.freiburg, mirrored into a y-down camera     |
 | tum-rgbd  | rgb.txt                                   | groundtruth.txt, nearest within 0.02 s               |
+| tartanair | image_left/ or pose_left.txt              | pose_left.txt, NED carried to the camera's axes      |
 | tum-mono  | times.txt or camera.txt                   | groundtruthSync.txt (start and end segments)         |
 
 A folder is of the first layout, in this order, that recognises it; plug-in layouts are tried after the built-in
@@ -24,7 +26,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import replace
 from pathlib import Path
 
-from runner.datasets import euroc, kitti, tum_mono, tum_rgbd, tum_vi
+from runner.datasets import euroc, icl_nuim, kitti, tartanair, tum_mono, tum_rgbd, tum_vi
 from runner.datasets.protocol import Layout
 from runner.datasets.sequence import Sequence, folder_identity
 from runner.errors import DatasetError, SlamRunError
@@ -33,11 +35,13 @@ BUILT_IN: tuple[Layout, ...] = (
     tum_vi.LAYOUT,
     euroc.LAYOUT,
     kitti.LAYOUT,
+    icl_nuim.LAYOUT,
     tum_rgbd.LAYOUT,
+    tartanair.LAYOUT,
     tum_mono.LAYOUT,
 )
 _BY_NAME = {layout.name: layout for layout in BUILT_IN}
-LAYOUTS = ("tum-mono", "euroc", "kitti", "tum-rgbd", "tum-vi")  # as the README lists them
+LAYOUTS = ("tum-mono", "euroc", "kitti", "tum-rgbd", "tum-vi", "icl-nuim", "tartanair")  # as the README lists them
 PLUGIN_GROUP = "slamrun.datasets"
 
 
