@@ -106,12 +106,12 @@ def cmd_synth(args) -> int:
 def cmd_list_datasets(args) -> int:
     from rich.table import Table
 
-    from runner.datasets.layouts import all_layouts, plugin_errors
+    from runner.datasets.layouts import get, names, plugin_errors
 
     t = Table(title="dataset layouts")
     for c in ("name", "dataset", "metrics", "synth", "download", "from"):
         t.add_column(c)
-    for layout in all_layouts():
+    for layout in (get(name) for name in names()):
         t.add_row(
             layout.name,
             layout.title,

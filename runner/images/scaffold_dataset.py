@@ -173,7 +173,7 @@ def write_synthetic(tmp: Path, s) -> list:
     t = 100.0 + np.arange(s.frames) / 30.0
     for i, img in s.images(cam):
         cv2.imwrite(str(tmp / FRAMES / f"{i:06d}.png"), img)
-    (tmp / LIST).write_text("# time_s,file\\n" + "".join(f"{t[i]:.6f},{i:06d}.png\\n" for i in range(s.frames)))
+    (tmp / LIST).write_text("# time_s,file\\n" + "".join(f"{t[i]:.9f},{i:06d}.png\\n" for i in range(s.frames)))
     (tmp / INTRINSICS).write_text(f"{cam.fx} {cam.fy} {cam.cx} {cam.cy} {w} {h}\\n")
     poses = s.poses_at(s.scene, np.arange(s.frames) / max(s.frames - 1, 1))
     q = rotmat_to_quat(poses[:, :3, :3])
