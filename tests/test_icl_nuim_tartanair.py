@@ -344,3 +344,15 @@ def test_icl_nuim_downloads_by_the_sites_archive_names(sequences, tmp_path):
 def test_synth_names_an_unknown_layout(tmp_path):
     out = slamrun("synth", tmp_path / "x", "--layout", "icl_nuim", "--frames", 30)
     assert out.returncode == 1 and "unknown layout 'icl_nuim'" in out.stderr and "icl-nuim" in out.stderr
+
+
+@pytest.mark.parametrize("name", ["icl-tartanair-demo.yaml", "icl-nuim.yaml"])
+def test_the_example_specs_load(name):
+    import methods
+    from runner.engine.spec import load_spec
+
+    spec = load_spec(ROOT / "configs" / name, check_files=False)
+    assert [d.layout for d in spec.datasets] == ["icl-nuim", "tartanair"]
+    assert all(d.metrics == ["ate", "rpe"] for d in spec.datasets)
+    for m in spec.methods:
+        methods.get(m.name)(m.params)  # their parameters are the methods' own
