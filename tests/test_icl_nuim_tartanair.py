@@ -218,6 +218,29 @@ def test_tartanair_problems_are_named_with_their_file_and_line(sequences, tmp_pa
         open_sequence(bad)
 
 
+def test_a_fifo_as_a_listing_a_ground_truth_or_a_frame_never_blocks(sequences, tmp_path):
+    """A FIFO nobody writes (a plain open() blocks for ever) in each file a reader opens: `slamrun validate` ends
+    at once naming it, as for every other layout (tests/test_bad_data.py)."""
+    import shutil
+
+    from tests.test_bad_data import refused
+
+    cases = [
+        ("icl-nuim", "associations.txt", "not a regular file"),
+        ("icl-nuim", "livingRoom0.gt.freiburg", "not a regular file"),
+        ("icl-nuim", "rgb/5.png", "FIFO"),
+        ("tartanair", "pose_left.txt", "not a regular file"),
+        ("tartanair", "image_left/000003_left.png", "FIFO"),
+    ]
+    for i, (layout, name, why) in enumerate(cases):
+        folder = tmp_path / f"data{i}" / NAMES[layout]
+        shutil.copytree(sequences[layout], folder, copy_function=os.link)
+        (folder / name).unlink()
+        os.mkfifo(folder / name)
+        (tmp_path / f"spec{i}").mkdir()
+        refused(folder, layout, tmp_path / f"spec{i}", name, why)
+
+
 # ---------------------------------------------------------------------------------------------------- end to end
 
 
