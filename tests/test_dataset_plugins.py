@@ -45,6 +45,8 @@ def installed(tmp_path_factory) -> dict:
         'broken = "slamrun_dataset_mylab.layout:NOPE"\n'
         'euroc = "slamrun_dataset_mylab.layout:LAYOUT"\n'
         'twice = "slamrun_dataset_mylab.layout:LAYOUT"\n'
+        'number = "slamrun_dataset_mylab.layout:MAX_GAP_S"\n'
+        'renamed = "slamrun_dataset_mylab.layout:LAYOUT"\n'
     )
     pyproject.write_text(pyproject.read_text().replace(':LAYOUT"\n', ':LAYOUT"\n' + extra, 1))
     site = tmp / "site"
@@ -57,14 +59,18 @@ def installed(tmp_path_factory) -> dict:
 
 
 def test_the_plugin_is_listed_with_its_package_and_the_broken_ones_are_named(installed):
-    listed = slamrun("list-datasets", env=installed["env"]).stdout
-    row = next(line for line in listed.splitlines() if "│ mylab" in line)
+    out = slamrun("list-datasets", env=installed["env"]).stdout
+    row = next(line for line in out.splitlines() if "│ mylab" in line)
     assert "slamrun-dataset-mylab 0.1.0" in row
+    listed = " ".join(out.split())  # rich wraps long lines
     assert "│ icl-nuim" in listed and "built-in" in listed
     assert "not registered: broken: plug-in slamrun_dataset_mylab.layout:NOPE" in listed
     assert "cannot be imported: AttributeError" in listed
     assert "not registered: euroc: plug-in" in listed and "is a built-in layout" in listed
     assert "not registered: twice: 'twice' is registered by 2 installed plug-ins" in listed
+    assert "not registered: number: plug-in slamrun_dataset_mylab.layout:MAX_GAP_S" in listed
+    assert "is float, not a runner.datasets.protocol.Layout" in listed
+    assert "not registered: renamed:" in listed and "its layout's name is 'mylab', not 'renamed'" in listed
     # without the package, nothing of it
     assert "mylab" not in slamrun("list-datasets").stdout
 

@@ -329,6 +329,9 @@ def test_evaluate_from_the_folder_equals_the_campaign_and_a_raw_file_says_what_i
     est = Path(df[df.dataset == "icl-nuim"].run_dir.iloc[0]) / "trajectory.txt"
     raw = slamrun("evaluate", "--gt", released, "--metric", "ate", est)
     assert "y-up camera (fy -480)" in raw.stderr and f"--gt {sequences['icl-nuim']}" in raw.stderr
+    raw = slamrun("evaluate", "--gt", sequences["tartanair"] / "pose_left.txt", est)  # no times: not a TUM file
+    assert raw.returncode == 1 and "Traceback" not in raw.stderr and len(raw.stderr.splitlines()) == 1
+    assert "no times and are in NED axes" in raw.stderr and f"--gt {sequences['tartanair']}" in raw.stderr
 
 
 # ---------------------------------------------------------------------------------------------------- download

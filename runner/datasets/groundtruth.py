@@ -20,7 +20,7 @@ from runner.core.batch_eval import MAX_FILE_BYTES, file_problem
 from runner.core.inputs import read_text_bounded
 from runner.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_times, read_tum
 from runner.datasets.euroc import EUROC_GT, asl_file_note, asl_folder
-from runner.datasets.layouts import DEFAULT_METRICS, GROUNDTRUTH_FILES, all_layouts, detect, names, open_sequence
+from runner.datasets.layouts import BUILT_IN, DEFAULT_METRICS, GROUNDTRUTH_FILES, detect, names, open_sequence
 from runner.datasets.tum_vi import TUMVI_GT
 from runner.errors import DatasetError
 
@@ -78,10 +78,15 @@ def open_groundtruth(
     if fmt == "kitti" and times is None:
         raise DatasetError(f"{path}: KITTI poses carry no timestamps: give the sequence's times.txt with --times")
     frame_times = read_frame_times(times) if times is not None else None
-    traj = _read_file(path, fmt, frame_times)
+    try:
+        traj = _read_file(path, fmt, frame_times)
+    except DatasetError as exc:
+        if (note := layout_note(path)) is None:
+            raise
+        raise DatasetError(f"{exc}. {note}") from None  # a layout's file in no format of evaluate's says so
+    notes = file_notes(path, fmt)
     if not np.isfinite(traj.positions).all(axis=1).any():
         raise DatasetError(f"{path}: no finite pose; expected {FORMAT_NAMES[fmt]}")
-    notes = file_notes(path, fmt)
     return GroundTruth(traj, path, None, FILE_DEFAULT_METRICS[fmt], frame_times, notes)
 
 
@@ -112,13 +117,21 @@ def sniff_format(path: Path, metrics: tuple[str, ...] | None) -> str:
     return "tum-mono" if not metrics or "tum-mono" in metrics else "tum"
 
 
+def layout_note(path: Path) -> str | None:
+    """A built-in layout's note on one of its ground-truth files (an ASL state csv of EuRoC or TUM-VI, ICL-NUIM's
+    *.gt.freiburg, TartanAir's pose_left.txt, ...), or None. Plug-ins are not loaded for a file (evaluating files
+    never pays for scanning the installed packages)."""
+    for layout in BUILT_IN:
+        if layout.file_note is not None and (note := layout.file_note(path)):
+            return note
+    return None
+
+
 def file_notes(path: Path, fmt: str) -> tuple[str, ...]:
     """What a ground-truth file given as it is means for the figures, where it is in another frame (or at other
-    times) than a campaign evaluates in: its layout's note (an ASL state csv of EuRoC or TUM-VI, ICL-NUIM's
-    *.gt.freiburg, ...), or the note of any ASL state csv."""
-    for layout in all_layouts():
-        if layout.file_note is not None and (note := layout.file_note(path)):
-            return (note,)
+    times) than a campaign evaluates in: its layout's note, or the note of any ASL state csv."""
+    if (note := layout_note(path)) is not None:
+        return (note,)
     if fmt == "euroc":
         return (asl_file_note(path, "the body (IMU) frame", "the camera's extrinsics"),)
     return ()

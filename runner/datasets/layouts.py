@@ -27,7 +27,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from runner.datasets import euroc, icl_nuim, kitti, tartanair, tum_mono, tum_rgbd, tum_vi
-from runner.datasets.protocol import Layout
+from runner.datasets.protocol import METRICS, Layout
 from runner.datasets.sequence import Sequence, folder_identity
 from runner.errors import DatasetError, SlamRunError
 
@@ -117,6 +117,12 @@ def _load(name: str, ep, provider: str, where: str) -> Layout | str:
         return f"plug-in {where} is {type(layout).__name__}, not a runner.datasets.protocol.Layout"
     if layout.name != name:
         return f"plug-in {where}: its layout's name is {layout.name!r}, not {name!r}"
+    if not (callable(layout.recognise) and callable(layout.read)):
+        return f"plug-in {where}: its layout's recognise and read must be functions"
+    if not (isinstance(layout.frame_list, str) and layout.frame_list):
+        return f"plug-in {where}: its layout's frame_list must be a relative path"
+    if not (isinstance(layout.default_metrics, tuple) and set(layout.default_metrics) <= set(METRICS)):
+        return f"plug-in {where}: its layout's default_metrics must be a tuple of {', '.join(METRICS)}"
     return _adopt(layout, provider)
 
 

@@ -17,6 +17,8 @@ if TYPE_CHECKING:  # the synthetic writers import the renderer (scipy) only when
     from runner.datasets.sequence import Sequence
     from runner.datasets.synth import Synth
 
+METRICS = ("tum-mono", "ate", "rpe", "kitti")  # the metrics a layout's default_metrics may name
+
 # (staged file, its place): files a synthetic writer puts beside the sequence's folder, moved there once the
 # folder is in place (KITTI's poses/NN.txt)
 Placed = list[tuple[Path, Path]]
@@ -57,7 +59,8 @@ class Layout:
     synthetic sequence into `tmp` and returns the files it staged beside it (`synth_outside(out)` names their
     places in advance, so that nothing of a user's is replaced). `identity(folder)`, when given, is the content
     digest of the sequence for run keys (default: its key files and frames). `file_note(path)` says what one of
-    the layout's ground-truth files given to `slamrun evaluate` as it is means, when it is one.
+    the layout's ground-truth files given to `slamrun evaluate` as it is means, when it is one (built-in layouts
+    only: evaluating a file never loads the plug-ins).
     """
 
     name: str
