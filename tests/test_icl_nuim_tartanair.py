@@ -367,6 +367,14 @@ def test_icl_nuim_downloads_by_the_sites_archive_names(sequences, tmp_path):
     assert out.returncode == 1 and "tartanair_tools" in out.stderr and "Traceback" not in out.stderr
 
 
+def test_icl_nuim_downloads_the_studys_eight_by_default():
+    from runner.datasets.download import remote_archives
+
+    names = icl_nuim.LAYOUT.download.names(None)
+    expected = [f"living_room_traj{k}_frei_png" for k in range(4)] + [f"traj{k}_frei_png" for k in range(4)]
+    assert remote_archives("icl-nuim", names, "http://m/") == [(n, f"http://m/{n}.tar.gz") for n in expected]
+
+
 def test_synth_names_an_unknown_layout(tmp_path):
     out = slamrun("synth", tmp_path / "x", "--layout", "icl_nuim", "--frames", 30)
     assert out.returncode == 1 and "unknown layout 'icl_nuim'" in out.stderr and "icl-nuim" in out.stderr

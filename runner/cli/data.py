@@ -27,8 +27,8 @@ def add_commands(sub) -> None:
     dl.add_argument(
         "--sequences",
         help="tum-mono: numbers and ranges (default 1-50); euroc: names (default all eleven, e.g. MH_01_easy); "
-        "tum-rgbd, tum-vi and icl-nuim: names, comma-separated (e.g. freiburg1_xyz,freiburg2_desk; room1,room2; "
-        "lr_kt0,of_kt2)",
+        "icl-nuim: names (default all eight, e.g. lr_kt0,of_kt2); tum-rgbd and tum-vi: names, comma-separated "
+        "(e.g. freiburg1_xyz,freiburg2_desk; room1,room2)",
     )
     dl.add_argument("--url", help="base address of the archives (a mirror; default: the dataset's site)")
     dl.set_defaults(func=cmd_download)

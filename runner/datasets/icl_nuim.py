@@ -228,6 +228,7 @@ LAYOUT = Layout(
         _archive,
         "lr_kt0-lr_kt3 and of_kt0-of_kt3 (living room, office), or the release's folder names such as "
         "living_room_traj0_frei_png and traj0_frei_png",
+        default=tuple(SCENES[scene].format(k=k) for scene in SCENES for k in range(4)),  # the study's eight
     ),
     file_note=file_note,
 )
