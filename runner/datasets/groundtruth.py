@@ -19,7 +19,9 @@ import numpy as np
 from runner.core.batch_eval import MAX_FILE_BYTES, file_problem
 from runner.core.inputs import read_text_bounded
 from runner.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_times, read_tum
-from runner.datasets.layouts import DEFAULT_METRICS, GROUNDTRUTH_FILES, LAYOUTS, detect, open_sequence
+from runner.datasets.euroc import EUROC_GT, asl_file_note, asl_folder
+from runner.datasets.layouts import BUILT_IN, DEFAULT_METRICS, GROUNDTRUTH_FILES, detect, names, open_sequence
+from runner.datasets.tum_vi import TUMVI_GT
 from runner.errors import DatasetError
 
 FILE_FORMATS = ("tum-mono", "tum", "euroc", "kitti")
@@ -35,12 +37,6 @@ FILE_DEFAULT_METRICS = {
     "tum": DEFAULT_METRICS["tum-rgbd"],
     "euroc": DEFAULT_METRICS["euroc"],
     "kitti": DEFAULT_METRICS["kitti"],
-}
-# an ASL csv's place in a sequence folder: (its folder under mav0/, the frame of its poses, how a campaign carries
-# them to the camera)
-BODY_FRAME_FILES = {
-    "state_groundtruth_estimate0": ("the body (IMU) frame", "the camera's T_BS"),
-    "mocap0": ("the IMU frame", "the camera's T_cam_imu"),
 }
 
 
@@ -82,10 +78,15 @@ def open_groundtruth(
     if fmt == "kitti" and times is None:
         raise DatasetError(f"{path}: KITTI poses carry no timestamps: give the sequence's times.txt with --times")
     frame_times = read_frame_times(times) if times is not None else None
-    traj = _read_file(path, fmt, frame_times)
+    try:
+        traj = _read_file(path, fmt, frame_times)
+    except DatasetError as exc:
+        if (note := layout_note(path)) is None:
+            raise
+        raise DatasetError(f"{exc}. {note}") from None  # a layout's file in no format of evaluate's says so
+    notes = file_notes(path, fmt)
     if not np.isfinite(traj.positions).all(axis=1).any():
         raise DatasetError(f"{path}: no finite pose; expected {FORMAT_NAMES[fmt]}")
-    notes = (frame_note(path),) if fmt == "euroc" else ()
     return GroundTruth(traj, path, None, FILE_DEFAULT_METRICS[fmt], frame_times, notes)
 
 
@@ -94,8 +95,9 @@ def sequence_groundtruth(root: Path) -> GroundTruth:
     layout = detect(root)
     if layout is None:
         raise DatasetError(
-            f"{root}: no sequence of a layout slamrun reads ({', '.join(LAYOUTS)}) in this folder (none of their "
-            "files: mav0/cam0/, image_0/, rgb.txt, times.txt); expected a sequence folder or a ground-truth file"
+            f"{root}: no sequence of a layout slamrun reads ({', '.join(names())}) in this folder (none of their "
+            "files: mav0/cam0/, image_0/, rgb.txt, associations.txt, image_left/, times.txt, ...); expected a "
+            "sequence folder or a ground-truth file"
         )
     seq = open_sequence(root, layout)
     gt = seq.groundtruth()
@@ -115,23 +117,30 @@ def sniff_format(path: Path, metrics: tuple[str, ...] | None) -> str:
     return "tum-mono" if not metrics or "tum-mono" in metrics else "tum"
 
 
-def frame_note(path: Path) -> str:
-    """What an ASL state csv given as it is means for the figures, and the folder form that evaluates as the
-    campaign does."""
-    frame, how = BODY_FRAME_FILES.get(path.parent.name, ("the body (IMU) frame", "the camera's extrinsics"))
-    return (
-        f"{path}: an ASL state csv holds the poses of {frame} at its own times; a campaign evaluates the camera's "
-        f"poses at the frames (carried by {how}, interpolated), so figures against this file differ from "
-        f"results.csv's. To evaluate as the campaign does, give the sequence folder: --gt {sequence_folder(path)}"
-    )
+def layout_note(path: Path) -> str | None:
+    """A built-in layout's note on one of its ground-truth files (an ASL state csv of EuRoC or TUM-VI, ICL-NUIM's
+    *.gt.freiburg, TartanAir's pose_left.txt, ...), or None. Plug-ins are not loaded for a file (evaluating files
+    never pays for scanning the installed packages)."""
+    for layout in BUILT_IN:
+        if layout.file_note is not None and (note := layout.file_note(path)):
+            return note
+    return None
+
+
+def file_notes(path: Path, fmt: str) -> tuple[str, ...]:
+    """What a ground-truth file given as it is means for the figures, where it is in another frame (or at other
+    times) than a campaign evaluates in: its layout's note, or the note of any ASL state csv."""
+    if (note := layout_note(path)) is not None:
+        return (note,)
+    if fmt == "euroc":
+        return (asl_file_note(path, "the body (IMU) frame", "the camera's extrinsics"),)
+    return ()
 
 
 def sequence_folder(path: Path) -> str:
     """The sequence folder an ASL csv lies in (SEQ/mav0/NAME/data.csv), or a placeholder."""
-    parts = path.parts
-    if len(parts) >= 3 and parts[-3] == "mav0" and parts[-2] in BODY_FRAME_FILES:
-        return str(Path(*parts[:-3]))
-    return "SEQUENCE_FOLDER"
+    found = (asl_folder(path, rel) for rel in (EUROC_GT, TUMVI_GT))
+    return next((folder for folder in found if folder is not None), "SEQUENCE_FOLDER")
 
 
 def read_frame_times(path: Path) -> np.ndarray:

@@ -1,17 +1,20 @@
 """KITTI odometry sequences: `sequences/NN/` with `image_0/` (the left grey camera, already rectified), `times.txt`
 (seconds, one per frame) and `calib.txt` (P0: the 3x4 projection of camera 0); ground truth `poses/NN.txt` beside
-`sequences/` (sequences 00-10): one 3x4 camera-to-world row per frame, no timestamps of its own.
+`sequences/` (sequences 00-10): one 3x4 camera-to-world row per frame, no timestamps of its own. Written
+synthetically with its poses beside the sequences' folder; not downloaded (its site asks each user to register).
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from runner.core.camera import CameraFile, FovCamera
 from runner.core.trajectory import Trajectory, from_matrices
 from runner.datasets import frames
+from runner.datasets.protocol import Layout, Placed
 from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
     MAX_POSITION_M,
@@ -23,6 +26,9 @@ from runner.datasets.sequence import (
     time_problem,
 )
 from runner.errors import DatasetError
+
+if TYPE_CHECKING:
+    from runner.datasets.synth import Synth
 
 
 def poses_path(root: Path) -> Path:
@@ -168,3 +174,69 @@ def _first_frame_size(images: Path) -> tuple[int, int] | None:
             return None
         size = (img.shape[1], img.shape[0])
     return size
+
+
+# ---------------------------------------------------------------------------------------------------- the layout
+
+
+def recognise(root: Path) -> bool:
+    """image_0/ or calib.txt."""
+    return (root / "image_0").is_dir() or (root / "calib.txt").exists()
+
+
+def synth_outside(out: Path) -> tuple[Path, ...]:
+    """The synthetic sequence's poses: poses/NN.txt beside the sequences' folder."""
+    return (poses_path(out),)
+
+
+def write_synthetic(tmp: Path, s: Synth) -> Placed:
+    """The sequence in KITTI's layout: image_0/NNNNNN.png, irregular-looking times about 10 Hz, calib.txt's P0-P3
+    and Tr, and the camera poses relative to the first camera, staged beside the folder for poses/NN.txt."""
+    import cv2
+
+    from runner.core.camera import PinholeCamera
+    from runner.datasets.synth import savetxt
+
+    w, h = s.size
+    f = 0.55 * w
+    cam = PinholeCamera(w, h, f, f, w / 2 - 0.5, h / 2 - 0.5)
+    images = tmp / "image_0"
+    images.mkdir()
+    for i, img in s.images(cam):
+        cv2.imwrite(str(images / f"{i:06d}.png"), img)
+    t = np.arange(s.frames) * 0.1036  # about 10 Hz, KITTI's irregular-looking step
+    (tmp / "times.txt").write_text("".join(f"{v:e}\n" for v in t))
+
+    def p(tx: float) -> str:  # a 3x4 projection row-major, KITTI's %e style
+        return " ".join(f"{v:e}" for v in (f, 0, cam.cx, tx, 0, f, cam.cy, 0, 0, 0, 1, 0))
+
+    (tmp / "calib.txt").write_text(
+        f"P0: {p(0.0)}\nP1: {p(-0.54 * f)}\nP2: {p(0.0)}\nP3: {p(-0.54 * f)}\nTr: 1 0 0 0 0 1 0 0 0 0 1 0\n"
+    )
+    poses = s.poses_at(s.scene, np.arange(s.frames) / max(s.frames - 1, 1))
+    relative = np.linalg.inv(poses[0]) @ poses  # KITTI: camera poses in the first camera's frame
+    rows = relative[:, :3, :].reshape(len(relative), 12)
+    staged = tmp.parent / f".{s.name}.poses.tmp"
+    savetxt(staged, rows, fmt="%e")
+    return [(staged, tmp.parent.parent / "poses" / f"{s.name}.txt")]
+
+
+KITTI_HOWTO = (
+    "KITTI odometry is not downloaded by slamrun: its site (https://www.cvlibs.net/datasets/kitti/eval_odometry.php) "
+    "asks each user to register and agree to its terms. Download data_odometry_gray.zip, data_odometry_calib.zip and "
+    "data_odometry_poses.zip there, unpack them into one folder (they share dataset/sequences/NN/ and add "
+    "dataset/poses/), and give a spec `layout: kitti` with `path: <folder>/dataset/sequences` and sequences such as "
+    '["00", "05"] (ground truth for 00-10).'
+)
+LAYOUT = Layout(
+    name="kitti",
+    title="KITTI odometry (sequences/NN, the left grey camera; poses/NN.txt for 00-10)",
+    recognise=recognise,
+    frame_list="times.txt",
+    read=open_kitti,
+    groundtruth_file="poses/NN.txt beside sequences/",
+    default_metrics=("ate", "rpe", "kitti"),
+    synth=write_synthetic,
+    synth_outside=synth_outside,
+    manual_download=KITTI_HOWTO,
+)

@@ -1,11 +1,19 @@
-"""Open and validate a TUM-Mono sequence folder; every problem is reported with its file."""
+"""TUM monoVO (TUM-Mono): `sequence_XX/` with `images.zip` (or `images/`), `times.txt` (`id timestamp
+exposure_ms`), `camera.txt` (the FOV camera), the photometric calibration (`pcalib.txt`, `vignette.png`) and
+`groundtruthSync.txt` (the start and end segments' poses, NaN rows between). Opened and validated here (every
+problem reported with its file); written synthetically with its photometric model; downloaded as the site's
+`sequence_XX.zip`.
+"""
 
 from __future__ import annotations
 
 import functools
 import io
+import math
+import os
 import zipfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -14,6 +22,7 @@ from runner.core.camera import CameraFile, read_camera_txt
 from runner.core.inputs import read_bounded
 from runner.core.trajectory import Trajectory
 from runner.datasets import frames
+from runner.datasets.protocol import Download, Layout, Placed
 from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
     Sequence,
@@ -25,6 +34,9 @@ from runner.datasets.sequence import (
     time_problem,
 )
 from runner.errors import DatasetError
+
+if TYPE_CHECKING:
+    from runner.datasets.synth import Synth
 
 REQUIRED = ("times.txt", "camera.txt", "pcalib.txt", "vignette.png")
 TEXT_FILES = ("times.txt", "camera.txt", "pcalib.txt", "groundtruthSync.txt")
@@ -276,3 +288,91 @@ def _identity(root: Path, stamp: tuple) -> str:
             if head is not None:  # a frame (a FIFO or a device is never opened: validation names it)
                 h.update(f"{p.name}|{p.stat().st_size}|".encode() + hashlib.sha256(head).digest())
     return h.hexdigest()[:10]
+
+
+# ---------------------------------------------------------------------------------------------------- the layout
+
+
+def recognise(root: Path) -> bool:
+    """times.txt or camera.txt (and none of KITTI's image_0/ and calib.txt, which has a times.txt too)."""
+    kitti = (root / "image_0").is_dir() or (root / "calib.txt").exists()
+    return not kitti and ((root / "times.txt").exists() or (root / "camera.txt").exists())
+
+
+def write_synthetic(tmp: Path, s: Synth) -> Placed:
+    """The sequence in TUM-Mono's layout: JPEG frames in images.zip through a response curve, a vignette and
+    per-frame exposures (times.txt), the FOV camera, and the ground truth of the start and end segments."""
+    import cv2
+    from scipy.spatial.transform import Rotation
+
+    from runner.core.camera import write_camera_txt
+    from runner.datasets import synth as sy
+
+    n = s.frames
+    cam = sy.default_camera(*s.size)
+    vignette = sy.vignette_image(cam)
+    t = 1.0 + np.arange(n) / sy.FPS
+    exposure = 8.0 * (1.0 + 0.25 * np.sin(2 * np.pi * np.arange(n) / 97.0))
+    with zipfile.ZipFile(tmp / "images.zip", "w", zipfile.ZIP_STORED) as zf:
+        for i, img in s.images(cam, exposure, vignette):
+            ok, jpg = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 95])
+            entry = zipfile.ZipInfo(f"{i:05d}.jpg", date_time=(1980, 1, 1, 0, 0, 0))  # deterministic bytes
+            zf.writestr(entry, jpg.tobytes())
+    with open(tmp / "times.txt", "w") as f:
+        for i in range(n):
+            f.write(f"{i:05d} {t[i]:.6f} {exposure[i]:.6f}\n")
+    out_size = (640, 480) if s.size[0] >= 640 and s.size[1] >= 480 else s.size  # TUM-Mono's output size
+    write_camera_txt(tmp / "camera.txt", cam, "crop", out_size)
+    (tmp / "pcalib.txt").write_text(" ".join(f"{v:.9g}" for v in sy.inverse_response()) + "\n")
+    cv2.imwrite(str(tmp / "vignette.png"), np.rint(vignette / vignette.max() * 65535).astype(np.uint16))
+    rots, positions = sy.camera_path(s.scene, n)
+    gt = np.column_stack([t, positions, Rotation.from_matrix(rots).as_quat()])
+    sy.savetxt(tmp / "groundtruth_full.txt", gt)
+    n_seg = max(int(math.floor(sy.GT_FRACTION * n)), 3)
+    gt_sync = gt.copy()
+    gt_sync[n_seg : n - n_seg, 1:] = np.nan
+    sy.savetxt(tmp / "groundtruthSync.txt", gt_sync)
+    return []
+
+
+URL = os.environ.get("SLAMRUN_TUM_MONO_URL", "https://vision.in.tum.de/mono/dataset")
+
+
+def parse_sequences(text: str) -> list[int]:
+    """'1-5,7,10-12' → [1, 2, 3, 4, 5, 7, 10, 11, 12] (TUM-Mono numbers 1..50)."""
+    from runner.datasets.download import parse_numbers
+
+    out = parse_numbers(text)
+    bad = [n for n in out if not 1 <= n <= 50]
+    if bad:
+        raise DatasetError(f"--sequences {text!r}: TUM-Mono has sequences 1 to 50, not {bad}")
+    return out
+
+
+def _archive(name: str, base: str) -> tuple[str, str] | None:
+    """sequence_XX (or XX) → its folder and the site's sequence_XX.zip."""
+    number = name.removeprefix("sequence_")
+    if not (number.isdigit() and 1 <= int(number) <= 50):
+        return None
+    folder = f"sequence_{int(number):02d}"
+    return folder, f"{base}/{folder}.zip"
+
+
+LAYOUT = Layout(
+    name="tum-mono",
+    title="TUM monoVO (photometric calibration; ground truth at the start and end)",
+    recognise=recognise,
+    frame_list="times.txt",
+    read=open_sequence,
+    groundtruth_file="groundtruthSync.txt",
+    default_metrics=("tum-mono",),
+    synth=write_synthetic,
+    download=Download(
+        URL,
+        _archive,
+        "1 to 50",
+        default=tuple(f"sequence_{n:02d}" for n in range(1, 51)),
+        parse=lambda text: [f"sequence_{n:02d}" for n in parse_sequences(text)],
+    ),
+    identity=sequence_identity,
+)

@@ -1,13 +1,16 @@
 """TUM RGB-D sequences (`rgbd_dataset_freiburgN_...`): `rgb.txt` (`timestamp rgb/<timestamp>.png` rows after `#`
 comments), the colour frames in `rgb/`, and `groundtruth.txt` (TUM format, motion capture at 100 Hz). The camera is
 one of the three the benchmark publishes, chosen by `freiburg1`, `freiburg2` or `freiburg3` in the folder's name.
-Ground truth is associated with the frames as TUM's tools do: the nearest pose within 0.02 s.
+Ground truth is associated with the frames as TUM's tools do: the nearest pose within 0.02 s. Written synthetically
+with the named camera, colour frames and a 100 Hz ground truth on its own clock; downloaded as the site's .tgz.
 """
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -15,6 +18,7 @@ from runner.core.camera import CameraFile, FovCamera, PinholeCamera, RadTanCamer
 from runner.core.metrics import poses_at
 from runner.core.trajectory import Trajectory, read_tum
 from runner.datasets import frames
+from runner.datasets.protocol import Download, Layout, Placed
 from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
     Sequence,
@@ -24,6 +28,9 @@ from runner.datasets.sequence import (
     time_problem,
 )
 from runner.errors import DatasetError, TrajectoryFormatError
+
+if TYPE_CHECKING:
+    from runner.datasets.synth import Synth
 
 ASSOCIATION_S = 0.02
 WIDTH, HEIGHT = 640, 480
@@ -123,3 +130,72 @@ def _read_listing(path: Path, problems: list[str]) -> tuple[list[str], np.ndarra
         problems.append(f"{path}: times not strictly increasing (frame {int(bad[0]) + 2})")
         return [], None
     return names, t
+
+
+# ---------------------------------------------------------------------------------------------------- the layout
+
+
+def recognise(root: Path) -> bool:
+    """rgb.txt (and no ICL-NUIM *.gt.freiburg: a TUM-compatible ICL-NUIM sequence given an rgb.txt is ICL-NUIM)."""
+    return (root / "rgb.txt").exists() and not any(root.glob("*.gt.freiburg"))
+
+
+def synth_name_problem(name: str) -> str | None:
+    """A synthetic TUM RGB-D sequence takes the published camera its name names."""
+    if re.search(r"freiburg[123]", name):
+        return None
+    return (
+        f"{name!r}: a synthetic TUM RGB-D sequence takes the camera of its name: name it with freiburg1, freiburg2 "
+        "or freiburg3 (e.g. rgbd_dataset_freiburg1_room)"
+    )
+
+
+def write_synthetic(tmp: Path, s: Synth) -> Placed:
+    """The sequence in TUM RGB-D's layout: colour PNGs named by their (slightly irregular) 30 Hz times, rgb.txt,
+    and the motion capture's poses at 100 Hz on its own clock ticks, 4 decimals as the benchmark writes them."""
+    import cv2
+
+    from runner.datasets.synth import loop_fraction, tum_rows
+
+    cam = camera_for(Path(s.name)).camera
+    rgb = tmp / "rgb"
+    rgb.mkdir()
+    t = 1305031102.175304 + np.arange(s.frames) / 30.0 + (np.arange(s.frames) % 4) * 0.0011
+    names = [f"rgb/{v:.6f}.png" for v in t]
+    for i, img in s.images(cam):
+        cv2.imwrite(str(tmp / names[i]), cv2.cvtColor(img, cv2.COLOR_GRAY2BGR))
+    (tmp / "rgb.txt").write_text(
+        f"# color images\n# file: '{s.name}.bag'\n# timestamp filename\n"
+        + "".join(f"{v:.6f} {n}\n" for v, n in zip(t, names, strict=True))
+    )
+    t_gt = np.arange(t[0] - 0.05 + 0.0043, t[-1] + 0.05, 0.01)  # motion capture at 100 Hz, its own clock ticks
+    frac = loop_fraction(t_gt, t)
+    rows = tum_rows(t_gt, s.poses_at(s.scene, frac))
+    (tmp / "groundtruth.txt").write_text(
+        f"# ground truth trajectory\n# file: '{s.name}.bag'\n# timestamp tx ty tz qx qy qz qw\n"
+        + "".join(f"{r[0]:.4f} " + " ".join(f"{v:.4f}" for v in r[1:]) + "\n" for r in rows)
+    )
+    return []
+
+
+URL = os.environ.get("SLAMRUN_TUM_RGBD_URL", "https://vision.in.tum.de/rgbd/dataset")
+
+
+def _archive(name: str, base: str) -> tuple[str, str] | None:
+    full = name if name.startswith("rgbd_dataset_") else f"rgbd_dataset_{name}"
+    found = re.fullmatch(r"rgbd_dataset_(freiburg[123])_[a-z0-9_]+", full)
+    return None if found is None else (full, f"{base}/{found.group(1)}/{full}.tgz")
+
+
+LAYOUT = Layout(
+    name="tum-rgbd",
+    title="TUM RGB-D (the colour camera; motion-capture ground truth)",
+    recognise=recognise,
+    frame_list="rgb.txt",
+    read=open_tum_rgbd,
+    groundtruth_file="groundtruth.txt",
+    synth=write_synthetic,
+    synth_name_problem=synth_name_problem,
+    fixed_size=(WIDTH, HEIGHT),
+    download=Download(URL, _archive, "rgbd_dataset_freiburg1_xyz, freiburg2_desk, ... (the benchmark's folder names)"),
+)

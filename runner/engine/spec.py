@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 import methods
 from runner.core.inputs import expanded_size, read_text_bounded
 from runner.datasets.generated import target_problem
+from runner.datasets.layouts import get as get_layout
 from runner.datasets.layouts import holds_sequence
 from runner.datasets.view import Direction
 from runner.engine.folders import (
@@ -27,7 +28,7 @@ from runner.engine.folders import (
     output_folder_problem,
     path_part_problem,
 )
-from runner.errors import SlamRunError, SpecError
+from runner.errors import DatasetError, SlamRunError, SpecError
 
 
 class Strict(BaseModel):
@@ -57,11 +58,22 @@ class DatasetSpec(Strict):
     name: str = Field(description="Dataset name, e.g. tum-mono.")
     path: Path = Field(description="Folder holding one folder per sequence.")
     sequences: list[str] = Field(min_length=1, description="Sequence folder names, e.g. sequence_01.")
-    layout: Literal["tum-mono", "euroc", "kitti", "tum-rgbd", "tum-vi"] = Field(
+    layout: str = Field(
         "tum-mono",
-        description="The sequences' layout: TUM-Mono, EuRoC (ASL), KITTI odometry (sequences/NN), TUM RGB-D, TUM-VI; "
-        "each sequence folder must be of it (recognised from its files), and synthetic sequences are written in it.",
+        description="The sequences' layout: tum-mono, euroc (ASL), kitti (sequences/NN), tum-rgbd, tum-vi, icl-nuim, "
+        "tartanair, or a plug-in's (slamrun list-datasets); each sequence folder must be of it (recognised from its "
+        "files), and synthetic sequences are written in it.",
     )
+
+    @field_validator("layout")
+    @classmethod
+    def _known_layout(cls, v: str) -> str:
+        try:
+            get_layout(v)
+        except DatasetError as exc:
+            raise ValueError(str(exc)) from None
+        return v
+
     synthetic: SynthSpec | None = Field(None, description="Generate missing sequences with `slamrun synth`.")
     metrics: list[Literal["tum-mono", "ate", "rpe", "kitti"]] | None = Field(
         None,
@@ -419,6 +431,9 @@ def _file_problems(spec: CampaignSpec, results_source: str = "results") -> list[
     problems = output_problems(spec, results_source)
     for d, ds in enumerate(spec.datasets):
         if ds.synthetic is not None:
+            if get_layout(ds.layout).synth is None:
+                problems.append(f"datasets[{d}].synthetic: layout {ds.layout} has no synthetic writer")
+                continue
             if ds.path.exists() and not ds.path.is_dir():
                 problems.append(f"datasets[{d}].path: {ds.path} exists and is not a folder")
                 continue
@@ -426,11 +441,8 @@ def _file_problems(spec: CampaignSpec, results_source: str = "results") -> list[
                 folder = ds.path / seq
                 if not holds_sequence(folder) and (why := target_problem(folder)):
                     problems.append(f"datasets[{d}].sequences[{s}]: {why}")
-                if ds.layout == "tum-rgbd" and not re.search(r"freiburg[123]", seq):
-                    problems.append(
-                        f"datasets[{d}].sequences[{s}]: {seq!r}: a synthetic TUM RGB-D sequence takes the camera "
-                        "of its name: name it with freiburg1, freiburg2 or freiburg3 (e.g. rgbd_dataset_freiburg1_room)"
-                    )
+                if (check := get_layout(ds.layout).synth_name_problem) is not None and (why := check(seq)):
+                    problems.append(f"datasets[{d}].sequences[{s}]: {why}")
             continue
         if not ds.path.is_dir():
             problems.append(f"datasets[{d}].path: folder {ds.path} not found (download it: slamrun dataset download)")
