@@ -261,7 +261,8 @@ def test_a_campaign_carries_the_sampled_gpu_columns_into_results_csv(tmp_path):
 
 # what the GPU machine has (issue 41's brief; pip, and setuptools as PyTorch requires it on Python 3.12): their
 # installed closure is seen by the fresh venv, nothing else
-MACHINE = "numpy scipy pandas pyarrow opencv-python-headless matplotlib psutil rich pyyaml requests pip setuptools".split()
+MACHINE = "numpy scipy pandas pyarrow opencv-python-headless matplotlib psutil rich pyyaml requests pip".split()
+MACHINE.append("setuptools")
 
 
 def closure(names: list[str]) -> set[str]:
