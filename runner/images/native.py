@@ -28,9 +28,14 @@ from runner.images import sources as src
 from runner.images.build import ROOT, BuildOptions, _weights_file, model_choice
 
 PATCHES = ROOT / "docker" / "dpvo" / "patches.py"
+DEFAULT_CUDA = "/usr/local/cuda"
 EIGEN_CANDIDATES = ("/usr/include/eigen3", "/usr/local/include/eigen3")
 EXTENSIONS = ("cuda_corr", "cuda_ba", "lietorch_backends")
 STANDIN_SEED = 0
+# A random network's flow head gives sub-pixel updates, which DPVO's motion probe (median >= 2 px before it starts)
+# takes for a still camera: it would never initialise. The stand-in's flow head (update.d, Linear(384, 2)) is scaled
+# so that its updates are a few pixels and the whole pipeline runs (patches, BA, keyframes, terminate).
+STANDIN_FLOW_GAIN = 16.0
 TAIL_LINES = 30
 
 
@@ -66,15 +71,18 @@ def eigen_dir(given: Path | None) -> Path:
 
 
 def cuda_home() -> Path:
-    """The CUDA toolkit: $CUDA_HOME, else the one of the nvcc on PATH."""
+    """The CUDA toolkit: $CUDA_HOME, else the one of the nvcc on PATH, else /usr/local/cuda (as PyTorch looks)."""
     if home := os.environ.get("CUDA_HOME") or os.environ.get("CUDA_PATH"):
         if (Path(home) / "bin" / "nvcc").is_file():
             return Path(home)
         raise NativeBuildError(f"CUDA_HOME={home} holds no bin/nvcc: point it at the CUDA toolkit")
-    nvcc = shutil.which("nvcc")
-    if nvcc is None:
-        raise NativeBuildError("no nvcc on PATH and no $CUDA_HOME: DPVO's extensions need the CUDA compiler")
-    return Path(nvcc).resolve().parent.parent
+    if nvcc := shutil.which("nvcc"):
+        return Path(nvcc).resolve().parent.parent
+    if Path(DEFAULT_CUDA, "bin", "nvcc").is_file():
+        return Path(DEFAULT_CUDA)
+    raise NativeBuildError(
+        f"no nvcc on PATH, in $CUDA_HOME or in {DEFAULT_CUDA}: DPVO's extensions need the CUDA compiler"
+    )
 
 
 def local_arch() -> str:
@@ -217,22 +225,29 @@ def place_weights(opts: NativeOptions, model: str, tree: Path, stage: Path, log:
         shutil.copyfile(given, dest)
         note = f"{WEIGHTS_NAME}: {given.name} sha256 {src.file_sha256(dest)}"
     else:
-        standin_network(opts.python, tree, dest, STANDIN_SEED)
+        standin_network(opts.python, tree, dest, STANDIN_SEED, STANDIN_FLOW_GAIN)
         note = (
-            f"untrained stand-in with {WEIGHTS_NAME}'s interface (random init, torch seed {STANDIN_SEED}, sha256 "
-            f"{src.file_sha256(dest)}): plumbing only, NOT the trained network, accuracy meaningless"
+            f"untrained stand-in with {WEIGHTS_NAME}'s interface (random init, torch seed {STANDIN_SEED}, flow head x"
+            f"{STANDIN_FLOW_GAIN:g}, sha256 {src.file_sha256(dest)}): plumbing only, NOT the trained network, "
+            "accuracy meaningless"
         )
     log(f"network: {note}")
     return note
 
 
-def standin_network(python: str, tree: Path, dest: Path, seed: int) -> None:
-    """DPVO's VONet with random weights from `seed`, saved as a state dict (needs the compiled extensions)."""
+def standin_network(python: str, tree: Path, dest: Path, seed: int, flow_gain: float) -> None:
+    """DPVO's VONet with random weights from `seed`, its flow head scaled by `flow_gain`, saved as a state dict
+    (needs the compiled extensions, not a GPU)."""
     code = (
-        "import sys, torch; sys.path.insert(0, sys.argv[1]); torch.manual_seed(int(sys.argv[3])); "
-        "from dpvo.net import VONet; torch.save(VONet().state_dict(), sys.argv[2])"
+        "import sys, torch; sys.path.insert(0, sys.argv[1]); torch.manual_seed(int(sys.argv[3]))\n"
+        "from dpvo.net import VONet\n"
+        "net = VONet()\n"
+        "with torch.no_grad():\n"
+        "    for p in net.update.d[1].parameters(): p.mul_(float(sys.argv[4]))\n"
+        "torch.save(net.state_dict(), sys.argv[2])\n"
     )
-    res = subprocess.run([python, "-c", code, str(tree), str(dest), str(seed)], capture_output=True, text=True)
+    argv = [python, "-c", code, str(tree), str(dest), str(seed), str(flow_gain)]
+    res = subprocess.run(argv, capture_output=True, text=True)
     if res.returncode != 0:
         raise NativeBuildError(f"the stand-in network could not be made: {_last_line(res.stderr)}")
 
