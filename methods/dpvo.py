@@ -153,10 +153,10 @@ def native_problems(build: Path, weights: str | None) -> list[str]:
     torch = installed_torch()
     if torch is None:
         return [f"dpvo runs on PyTorch, which this Python ({sys.executable}) lacks: install it, then {how}"]
-    if record.get("torch") != torch:
+    if record.get("torch_dist") != torch:  # the distribution's version (torch.__version__ may add +cuXXX)
         return [
-            f"dpvo's native build at {build} was made for PyTorch {record.get('torch')}, this Python has {torch}: "
-            f"rebuild it (`slamrun native-build dpvo`)"
+            f"dpvo's native build at {build} was made for PyTorch {record.get('torch_dist')}, this Python has "
+            f"{torch}: rebuild it (`slamrun native-build dpvo`)"
         ]
     if weights is not None:
         return [] if Path(weights).is_file() else [f"dpvo: params.weights: {weights} not found"]

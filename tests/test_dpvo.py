@@ -198,7 +198,8 @@ def test_registered_native_needing_a_gpu_with_its_image_not_built_yet():
 def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:
     """A native build folder as `slamrun native-build dpvo` leaves it (its record and network file)."""
     folder.mkdir(parents=True)
-    (folder / "build.json").write_text(json.dumps({"torch": torch, "tree": "t", "weights_file": "weights/dpvo.pth"}))
+    record = {"torch": f"{torch}+cu130", "torch_dist": torch, "tree": "t", "weights_file": "weights/dpvo.pth"}
+    (folder / "build.json").write_text(json.dumps(record))
     if weights:
         (folder / "weights").mkdir()
         (folder / "weights" / "dpvo.pth").write_bytes(b"net")

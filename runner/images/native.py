@@ -104,7 +104,10 @@ def local_arch() -> str:
 
 def torch_info(python: str) -> dict:
     """PyTorch's version and CUDA version in `python` (a subprocess: importing it takes seconds)."""
-    code = "import json, torch; print(json.dumps({'torch': torch.__version__, 'cuda': torch.version.cuda}))"
+    code = (  # torch_dist: the installed distribution's version, as methods.dpvo reads it without importing torch
+        "import json, torch, importlib.metadata as md; print(json.dumps({'torch': torch.__version__, "
+        "'torch_dist': md.version('torch'), 'cuda': torch.version.cuda}))"
+    )
     res = subprocess.run([python, "-c", code], capture_output=True, text=True)
     if res.returncode != 0:
         raise NativeBuildError(f"{python} cannot import PyTorch: {_last_line(res.stderr)}; install a CUDA build of it")
