@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 SPEC   ?= configs/demo.yaml
 ARGS   ?=
 
-.PHONY: install campaign test bench lint images verify-images paper clean
+.PHONY: install campaign test bench lint images verify-images paper clean gpu-wheels gpu-check
 
 install: $(VENV)/.installed
 
@@ -42,3 +42,15 @@ paper: install
 
 clean:
 	rm -rf $(VENV) results .cache
+
+# The GPU check (scripts/gpu-check.sh): `make gpu-wheels` here fills .whl/ with what a GPU machine without network
+# lacks (wheels for Python $(GPU_PY), Eigen's headers, DPVO's archive); there, `make gpu-check OUT=DIR`.
+WHEELS ?= .whl
+GPU_PY ?= 3.12
+OUT ?= gpu-check-out
+
+gpu-wheels:
+	PY=$(PYTHON) scripts/gpu-wheels.sh $(WHEELS) $(GPU_PY)
+
+gpu-check:
+	WHEELS=$(WHEELS) bash scripts/gpu-check.sh $(OUT)

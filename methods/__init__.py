@@ -17,6 +17,7 @@ from methods.cnn_dso import CnnDso
 from methods.cnn_svo import CnnSvo
 from methods.colmap import Colmap
 from methods.df_orb_slam import DfOrbSlam
+from methods.dpvo import Dpvo
 from methods.dsm import Dsm
 from methods.dso import Dso
 from methods.dynaslam import DynaSlam
@@ -45,6 +46,7 @@ REGISTRY: dict[str, type[Method]] = {
         ReferenceVO,
         Colmap,
         External,
+        Dpvo,
     )
 }
 

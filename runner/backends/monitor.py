@@ -7,6 +7,7 @@ there is no GPU, never zero.
 from __future__ import annotations
 
 import csv
+import subprocess
 import threading
 import time
 from collections.abc import Callable
@@ -65,17 +66,28 @@ class ResourceSeries:
                 )
 
 
+UTIL_WINDOW_S = 1.0  # per-process utilisation: NVML's samples of the last second (its sample period is shorter)
+NVML_NO_SAMPLE = (0, 6)  # NVML_SUCCESS with no sample, NVML_ERROR_NOT_FOUND: nothing ran kernels in the window
+
+
 class Gpu:
-    """Per-process GPU memory and device utilisation through NVML, when a GPU and nvidia-ml-py exist."""
+    """Per-process GPU memory and utilisation through NVML (nvidia-ml-py's `pynvml`), where a GPU and a driver are.
 
-    def __init__(self) -> None:
+    `nvml` is the NVML module (a stand-in in tests). Memory is what the run's processes hold on all devices; the
+    utilisation is the SM % the run's processes used on the busiest device (NVML's per-process samples of the last
+    second), or, where a device has no per-process accounting, that device's whole utilisation while the run holds
+    memory on it. A device call that fails counts as nothing held and nothing used, and never stops the sampling.
+    """
+
+    def __init__(self, nvml=None) -> None:
         self.handles = []
+        self.nvml = None
         try:
-            import pynvml  # type: ignore[import-not-found]
-
-            pynvml.nvmlInit()
-            self.nvml = pynvml
-            self.handles = [pynvml.nvmlDeviceGetHandleByIndex(i) for i in range(pynvml.nvmlDeviceGetCount())]
+            if nvml is None:
+                import pynvml as nvml  # type: ignore[import-not-found,no-redef]
+            nvml.nvmlInit()
+            self.handles = [nvml.nvmlDeviceGetHandleByIndex(i) for i in range(nvml.nvmlDeviceGetCount())]
+            self.nvml = nvml
         except Exception:  # no library, no driver or no device: the GPU columns stay empty
             self.handles = []
 
@@ -84,15 +96,71 @@ class Gpu:
         return bool(self.handles)
 
     def sample(self, pids: set[int]) -> tuple[float | None, float | None]:
+        """(MB the processes `pids` hold on the GPUs, SM % they used on the busiest GPU); (None, None) without GPU."""
         if not self.handles:
             return None, None
         mem, util = 0.0, 0.0
-        for h in self.handles:
-            for p in self.nvml.nvmlDeviceGetComputeRunningProcesses(h):
-                if p.pid in pids and p.usedGpuMemory:
-                    mem += p.usedGpuMemory / 2**20
-            util = max(util, float(self.nvml.nvmlDeviceGetUtilizationRates(h).gpu))
+        for handle in self.handles:
+            held = self.memory_mb(handle, pids)
+            mem += held
+            util = max(util, self.utilisation_pct(handle, pids, held > 0))
         return mem, util
+
+    def memory_mb(self, handle, pids: set[int]) -> float:
+        """MB held on one device by the processes `pids` (compute and graphics contexts, each process once)."""
+        held: dict[int, int] = {}
+        for query in (self.nvml.nvmlDeviceGetComputeRunningProcesses, self.nvml.nvmlDeviceGetGraphicsRunningProcesses):
+            try:
+                procs = query(handle)
+            except self.nvml.NVMLError:
+                continue
+            for p in procs:
+                if p.pid in pids and isinstance(p.usedGpuMemory, int):  # None: the driver does not tell
+                    held[p.pid] = max(held.get(p.pid, 0), p.usedGpuMemory)
+        return sum(held.values()) / 2**20
+
+    def utilisation_pct(self, handle, pids: set[int], holds_memory: bool) -> float:
+        """SM % used on one device by the processes `pids` (their newest samples of the last second, summed)."""
+        since_us = int((time.time() - UTIL_WINDOW_S) * 1e6)
+        try:
+            samples = self.nvml.nvmlDeviceGetProcessUtilization(handle, since_us)
+        except self.nvml.NVMLError as err:
+            if getattr(err, "value", None) in NVML_NO_SAMPLE:
+                return 0.0
+            return self._device_utilisation(handle) if holds_memory else 0.0  # no per-process accounting
+        newest: dict[int, tuple[int, float]] = {}
+        for s in samples:
+            if s.pid in pids and s.timeStamp >= newest.get(s.pid, (-1, 0.0))[0]:
+                newest[s.pid] = (s.timeStamp, float(s.smUtil))
+        return min(100.0, sum(u for _, u in newest.values()))
+
+    def _device_utilisation(self, handle) -> float:
+        try:
+            return float(self.nvml.nvmlDeviceGetUtilizationRates(handle).gpu)
+        except self.nvml.NVMLError:
+            return 0.0
+
+
+def host_gpus(nvml=None, smi: str = "nvidia-smi", timeout_s: float = 10.0) -> list[str]:
+    """This host's GPUs, as NVML names them, else as `nvidia-smi -L` lists them; [] when neither answers."""
+    try:
+        if nvml is None:
+            import pynvml as nvml  # type: ignore[import-not-found,no-redef]
+        nvml.nvmlInit()
+        names = [
+            str(nvml.nvmlDeviceGetName(nvml.nvmlDeviceGetHandleByIndex(i))) for i in range(nvml.nvmlDeviceGetCount())
+        ]
+        if names:
+            return names
+    except Exception:  # no library, no driver, no device: ask nvidia-smi
+        pass
+    try:
+        out = subprocess.run([smi, "-L"], capture_output=True, text=True, timeout=timeout_s, stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.SubprocessError):
+        return []
+    if out.returncode != 0:
+        return []
+    return [line.strip() for line in out.stdout.splitlines() if line.startswith("GPU ")]
 
 
 class ProcessTreeMonitor:

@@ -7,10 +7,10 @@ import argparse
 import os
 import sys
 
-from runner.cli import analysis, campaign, data, evaluate, images
+from runner.cli import analysis, campaign, data, evaluate, images, native
 from runner.errors import SlamRunError
 
-GROUPS = (campaign, evaluate, analysis, images, data)
+GROUPS = (campaign, evaluate, analysis, images, native, data)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -82,7 +82,7 @@ def cmd_list_methods(args) -> int:
             name,
             str(prof),
             cls.image if isinstance(cls.image, str) else "-" if cls.image is None else "from the spec",
-            "optional" if cls.gpu_capable else "no",
+            "required" if cls.needs_gpu is True else "optional" if cls.gpu_capable else "no",  # a property: per params
             "yes" if cls.native else "no",
             cls.loop_closure_switch or "-",
             str(methods.PLUGINS.get(name, "slamrun")),

@@ -15,6 +15,7 @@ import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 import methods
+from runner.backends.monitor import host_gpus
 from runner.core.inputs import expanded_size, read_text_bounded
 from runner.datasets.generated import target_problem
 from runner.datasets.layouts import get as get_layout
@@ -267,9 +268,12 @@ MAX_SPEC_BYTES = 2**20  # a spec is a page of YAML
 MAX_SPEC_VALUES = 100_000  # values in the document once its aliases are expanded
 
 
-def load_spec(path: str | Path, check_files: bool = True, results: Path | None = None) -> CampaignSpec:
+def load_spec(
+    path: str | Path, check_files: bool = True, results: Path | None = None, check_gpu: bool = True
+) -> CampaignSpec:
     """Read, validate and resolve a spec file; raises SpecError listing every problem, each with its line.
-    `results` (the command line's --results) replaces the spec's results folder and is checked as it is."""
+    `results` (the command line's --results) replaces the spec's results folder and is checked as it is;
+    `check_gpu=False` accepts methods that need a GPU on a host without one (reading a campaign, not running it)."""
     path = Path(path)
     try:  # a regular file of at most a page: a FIFO or a device is refused without blocking on it
         text = read_text_bounded(path, MAX_SPEC_BYTES, "spec file")
@@ -293,7 +297,12 @@ def load_spec(path: str | Path, check_files: bool = True, results: Path | None =
         raise SpecError(str(path), ["expected a mapping at the top (name, datasets, methods, ...)"])
     try:
         return validate_spec(
-            raw, base_dir=path.resolve().parent, source=str(path), check_files=check_files, results=results
+            raw,
+            base_dir=path.resolve().parent,
+            source=str(path),
+            check_files=check_files,
+            results=results,
+            check_gpu=check_gpu,
         )
     except SpecError as exc:
         raise SpecError(exc.source, [_with_line(p, node) for p in exc.problems]) from None
@@ -320,9 +329,17 @@ def _with_line(problem: str, root: yaml.Node | None) -> str:
 
 
 def validate_spec(
-    raw: dict, base_dir: Path, source: str = "<spec>", check_files: bool = True, results: Path | None = None
+    raw: dict,
+    base_dir: Path,
+    source: str = "<spec>",
+    check_files: bool = True,
+    results: Path | None = None,
+    check_gpu: bool = True,
 ) -> CampaignSpec:
+    """The spec, or SpecError listing every problem. `check_gpu`: a method that needs a GPU is a problem on a host
+    that has none, where this host runs the runs (not when a cluster's or a remote scheduler's workers do)."""
     problems: list[str] = []
+    gpu_here = _GpuHere(check_gpu and runs_on_this_host(raw))
     try:
         spec = CampaignSpec.model_validate(raw)
     except ValidationError as exc:
@@ -353,6 +370,8 @@ def validate_spec(
             backend = raw.get("backend", "local")
             method = cls(params)
             found = method.problems(backend) + method.launch_problems() + method.executable_problems(backend)
+            if method.needs_gpu and gpu_here.missing():
+                found.append(f"{m['name']} needs a GPU; this host has none (neither NVML nor nvidia-smi answers)")
             problems += [f"methods[{i}]: {p}" for p in found]
         label = m.get("label") or m["name"]
         if label in labels:
@@ -374,6 +393,27 @@ def validate_spec(
         raise SpecError(source, problems)
     assert spec is not None
     return spec
+
+
+def runs_on_this_host(raw: dict) -> bool:
+    """Whether the spec's runs execute on this host: no `distributed`, or Dask workers on this machine."""
+    d = raw.get("distributed")
+    return not isinstance(d, dict) or d.get("address") == "local"
+
+
+class _GpuHere:
+    """Whether this host lacks a GPU, asked once (NVML, then nvidia-smi) and only when a method needs one."""
+
+    def __init__(self, check: bool):
+        self.check = check
+        self._gpus: list[str] | None = None
+
+    def missing(self) -> bool:
+        if not self.check:
+            return False
+        if self._gpus is None:
+            self._gpus = host_gpus()
+        return not self._gpus
 
 
 def _resolve(spec: CampaignSpec, base: Path, results_flag: Path | None = None) -> CampaignSpec:

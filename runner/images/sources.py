@@ -180,6 +180,13 @@ _TABLE = (
         "2e9e07587d3f6f06c92b55932a879eecbcbfa65d6863e7070a3df2fbd28854d1",
         (),
     ),
+    (  # a method after the study: `slamrun native-build dpvo` compiles it (docker/dpvo/patches.py)
+        "dpvo",
+        "princeton-vl/DPVO",
+        "859bbbfdac6c6185f345003b3c473901fcd13ace",
+        "40c43ebe3be51e5c6e1c9d1a0d866b84b8e285093ce132d8b53ae97bf8b49dfb",
+        (),
+    ),
 )
 # tree_digest() of each source (absent files excluded), computed from the stored archives
 _TREES = {
@@ -201,6 +208,7 @@ _TREES = {
     "monodepth-cpp": "ce43a2595cc78ee27ca5032022c3773984ef2aad97ec3acb66a80e28647dfac0",
     "g2o": "e56f748c20bffba0f6880ad1a7b8c65fbbdd551e57ed190735c04faa7d86a70d",
     "mono_dataset_code": "1fbd1248c5b48a5f7047af46d8fc00da235c8b0e6783f313815fecb23b86fa25",
+    "dpvo": "4372b2d0909e07a42cf662c73ae98abe687b1a17733fb4dbcb872b60ca36b4a9",
 }
 SOURCES: dict[str, Source] = {
     name: Source(name, repo, commit, sha, _TREES[name], absent) for name, repo, commit, sha, absent in _TABLE

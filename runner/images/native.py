@@ -1,0 +1,273 @@
+"""Native builds of the GPU methods, for machines without a container engine: `slamrun native-build dpvo`.
+
+DPVO's CUDA extensions (cuda_corr, cuda_ba, lietorch_backends) are compiled once into slamrun's cache
+($XDG_CACHE_HOME/slamrun/native/dpvo, methods.dpvo.default_build) from the pinned archive (runner/images/sources.py)
+with the same patches as the image (docker/dpvo/patches.py), by and for the Python that runs slamrun: its PyTorch
+(a CUDA build), the CUDA toolkit of $CUDA_HOME or of the nvcc on PATH, Eigen 3.4's headers (Debian's libeigen3-dev,
+or a folder given), for one GPU architecture (the local GPU's by default), with all cores. The build folder is staged
+and renamed into place at the end, so a failed build never replaces a working one. It holds the patched tree with
+the extensions beside it, the network (given, or an untrained stand-in), build.log and build.json (what it is).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tarfile
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from methods.dpvo import WEIGHTS_NAME, default_build
+from runner.errors import SlamRunError
+from runner.images import sources as src
+from runner.images.build import ROOT, BuildOptions, _weights_file, model_choice
+
+PATCHES = ROOT / "docker" / "dpvo" / "patches.py"
+DEFAULT_CUDA = "/usr/local/cuda"
+EIGEN_CANDIDATES = ("/usr/include/eigen3", "/usr/local/include/eigen3")
+EXTENSIONS = ("cuda_corr", "cuda_ba", "lietorch_backends")
+STANDIN_SEED = 0
+# A random network's flow head gives sub-pixel updates, which DPVO's motion probe (median >= 2 px before it starts)
+# takes for a still camera: it would never initialise. The stand-in's flow head (update.d, Linear(384, 2)) is scaled
+# so that its updates are a few pixels and the whole pipeline runs (patches, BA, keyframes, terminate).
+STANDIN_FLOW_GAIN = 16.0
+TAIL_LINES = 30
+
+
+class NativeBuildError(SlamRunError):
+    """A native build cannot start (no PyTorch with CUDA, no nvcc, no Eigen, no GPU to build for) or failed."""
+
+
+@dataclass
+class NativeOptions:
+    sources_dir: Path | None = None  # the pinned archive from here (no network)
+    source_url: str | None = None
+    source_cache: Path | None = None
+    arch: str | None = None  # compute capability, e.g. 9.0; default: the local GPU's
+    jobs: int = field(default_factory=lambda: os.cpu_count() or 2)
+    eigen: Path | None = None  # a folder holding Eigen/Core
+    weights: dict[str, Path] = field(default_factory=dict)  # dpvo.pth -> file or URL#sha256=HEX
+    standin_model: bool = False
+    into: Path | None = None  # the build folder (default: slamrun's cache)
+    python: str = sys.executable
+
+
+def eigen_dir(given: Path | None) -> Path:
+    """A folder with Eigen 3's headers (Eigen/Core): the one given, $EIGEN_INCLUDE_DIR, or a system one."""
+    candidates = [given] if given else [os.environ.get("EIGEN_INCLUDE_DIR"), *EIGEN_CANDIDATES]
+    for c in filter(None, candidates):
+        if (Path(c) / "Eigen" / "Core").is_file():
+            return Path(c).resolve()
+    where = f"{given} holds no Eigen/Core" if given else f"none in $EIGEN_INCLUDE_DIR or {', '.join(EIGEN_CANDIDATES)}"
+    raise NativeBuildError(
+        f"DPVO needs Eigen 3.4's headers, {where}: install Debian's libeigen3-dev, or give --eigen DIR "
+        "(a folder holding Eigen/Core)"
+    )
+
+
+def cuda_home() -> Path:
+    """The CUDA toolkit: $CUDA_HOME, else the one of the nvcc on PATH, else /usr/local/cuda (as PyTorch looks)."""
+    if home := os.environ.get("CUDA_HOME") or os.environ.get("CUDA_PATH"):
+        if (Path(home) / "bin" / "nvcc").is_file():
+            return Path(home)
+        raise NativeBuildError(f"CUDA_HOME={home} holds no bin/nvcc: point it at the CUDA toolkit")
+    if nvcc := shutil.which("nvcc"):
+        return Path(nvcc).resolve().parent.parent
+    if Path(DEFAULT_CUDA, "bin", "nvcc").is_file():
+        return Path(DEFAULT_CUDA)
+    raise NativeBuildError(
+        f"no nvcc on PATH, in $CUDA_HOME or in {DEFAULT_CUDA}: DPVO's extensions need the CUDA compiler"
+    )
+
+
+def local_arch() -> str:
+    """The compute capability of this machine's first GPU (nvidia-smi), e.g. 9.0."""
+    try:
+        out = subprocess.run(
+            ["nvidia-smi", "--query-gpu=compute_cap", "--format=csv,noheader"],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
+    except (OSError, subprocess.TimeoutExpired):
+        out = None
+    caps = out.stdout.split() if out is not None and out.returncode == 0 else []
+    if not caps:
+        raise NativeBuildError("no GPU answers here (nvidia-smi): give the target with --arch (9.0: H100/H200)")
+    return caps[0]
+
+
+def torch_info(python: str) -> dict:
+    """PyTorch's version and CUDA version in `python` (a subprocess: importing it takes seconds)."""
+    code = (  # torch_dist: the installed distribution's version, as methods.dpvo reads it without importing torch
+        "import json, torch, importlib.metadata as md; print(json.dumps({'torch': torch.__version__, "
+        "'torch_dist': md.version('torch'), 'cuda': torch.version.cuda}))"
+    )
+    res = subprocess.run([python, "-c", code], capture_output=True, text=True)
+    if res.returncode != 0:
+        raise NativeBuildError(f"{python} cannot import PyTorch: {_last_line(res.stderr)}; install a CUDA build of it")
+    info = json.loads(res.stdout.strip().splitlines()[-1])
+    if not info["cuda"]:
+        raise NativeBuildError(f"PyTorch {info['torch']} in {python} is a CPU build: DPVO needs a CUDA build")
+    return info
+
+
+def build_dpvo(opts: NativeOptions, log: Callable[[str], None] = print) -> dict:
+    """Compile DPVO natively into `opts.into` (default: slamrun's cache); returns its build record."""
+    t0 = time.monotonic()
+    final = Path(opts.into or default_build())
+    model, _ = model_choice("dpvo", BuildOptions(weights=opts.weights, standin_model=opts.standin_model))
+    info = torch_info(opts.python)
+    env = build_environment(opts, log)
+    archive = src.obtain("dpvo", opts.sources_dir, opts.source_cache, opts.source_url)
+    source = src.SOURCES["dpvo"]
+    log(f"source {source.repo}@{source.commit} ({archive}); PyTorch {info['torch']} (CUDA {info['cuda']})")
+    stage = final.with_name(f"{final.name}.staging-{os.getpid()}")
+    shutil.rmtree(stage, ignore_errors=True)
+    stage.mkdir(parents=True)
+    try:
+        tree = unpack_and_patch(archive, stage, log)
+        compile_extensions(opts.python, tree, env, stage / "build.log", log)
+        weights = place_weights(opts, model, tree, stage, log)
+        record = {
+            "method": "dpvo",
+            "source": f"{source.repo}@{source.commit}",
+            "patches": f"docker/dpvo/patches.py sha256 {src.file_sha256(PATCHES)}",
+            "tree": tree.name,
+            "python": opts.python,
+            **info,
+            "arch": env["TORCH_CUDA_ARCH_LIST"],
+            "cuda_home": env["CUDA_HOME"],
+            "eigen": env["EIGEN_INCLUDE_DIR"],
+            "weights_file": f"weights/{WEIGHTS_NAME}",
+            "weights": weights,
+            "seconds": round(time.monotonic() - t0, 1),
+            "finished": time.time(),
+        }
+        (stage / "build.json").write_text(json.dumps(record, indent=1) + "\n")
+        replace_folder(stage, final)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    log(f"built dpvo in {record['seconds']:.0f} s into {final} (for compute capability {record['arch']})")
+    return record
+
+
+def unpack_only(opts: NativeOptions, log: Callable[[str], None] = print) -> Path:
+    """The checked archive unpacked and patched into `opts.into` (or the cache's build folder), nothing compiled: to
+    read or check the patched tree on a machine without the toolkit. Returns the tree."""
+    dest = Path(opts.into or default_build())
+    if dest.exists() and any(dest.iterdir()):
+        raise NativeBuildError(f"{dest} is not empty: give an empty or new folder with --into")
+    archive = src.obtain("dpvo", opts.sources_dir, opts.source_cache, opts.source_url)
+    dest.mkdir(parents=True, exist_ok=True)
+    tree = unpack_and_patch(archive, dest, log)
+    log(f"unpacked and patched into {tree} (not compiled)")
+    return tree
+
+
+def build_environment(opts: NativeOptions, log: Callable[[str], None]) -> dict[str, str]:
+    """The compiler's environment: the toolkit, the target, the jobs, Eigen."""
+    home = cuda_home()
+    arch = opts.arch or local_arch()
+    eigen = eigen_dir(opts.eigen)
+    log(f"CUDA toolkit {home}, target compute capability {arch}, {opts.jobs} jobs, Eigen {eigen}")
+    return {
+        **os.environ,
+        "CUDA_HOME": str(home),
+        "TORCH_CUDA_ARCH_LIST": arch,
+        "MAX_JOBS": str(opts.jobs),
+        "EIGEN_INCLUDE_DIR": str(eigen),
+        # nvcc, and the tools of the Python's own environment (ninja, which PyTorch runs for a parallel build)
+        "PATH": os.pathsep.join([str(home / "bin"), str(Path(opts.python).parent), os.environ.get("PATH", "")]),
+    }
+
+
+def unpack_and_patch(archive: Path, dest: Path, log: Callable[[str], None]) -> Path:
+    """The archive's tree unpacked into `dest` and patched (docker/dpvo/patches.py); returns the tree."""
+    with tarfile.open(archive, "r:gz") as tar:
+        tar.extractall(dest, filter="data")
+    tree = dest / src.SOURCES["dpvo"].top
+    res = subprocess.run([sys.executable, str(PATCHES), str(tree)], capture_output=True, text=True)
+    if res.returncode != 0:
+        raise NativeBuildError(f"{PATCHES} failed on {tree}: {_last_line(res.stderr)}")
+    log(f"patched {tree.name}: {len(res.stdout.splitlines())} edits")
+    return tree
+
+
+def compile_extensions(python: str, tree: Path, env: dict, log_path: Path, log: Callable[[str], None]) -> None:
+    """`setup.py build_ext --inplace` in the tree (its output in log_path), then an import of the extensions."""
+    log(f"compiling {', '.join(EXTENSIONS)} (log: {log_path})")
+    with open(log_path, "w") as out:
+        res = subprocess.run(
+            [python, "setup.py", "build_ext", "--inplace"], cwd=tree, env=env, stdout=out, stderr=subprocess.STDOUT
+        )
+    if res.returncode != 0:
+        raise NativeBuildError(
+            f"compiling DPVO failed (exit {res.returncode}); the end of {log_path}:\n{_tail(log_path)}"
+        )
+    check = f"import torch, {', '.join(EXTENSIONS)}"
+    res = subprocess.run([python, "-c", check], cwd=tree, env=env, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise NativeBuildError(f"DPVO's extensions were built but do not import: {_last_line(res.stderr)}")
+
+
+def place_weights(opts: NativeOptions, model: str, tree: Path, stage: Path, log: Callable[[str], None]) -> str:
+    """The network into stage/weights/dpvo.pth: the file given, or an untrained stand-in; returns what it is."""
+    dest = stage / "weights" / WEIGHTS_NAME
+    dest.parent.mkdir()
+    if model == "given":
+        given = _weights_file(
+            WEIGHTS_NAME, str(opts.weights[WEIGHTS_NAME]), BuildOptions(source_cache=opts.source_cache)
+        )
+        shutil.copyfile(given, dest)
+        note = f"{WEIGHTS_NAME}: {given.name} sha256 {src.file_sha256(dest)}"
+    else:
+        standin_network(opts.python, tree, dest, STANDIN_SEED, STANDIN_FLOW_GAIN)
+        note = (
+            f"untrained stand-in with {WEIGHTS_NAME}'s interface (random init, torch seed {STANDIN_SEED}, flow head x"
+            f"{STANDIN_FLOW_GAIN:g}, sha256 {src.file_sha256(dest)}): plumbing only, NOT the trained network, "
+            "accuracy meaningless"
+        )
+    log(f"network: {note}")
+    return note
+
+
+def standin_network(python: str, tree: Path, dest: Path, seed: int, flow_gain: float) -> None:
+    """DPVO's VONet with random weights from `seed`, its flow head scaled by `flow_gain`, saved as a state dict
+    (needs the compiled extensions, not a GPU)."""
+    code = (
+        "import sys, torch; sys.path.insert(0, sys.argv[1]); torch.manual_seed(int(sys.argv[3]))\n"
+        "from dpvo.net import VONet\n"
+        "net = VONet()\n"
+        "with torch.no_grad():\n"
+        "    for p in net.update.d[1].parameters(): p.mul_(float(sys.argv[4]))\n"
+        "torch.save(net.state_dict(), sys.argv[2])\n"
+    )
+    argv = [python, "-c", code, str(tree), str(dest), str(seed), str(flow_gain)]
+    res = subprocess.run(argv, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise NativeBuildError(f"the stand-in network could not be made: {_last_line(res.stderr)}")
+
+
+def replace_folder(stage: Path, final: Path) -> None:
+    """`stage` becomes `final`; an earlier build there is removed only once the new one is in place."""
+    old = final.with_name(f"{final.name}.old-{os.getpid()}")
+    if final.exists():
+        os.rename(final, old)
+    os.rename(stage, final)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def _tail(path: Path, lines: int = TAIL_LINES) -> str:
+    return "\n".join(path.read_text(errors="replace").splitlines()[-lines:])
+
+
+def _last_line(text: str) -> str:
+    lines = [line for line in text.strip().splitlines() if line.strip()]
+    return lines[-1] if lines else "(no output)"

@@ -1,0 +1,108 @@
+"""The one-page summary of scripts/gpu-check.sh: `python scripts/gpu_check_summary.py OUT SECONDS` -> OUT/summary.txt.
+
+Reads what the script left in OUT: results.csv (one row per run), native-build.json (the DPVO build's record) and
+runs/*/log.txt (DPVO's own line: poses, keyframes, processing fps, PyTorch's peak allocation). Standard library only.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import platform
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+COLUMNS = (  # results.csv column, heading, format
+    ("direction", "direction", "{}"),
+    ("trial", "trial", "{}"),
+    ("status", "status", "{}"),
+    ("failure", "failure", "{}"),
+    ("n_poses", "poses", "{:.0f}"),
+    ("wall_s", "wall s", "{:.1f}"),
+    ("fps", "fps", "{:.1f}"),
+    ("gpu_mem_peak_mb", "GPU MB", "{:.0f}"),
+    ("gpu_util_mean_pct", "GPU %", "{:.0f}"),
+    ("cpu_mean_pct", "CPU %", "{:.0f}"),
+    ("ram_peak_mb", "RAM MB", "{:.0f}"),
+    ("ate_rmse", "ATE m", "{:.3f}"),
+)
+DPVO_LINE = re.compile(r"^dpvo: \d+ poses .*$", re.M)
+PAPER = "DPVO's paper: about 60 fps at its default setting on an RTX 3090"
+
+
+def cell(row: dict, key: str, fmt: str) -> str:
+    value = row.get(key, "")
+    if value in ("", None):
+        return "-"
+    try:
+        return fmt.format(float(value)) if fmt != "{}" else str(value)
+    except ValueError:
+        return str(value)
+
+
+def table(rows: list[dict]) -> list[str]:
+    heads = [h for _, h, _ in COLUMNS]
+    cells = [[cell(r, k, f) for k, _, f in COLUMNS] for r in rows]
+    widths = [max(len(x) for x in col) for col in zip(heads, *cells, strict=False)]
+    fmt = "  ".join(f"{{:>{w}}}" for w in widths)
+    return [fmt.format(*heads)] + [fmt.format(*c) for c in cells]
+
+
+def means(rows: list[dict], key: str) -> str:
+    values = []
+    for r in rows:
+        try:
+            values.append(float(r[key]))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return f"{sum(values) / len(values):.1f}" if values else "-"
+
+
+def gpu_line() -> str:
+    try:
+        out = subprocess.run(
+            ["nvidia-smi", "--query-gpu=name,driver_version,memory.total,compute_cap", "--format=csv,noheader"],
+            capture_output=True,
+            text=True,
+            timeout=20,
+        )
+        return out.stdout.strip().splitlines()[0] if out.returncode == 0 and out.stdout.strip() else "(no nvidia-smi)"
+    except (OSError, subprocess.SubprocessError):
+        return "(no nvidia-smi)"
+
+
+def summary(out: Path, seconds: float) -> str:
+    rows = list(csv.DictReader(open(out / "results.csv"))) if (out / "results.csv").is_file() else []
+    try:
+        build = json.loads((out / "native-build.json").read_text())
+    except (OSError, ValueError):
+        build = {}
+    lines = [
+        f"slamrun GPU check, {time.strftime('%Y-%m-%d %H:%M:%S')}, {seconds:.0f} s in all, host {platform.node()}",
+        f"GPU: {gpu_line()}",
+        f"PyTorch {build.get('torch', '?')} (CUDA {build.get('cuda', '?')}), Python {platform.python_version()}",
+        f"DPVO build: {build.get('source', '?')}, compute capability {build.get('arch', '?')}, "
+        f"{build.get('seconds', '?')} s",
+        f"network: {build.get('weights', '?')}",
+        "",
+        f"runs: {len(rows)} ({sum(r.get('status') == 'done' for r in rows)} done)",
+        *table(rows),
+        "",
+        f"means: wall {means(rows, 'wall_s')} s, fps {means(rows, 'fps')}, GPU memory peak "
+        f"{means(rows, 'gpu_mem_peak_mb')} MB, GPU utilisation {means(rows, 'gpu_util_mean_pct')} %",
+        "fps above: frames fed / the process's wall time (Python, CUDA and network start-up included);",
+        f"DPVO's own processing rate is in its log lines below. {PAPER}.",
+        "",
+    ]
+    for log in sorted((out / "runs").glob("*/log.txt")):
+        found = DPVO_LINE.findall(log.read_text(errors="replace"))
+        lines.append(f"{log.parent.name}: {found[-1] if found else '(no DPVO summary line)'}")
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    folder = Path(sys.argv[1])
+    (folder / "summary.txt").write_text(summary(folder, float(sys.argv[2]) if len(sys.argv) > 2 else 0.0))
