@@ -6,6 +6,7 @@ import contextlib
 import itertools
 import json
 import os
+import re
 import shutil
 import subprocess
 from dataclasses import dataclass
@@ -152,10 +153,11 @@ def test_report_renders_in_chromium(tmp_path):
     render_in_chromium(write_report(tmp_path), tmp_path)
 
 
-def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tiny_dataset):
+def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tiny_dataset, drawn):
     """A campaign whose dataset asks for ATE and RPE beside TUM-Mono's metrics: the results carry them, the
     report has their table with letters and, per sequence, each method's best, median and worst path over the
-    ground truth, rendered in a real browser."""
+    ground truth (axes labelled with their units, equal aspect, a legend of what is drawn), rendered in a real
+    browser."""
     from runner.engine.campaign import run_campaign
     from runner.engine.spec import load_spec
     from tests.conftest import fake_method, write_spec
@@ -184,6 +186,25 @@ def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tin
     table = pd.read_csv(res.results / "report" / "tables" / "trajectory_metrics.csv")
     assert {"ate_rmse", "rpe_t_rmse", "rpe_r_rmse"} <= set(table.columns)
     assert (res.results / "report" / "figures" / "trajectories_seq_a.png").exists()
+    assert {"trajectories_seq_a", "trajectories_seq_b"} <= set(drawn)
+    for name in ("trajectories_seq_a", "trajectories_seq_b"):
+        d = drawn[name]
+        assert not d.overlaps()
+        panels = [ax for ax in d.figure.axes if ax.get_visible()]
+        assert sorted(ax.get_title() for ax in panels) == ["shaky", "steady"]
+        for ax in panels:  # TUM-Mono's ground truth has no unit of its own (arbitrary scale)
+            assert re.fullmatch(r"[xyz] \(ground-truth units\)", ax.get_xlabel()), ax.get_xlabel()
+            assert re.fullmatch(r"[xyz] \(ground-truth units\)", ax.get_ylabel()), ax.get_ylabel()
+            assert ax.get_aspect() == 1.0
+        drawn_labels = {line.get_label() for ax in panels for line in ax.get_lines()}
+        legend = [t.get_text() for t in d.figure.legends[0].get_texts()]
+        assert set(legend) == drawn_labels  # the legend names what the panels draw, nothing else
+        assert {"best run", "median run", "worst run", "start (ground truth)"} <= set(legend)
+        styles = {
+            line.get_label(): (line.get_color(), line.get_linestyle()) for line in d.figure.legends[0].get_lines()
+        }
+        picks = [styles[f"{which} run"] for which in ("best", "median", "worst")]
+        assert len({c for c, _ in picks}) == 3 and len({s for _, s in picks}) == 3  # told apart twice over
     render_in_chromium(index, tmp_path)
 
 

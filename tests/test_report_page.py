@@ -208,8 +208,6 @@ def chromium_page(url: str, profile: Path):
 @pytest.fixture(scope="module")
 def page(report, tmp_path_factory):
     with chromium_page(report.index.as_uri(), tmp_path_factory.mktemp("profile")) as p:
-        # the first view of each dataset opens with the page: plotly draws it into its element
-        p.until("document.querySelectorAll('details.view[open] .js-plotly-plot').length === 2")
         yield p
 
 
@@ -218,8 +216,19 @@ def page(report, tmp_path_factory):
 
 def test_the_page_fits_1400_px_and_every_image_loads(report, page):
     assert page.evaluate("window.innerWidth") == WIDTH
-    widths = page.evaluate("[document.documentElement.scrollWidth, document.body.scrollWidth, window.innerWidth]")
-    assert widths[0] <= WIDTH and widths[1] <= WIDTH, widths  # nothing sticks out sideways
+    page.until("document.body.dataset.imagesLoaded")  # after the load event: laid out
+    page_width, body_content, body_box = page.evaluate(
+        "[document.documentElement.scrollWidth, document.body.scrollWidth, document.body.clientWidth]"
+    )
+    assert page_width <= WIDTH and body_content <= body_box, (page_width, body_content, body_box)  # none sideways
+    sticking_out = page.evaluate(
+        "(() => { const b = document.body.getBoundingClientRect().right - "
+        "parseFloat(getComputedStyle(document.body).paddingRight) + 0.5;"
+        "return [...document.body.querySelectorAll('*')]"
+        ".filter(e => !e.parentElement.closest('.table-box, .js-plotly-plot, pre'))"
+        ".filter(e => e.getBoundingClientRect().right > b).map(e => e.outerHTML.slice(0, 80)); })()"
+    )
+    assert sticking_out == []  # no element reaches past the page's column
     # a table wider than the page scrolls inside its own box, which fits the page
     boxes = page.evaluate(
         "[...document.querySelectorAll('.table-box')].map(b => [b.getBoundingClientRect().right, b.scrollWidth])"
@@ -234,6 +243,8 @@ def test_the_page_fits_1400_px_and_every_image_loads(report, page):
 
 def test_the_views_are_interactive_and_draw_from_local_files_only(report, page):
     folder = report.index.parent.resolve()
+    # the first view of each dataset opens with the page: plotly draws it into its element
+    page.until("document.querySelectorAll('details.view[open] .js-plotly-plot').length === 2")
     views = page.evaluate("[...document.querySelectorAll('details.view')].map(d => [d.dataset.src, d.open])")
     assert len(views) == 3  # one per sequence: V1_synth, V2_synth, 00
     assert [open_ for _, open_ in views] == [True, False, True]  # the first of each dataset opens with the page
