@@ -366,3 +366,47 @@ def test_the_heatmap_draws_unplanned_runs_apart_from_failed_and_missing_ones(tmp
         assert np.abs(colour(*cell) - seen["unplanned"]).max() < 10  # every unplanned cell alike
     legend = " ".join(t.get_text() for t, _ in d.texts)
     assert "not planned" in legend and "failed" in legend
+
+
+def test_a_new_report_leaves_no_file_of_the_last_one(tmp_path):
+    """Reported once with TUM-Mono's metrics (drift tables per direction), then the same runs with ATE and RPE
+    only: no table3_drift file stays to claim it holds drift, and a file of the user's own is left alone."""
+    df = fake_results(tmp_path)
+    df.to_csv(tmp_path / "results.csv", index=False)
+    write_report(tmp_path)
+    tables = tmp_path / "report" / "tables"
+    assert (tables / "table3_drift_forward.csv").is_file()
+    (tables / "notes.txt").write_text("mine\n")
+    rng = np.random.default_rng(4)
+    done = df.status == "done"
+    df = df.drop(columns=[c for c in df.columns if c.startswith("e_")])
+    df.loc[done, "ate_rmse"] = rng.uniform(0.01, 0.1, int(done.sum()))
+    df.to_csv(tmp_path / "results.csv", index=False)
+    write_report(tmp_path)
+    assert not list(tables.glob("table3_*")) and not list(tables.glob("table4_*"))
+    assert (tables / "trajectory_metrics_forward.csv").is_file() and (tables / "notes.txt").read_text() == "mine\n"
+    assert not list((tmp_path / "report" / "figures").glob("*e_t*"))
+
+
+@pytest.mark.parametrize(
+    "images, why",
+    [
+        ("not json", "unreadable"),
+        ("[" * 200_000, "unreadable"),  # nested past Python's recursion limit
+        ('["a list"]', "expected an object of run labels"),
+        ("fifo", "a FIFO"),
+        ("x" * (5 << 20), "unreadable"),  # over the size cap
+    ],
+)
+def test_a_bad_image_description_is_named_on_the_page_and_the_report_is_written(tmp_path, images, why):
+    fake_results(tmp_path, n_methods=2, n_seq=1, trials=3).to_csv(tmp_path / "results.csv", index=False)
+    path = tmp_path / "images.json"
+    if images == "fifo":
+        os.mkfifo(path)  # never read: a FIFO would block a reader
+    else:
+        path.write_text(images)
+    (tmp_path / "spec.resolved.yaml").write_text("name: [unclosed\n")
+    text = write_report(tmp_path).read_text()
+    block = text.split("<h3>Images</h3>")[1].split("</p>")[0]
+    assert str(path) in block and why in block
+    assert "<pre>name: [unclosed\n</pre>" in text and "not a readable spec" in text  # shown as it is

@@ -36,6 +36,8 @@ HORIZONTAL = (
 def save(fig, folder: Path, name: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     fig.savefig(folder / f"{name}.png", dpi=110, bbox_inches="tight")
+    if fig.get_layout_engine() is not None:
+        fig.set_layout_engine("none")  # laid out for the PNG: the SVG keeps that layout, not computed again
     fig.savefig(folder / f"{name}.svg", bbox_inches="tight")
     plt.close(fig)
     return folder / f"{name}.png"
@@ -217,8 +219,10 @@ def _heatmap_columns(ax, cols: list[tuple[str, str, str]], col_pt: float) -> Non
     else:
         ends = [*blocks[1:], len(cols)]
         wide = [(a, b) for a, b in zip(blocks, ends, strict=True) if (b - a) * col_pt >= 8]
-        ax.set_xticks([(a + b - 1) / 2 for a, b in wide], [cols[a][1] for a, _ in wide], rotation=90, fontsize=6)
-        what = "runs by direction (forward, backward), trials in order"
+        short = {"forward": "fw", "backward": "bw"}
+        names = [short.get(cols[a][1], cols[a][1]) for a, _ in wide]
+        ax.set_xticks([(a + b - 1) / 2 for a, b in wide], names, rotation=90, fontsize=6)
+        what = "runs by direction (fw forward, bw backward), trials in order"
     ax.set_xlabel(what + "; sequences at the top", fontsize=7)
     ends = [*starts[1:], len(cols)]
     step = max(1, math.ceil(8 / max(col_pt * min(b - a for a, b in zip(starts, ends, strict=True)), 1e-9)))

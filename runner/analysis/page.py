@@ -136,9 +136,9 @@ def provenance_html(p: Provenance, root: Path, results: Path) -> str:
         *((esc(k), esc(v)) for k, v in p.runs.items()),
     ]
     out = '<dl class="prov">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
-    out += "<h4>Images</h4>" + (_images(p.images) if p.images else f"<p>{esc(p.images_note)}</p>")
+    out += "<h3>Images</h3>" + (_images(p.images) if p.images else f"<p>{esc(p.images_note)}</p>")
     out += links({"images.json": results / "images.json"}, root)
-    out += "<h4>The spec as run</h4>"
+    out += "<h3>The spec as run</h3>"
     if p.spec_text is not None:
         out += f"<details><summary>{esc(p.spec_note)}</summary><pre>{esc(p.spec_text)}</pre></details>"
     else:

@@ -79,8 +79,8 @@ def sequence_paths(df: pd.DataFrame, sequence: str, metric: str) -> SequencePath
         picks = {"best": g.iloc[0], "median": g.iloc[(len(g) - 1) // 2], "worst": g.iloc[-1]}
         drawn = set()
         for which, row in picks.items():
-            if row.run_dir in drawn:
-                continue  # a method with one or two runs: the same run is not drawn twice
+            if not isinstance(row.run_dir, str) or not row.run_dir or row.run_dir in drawn:
+                continue  # no run folder (a table from elsewhere), or a run already drawn (one or two runs)
             drawn.add(row.run_dir)
             run_dir = Path(row.run_dir)
             try:

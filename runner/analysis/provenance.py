@@ -94,26 +94,30 @@ def _ledger_meta(results: Path) -> dict:
 def _spec(results: Path, recorded: dict | None) -> tuple[dict | None, str | None, str]:
     """The spec as run: its values (the ledger's record, else the file's), its text and where the text is from."""
     path = results / SPEC_FILE
-    if not path.is_file():
+    if not (path.exists() or path.is_symlink()):
         return recorded, None, f"no {SPEC_FILE} in {results}"
     try:
         text = read_text_bounded(path, MAX_BYTES, "resolved spec")
-        values = recorded if recorded is not None else load_yaml_file(path, "resolved spec")
     except SlamRunError as exc:
         return recorded, None, f"unreadable: {exc}"
-    return (values if isinstance(values, dict) else None), text, SPEC_FILE
+    if recorded is None:
+        try:
+            recorded = load_yaml_file(path, "resolved spec")
+        except SlamRunError as exc:
+            return None, text, f"{SPEC_FILE} (not a readable spec: {exc})"
+    return (recorded if isinstance(recorded, dict) else None), text, SPEC_FILE
 
 
 def _images(results: Path) -> tuple[dict[str, dict[str, str]], str]:
     """images.json: per run label, the image's tag, id and slamrun.* labels, JSON-valued labels (sources, weights)
     spelt out; ({}, why) without one."""
     path = results / IMAGES_FILE
-    if not path.is_file():
+    if not (path.exists() or path.is_symlink()):
         return {}, "no image: the runs ran natively (no images.json)"
     try:
         raw = json.loads(read_text_bounded(path, MAX_BYTES, "image description"))
-    except (SlamRunError, ValueError) as exc:
-        return {}, f"{path}: unreadable ({exc})"
+    except (SlamRunError, ValueError, RecursionError) as exc:  # RecursionError: nested past Python's limit
+        return {}, f"{path}: unreadable ({str(exc)[:300]})"
     if not isinstance(raw, dict):
         return {}, f"{path}: expected an object of run labels"
     out = {}

@@ -65,6 +65,7 @@ def write_report(
     results = Path(results)
     df = load_results(results)
     out = results / "report"
+    clear_previous(out)
     out.mkdir(parents=True, exist_ok=True)
     groups = by_dataset(df)
     options = {"level": level, "adjust": adjust, "alpha": alpha, "trajectory_sequences": trajectory_sequences}
@@ -88,6 +89,36 @@ def write_report(
     index = out / "index.html"
     index.write_text(page.document(f"Campaign {prov.campaign}", sections, views))
     return index
+
+
+GENERATED = {"tables": (".csv", ".md", ".tex"), "figures": (".png", ".svg"), "views": (".js",)}
+
+
+def clear_previous(out: Path) -> None:
+    """Remove what an earlier report wrote into `out` (its tables, figures, views and statistics, also of datasets
+    no longer in the results), so that no file of another content or name stays beside the new ones; files of other
+    kinds are left alone."""
+    levels = [out, *((out / "datasets").iterdir() if (out / "datasets").is_dir() else [])]
+    for level in levels:
+        if not level.is_dir() or level.is_symlink():
+            continue
+        for sub, suffixes in GENERATED.items():
+            folder = level / sub
+            if folder.is_dir() and not folder.is_symlink():
+                for f in folder.iterdir():
+                    if f.suffix in suffixes and (f.is_symlink() or f.is_file()):
+                        f.unlink()
+                _remove_if_empty(folder)
+        for f in level.glob("statistics*.json"):
+            if f.is_symlink() or f.is_file():
+                f.unlink()
+        if level != out:
+            _remove_if_empty(level)
+
+
+def _remove_if_empty(folder: Path) -> None:
+    if not any(folder.iterdir()):
+        folder.rmdir()
 
 
 def _walk(sections: list[Section]):
