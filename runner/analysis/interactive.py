@@ -42,7 +42,7 @@ def _xyz(points: np.ndarray) -> dict[str, list]:
     """Plotly's x, y, z lists; null where a coordinate is missing (a gap in the line)."""
     p = thinned(points)
     scale = float(np.nanmax(np.abs(p))) if np.isfinite(p).any() else 1.0
-    decimals = max(2, 5 - int(np.floor(np.log10(scale or 1.0))))  # about 1e-5 of the extent
+    decimals = max(1, 4 - int(np.floor(np.log10(scale or 1.0))))  # about 1e-4 of the extent: under a pixel
     return {
         k: [None if not np.isfinite(v) else round(float(v), decimals) for v in p[:, i]] for i, k in enumerate("xyz")
     }

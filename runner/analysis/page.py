@@ -5,6 +5,7 @@ local files only."""
 from __future__ import annotations
 
 import html
+import os
 import re
 import urllib.parse
 from pathlib import Path
@@ -62,24 +63,10 @@ def esc(text: str) -> str:
 
 
 def href(path: Path, root: Path) -> str:
-    """A link from the page in `root` to `path`, relative (the report folder can move), URL-quoted."""
-    rel = Path(path).resolve().relative_to(Path(root).resolve()) if _inside(path, root) else _up(path, root)
-    return esc(urllib.parse.quote(rel.as_posix()))
-
-
-def _inside(path: Path, root: Path) -> bool:
-    try:
-        Path(path).resolve().relative_to(Path(root).resolve())
-        return True
-    except ValueError:
-        return False
-
-
-def _up(path: Path, root: Path) -> Path:
-    """`path` relative to `root` through `..` (a file beside the report folder: results.csv, the spec)."""
-    import os
-
-    return Path(os.path.relpath(Path(path).resolve(), Path(root).resolve()))
+    """A link from the page in `root` to `path`, relative (the report folder can move; a file beside it, such as
+    results.csv, through `..`), URL-quoted."""
+    rel = os.path.relpath(Path(path).resolve(), Path(root).resolve())
+    return esc(urllib.parse.quote(Path(rel).as_posix()))
 
 
 def links(files: dict[str, Path], root: Path) -> str:
@@ -110,6 +97,11 @@ def figure(png: Path, root: Path, caption: str) -> str:
         f'<figure><img alt="{esc(caption)}" src="{href(png, root)}" loading="eager">'
         f"<figcaption>{esc(caption)}</figcaption>{files}</figure>"
     )
+
+
+def has_view(html_text: str) -> bool:
+    """Whether a section's HTML holds an interactive view."""
+    return f'<details class="{VIEW_CLASS}"' in html_text
 
 
 def view(script: Path, root: Path, element: str, sequence: str, paths: SequencePaths, open_: bool) -> str:

@@ -71,7 +71,6 @@ def write_report(
     options = {"level": level, "adjust": adjust, "alpha": alpha, "trajectory_sequences": trajectory_sequences}
     prov = provenance(results, df)
     sections = [Section("Provenance", page.provenance_html(prov, out, results))]
-    views = False
     if len(groups) == 1:
         name, part = next(iter(groups.items()))
         label = name if name != NO_DATASET else ""
@@ -83,7 +82,7 @@ def write_report(
         for name, folder in _folders(groups).items():
             body = dataset_report(groups[name], out / "datasets" / folder, out, name, **options)
             sections.append(Section(f"Dataset {name}", "", body))
-    views = any(page.VIEW_CLASS in s.html for s in _walk(sections))
+    views = any(page.has_view(s.html) for s in _walk(sections))
     if views:
         interactive.write_library(out)
     index = out / "index.html"
@@ -95,9 +94,9 @@ GENERATED = {"tables": (".csv", ".md", ".tex"), "figures": (".png", ".svg"), "vi
 
 
 def clear_previous(out: Path) -> None:
-    """Remove what an earlier report wrote into `out` (its tables, figures, views and statistics, also of datasets
-    no longer in the results), so that no file of another content or name stays beside the new ones; files of other
-    kinds are left alone."""
+    """Remove what an earlier report wrote into `out` (its tables, figures, views, statistics and plotly.js, also
+    those of datasets no longer in the results), so that no file of another content or name stays beside the new
+    ones; files of other kinds are left alone."""
     levels = [out, *((out / "datasets").iterdir() if (out / "datasets").is_dir() else [])]
     for level in levels:
         if not level.is_dir() or level.is_symlink():
@@ -114,6 +113,9 @@ def clear_previous(out: Path) -> None:
                 f.unlink()
         if level != out:
             _remove_if_empty(level)
+    library = out / interactive.PLOTLY_JS
+    if library.is_symlink() or library.is_file():
+        library.unlink()  # written again where the new report has a view
 
 
 def _remove_if_empty(folder: Path) -> None:
