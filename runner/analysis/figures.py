@@ -1,7 +1,9 @@
-"""The study's figures from DataFrames (matplotlib, headless): PNG and SVG files."""
+"""The study's figures from DataFrames (matplotlib, headless): PNG and SVG files, fit for a paper: no text over
+another, every value axis with at least three labelled ticks, every axis labelled with its unit."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import matplotlib
@@ -11,14 +13,31 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
+from matplotlib.colors import ListedColormap, LogNorm, Normalize  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
+from runner.analysis.paths import SequencePaths  # noqa: E402
 from runner.analysis.stats import StudyStats  # noqa: E402
-from runner.results.vocabulary import LABELS  # noqa: E402
+from runner.results.vocabulary import INFRA, LABELS  # noqa: E402
+
+# best, median and worst run: told apart by colour and by line style (colour-blind safe, also in grey print)
+PICK_STYLES = {"best": ("#1b9e77", "-", 1.6), "median": ("#7570b3", "--", 1.3), "worst": ("#d95f02", ":", 1.6)}
+
+
+# horizontal boxes: `orientation` since matplotlib 3.10, `vert` before
+HORIZONTAL = (
+    {"orientation": "horizontal"}
+    if tuple(int(x) for x in matplotlib.__version__.split(".")[:2]) >= (3, 10)
+    else {"vert": False}
+)
 
 
 def save(fig, folder: Path, name: str) -> Path:
     folder.mkdir(parents=True, exist_ok=True)
     fig.savefig(folder / f"{name}.png", dpi=110, bbox_inches="tight")
+    if fig.get_layout_engine() is not None:
+        fig.set_layout_engine("none")  # laid out for the PNG: the SVG keeps that layout, not computed again
     fig.savefig(folder / f"{name}.svg", bbox_inches="tight")
     plt.close(fig)
     return folder / f"{name}.png"
@@ -34,113 +53,255 @@ def _colors(methods: list[str]) -> dict[str, tuple]:
     return {m: cmap(i % cmap.N) for i, m in enumerate(methods)}
 
 
+def _number(x: float, _pos=None) -> str:
+    """A tick's value as a reader writes it: 0.2, 5, 1e-05."""
+    return f"{x:g}"
+
+
+def use_log_scale(values: np.ndarray) -> bool:
+    """Whether positive values span a decade or more (a log axis then reads better than a linear one)."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v) & (v > 0)]
+    return len(v) > 1 and v.max() / v.min() >= 10
+
+
+def readable_log_ticks(axis, lo: float, hi: float) -> None:
+    """Ticks of a log axis from lo to hi that a reader can read values off: 1, 2 and 5 of each decade, labelled,
+    where the axis spans three decades or less (at least three labels over a decade), else every decade."""
+    decades = math.log10(hi / lo) if lo > 0 and hi > lo else 0
+    subs = (1.0, 2.0, 5.0) if decades <= 3 else (1.0,)
+    axis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=subs, numticks=40))
+    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(_number))
+    axis.set_minor_locator(matplotlib.ticker.LogLocator(base=10, subs=np.arange(1, 10), numticks=40))
+    axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+
+
 def cumulative(
     df: pd.DataFrame, metric: str, folder: Path, name: str | None = None, bold_all: bool = False, label: str = ""
 ) -> Path:
-    """Runs (y) whose error is below x (log x), one curve per method: best methods reach the top left; `label`
-    (the dataset) heads the title."""
-    fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    """Runs (y) whose error is below x, one curve per method: best methods reach the top left; x is logarithmic
+    where the values span a decade or more, else linear; `label` (the dataset) heads the title."""
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), layout="constrained")
     methods = sorted(df.method.unique())
     colors = _colors(methods)
+    log = use_log_scale(df[metric].to_numpy(float))
     for m in methods:
         g = df[df.method == m]
         if bold_all and "direction" in g:
             for direction, style in (("forward", ":"), ("backward", "--")):
-                v = np.sort(g.loc[g.direction == direction, metric].dropna().to_numpy(float))
+                v = _sorted(g.loc[g.direction == direction, metric], log)
                 if len(v):
                     ax.step(v, np.arange(1, len(v) + 1), where="post", ls=style, lw=1, color=colors[m])
-        v = np.sort(g[metric].dropna().to_numpy(float))
-        v = v[v > 0]
+        v = _sorted(g[metric], log)
         if len(v):
             ax.step(v, np.arange(1, len(v) + 1), where="post", lw=2.2 if bold_all else 1.6, color=colors[m], label=m)
-    ax.set_xscale("log")
-    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-    ax.set_xlabel(LABELS.get(metric, metric))
-    ax.set_ylabel("number of runs")
-    title = _labelled(label, f"cumulative {LABELS.get(metric, metric)}")
-    ax.set_title(title + (" (dotted forward, dashed backward, bold both)" if bold_all else ""), fontsize=9)
+    if log:
+        v = df[metric].to_numpy(float)
+        v = v[np.isfinite(v) & (v > 0)]
+        ax.set_xscale("log")
+        readable_log_ticks(ax.xaxis, v.min(), v.max())
+    ax.set_xlabel(LABELS.get(metric, metric) + (" (log scale)" if log else ""))
+    ax.set_ylabel("number of runs with a smaller error")
+    ax.set_title(_labelled(label, f"cumulative {LABELS.get(metric, metric)}"), fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    handles, labels = ax.get_legend_handles_labels()
+    if bold_all:  # the line styles, as drawn
+        for style, lw, what in (("-", 2.2, "both directions"), (":", 1, "forward"), ("--", 1, "backward")):
+            handles.append(Line2D([], [], color="0.3", ls=style, lw=lw))
+            labels.append(what)
+    if handles:
+        ax.legend(handles, labels, fontsize=8, loc="lower right")
     return save(fig, folder, name or f"cumulative_{metric}")
 
 
-def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "") -> Path:
-    """Colour-coded error per method (rows) × sequence, direction and run (columns); grey = failed."""
-    d = df.copy()
-    d["col"] = d.sequence.astype(str) + "/" + d.direction.astype(str).str[0] + "/" + d.trial.astype(str)
-    cols = sorted(d["col"].unique())
-    methods = sorted(d.method.unique())
-    grid = d.pivot_table(index="method", columns="col", values=metric, aggfunc="first").reindex(
-        index=methods, columns=cols
+def _sorted(values: pd.Series, log: bool) -> np.ndarray:
+    v = np.sort(values.dropna().to_numpy(float))
+    return v[v > 0] if log else v
+
+
+# the heat-map's cells that hold no value: what they are, how they are drawn
+FAILED, NO_VALUE, NOT_PLANNED = 1, 2, 3
+CELL_KINDS = {
+    FAILED: ("#b2182b", "failed (the method's failure)"),
+    NO_VALUE: ("0.78", "no value (pending, infrastructure failure or not evaluable)"),
+    NOT_PLANNED: ("white", "not planned (no such run)"),
+}
+
+
+def heatmap_cells(
+    df: pd.DataFrame, metric: str
+) -> tuple[list[str], list[tuple[str, str, str]], np.ndarray, np.ndarray]:
+    """Methods (rows), columns (sequence, direction, trial; forward first, trials in order), each cell's value
+    (NaN where none) and kind (0 value, FAILED, NO_VALUE, NOT_PLANNED: no row of the table is that run)."""
+    d = df.assign(
+        sequence=df.sequence.astype(str),
+        direction=df.direction.astype(str),
+        trial=df.trial.map(lambda t: str(int(t)) if isinstance(t, int | float | np.number) and t == t else str(t)),
     )
-    values = np.log10(grid.to_numpy(float))
-    fig, ax = plt.subplots(figsize=(min(18, 3 + 0.05 * len(cols)), 1 + 0.45 * len(methods)))
-    cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")  # grey where a run has no value
-    im = ax.imshow(np.ma.masked_invalid(values), aspect="auto", cmap=cmap, interpolation="nearest")
+    methods = sorted(d.method.astype(str).unique())
+
+    def order(c: tuple[str, str, str]):
+        seq, direction, trial = c
+        return seq, {"forward": 0, "backward": 1}.get(direction, 2), direction, int(trial) if trial.isdigit() else 0
+
+    cols = sorted(set(zip(d.sequence, d.direction, d.trial, strict=True)), key=order)
+    where = {c: i for i, c in enumerate(cols)}
+    values = np.full((len(methods), len(cols)), np.nan)
+    kinds = np.full((len(methods), len(cols)), NOT_PLANNED)
+    status = d["status"] if "status" in d.columns else pd.Series("done", index=d.index)
+    failure = d["failure"] if "failure" in d.columns else pd.Series(None, index=d.index)
+    for method, seq, direction, trial, value, st, why in zip(
+        d.method.astype(str), d.sequence, d.direction, d.trial, d[metric], status, failure, strict=True
+    ):
+        i, j = methods.index(method), where[(seq, direction, trial)]
+        if st == "done" and np.isfinite(value):
+            values[i, j], kinds[i, j] = value, 0
+        elif st == "failed" and why != INFRA:
+            kinds[i, j] = FAILED
+        else:
+            kinds[i, j] = NO_VALUE
+    return methods, cols, values, kinds
+
+
+def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "") -> Path:
+    """Colour-coded error per method (rows) and run (columns: sequence at the top, direction and trial below);
+    failed runs, runs without a value and runs never planned (a method with fewer trials or directions) each drawn
+    apart and named in the legend."""
+    methods, cols, values, kinds = heatmap_cells(df, metric)
+    col_pt = 9.0 if len(cols) <= 130 else max(1.0, 1100 / len(cols))  # room for one label per column when few
+    width = min(18.0, max(5.5, 2.8 + len(cols) * col_pt / 72))
+    fig, ax = plt.subplots(figsize=(width, 2.6 + 0.32 * len(methods)), layout="constrained")
+    finite = values[np.isfinite(values)]
+    log = use_log_scale(finite)
+    norm = (
+        LogNorm(finite.min(), finite.max())
+        if log
+        else Normalize(*(finite.min(), finite.max()) if len(finite) else (0, 1))
+    )
+    im = ax.imshow(np.ma.masked_invalid(values), aspect="auto", cmap="viridis", norm=norm, interpolation="nearest")
+    colours = [CELL_KINDS[k][0] for k in (FAILED, NO_VALUE, NOT_PLANNED)]
+    empty = np.ma.masked_where(kinds == 0, kinds)
+    ax.imshow(empty, aspect="auto", cmap=ListedColormap(colours), vmin=0.5, vmax=3.5, interpolation="nearest")
+    for i in range(len(methods)):  # not planned: hatched, one rectangle per stretch of such cells
+        j = 0
+        while j < len(cols):
+            if kinds[i, j] == NOT_PLANNED:
+                k = j
+                while k < len(cols) and kinds[i, k] == NOT_PLANNED:
+                    k += 1
+                ax.add_patch(Rectangle((j - 0.5, i - 0.5), k - j, 1, fill=False, hatch="///", ec="0.6", lw=0))
+                j = k
+            else:
+                j += 1
     ax.set_yticks(range(len(methods)), methods)
-    seqs = [c.split("/")[0] for c in cols]
-    starts = [i for i, s in enumerate(seqs) if i == 0 or s != seqs[i - 1]]
-    ax.set_xticks(starts, [seqs[i] for i in starts], rotation=90, fontsize=6)
-    fig.colorbar(im, ax=ax, label=f"log10 {metric}")
-    ax.set_title(_labelled(label, f"{LABELS.get(metric, metric)} per run (grey: no evaluated run)"), fontsize=9)
+    _heatmap_columns(ax, cols, col_pt)
+    cbar = fig.colorbar(im, ax=ax, label=LABELS.get(metric, metric) + (" (log scale)" if log else ""))
+    if log:
+        readable_log_ticks(cbar.ax.yaxis, finite.min(), finite.max())
+    handles = [Patch(fc=CELL_KINDS[k][0], ec="0.5", label=CELL_KINDS[k][1]) for k in (FAILED, NO_VALUE)]
+    handles.append(Patch(fc="white", ec="0.6", hatch="///", label=CELL_KINDS[NOT_PLANNED][1]))
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    ax.set_title(_labelled(label, f"{LABELS.get(metric, metric)} of each run"), fontsize=9)
     return save(fig, folder, f"heatmap_{metric}")
 
 
-def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "") -> Path:
-    """Box plots of a metric per method (outliers removed), medians labelled with their letters."""
+def _heatmap_columns(ax, cols: list[tuple[str, str, str]], col_pt: float) -> None:
+    """Column labels: each run's direction and trial below (f0, b2; where they fit, else each direction's block),
+    each sequence at the top, lines between sequences and between directions."""
+    seqs = [c[0] for c in cols]
+    starts = [i for i, s in enumerate(seqs) if i == 0 or s != seqs[i - 1]]
+    blocks = [i for i, c in enumerate(cols) if i == 0 or c[:2] != cols[i - 1][:2]]
+    for i in blocks[1:]:
+        ax.axvline(i - 0.5, color="white", lw=2.0 if i in starts else 0.8)
+    if col_pt >= 7:
+        ax.set_xticks(range(len(cols)), [f"{c[1][:1]}{c[2]}" for c in cols], rotation=90, fontsize=6)
+        what = "each column one run: direction (f forward, b backward) and trial"
+    else:
+        ends = [*blocks[1:], len(cols)]
+        wide = [(a, b) for a, b in zip(blocks, ends, strict=True) if (b - a) * col_pt >= 8]
+        short = {"forward": "fw", "backward": "bw"}
+        names = [short.get(cols[a][1], cols[a][1]) for a, _ in wide]
+        ax.set_xticks([(a + b - 1) / 2 for a, b in wide], names, rotation=90, fontsize=6)
+        what = "runs by direction (fw forward, bw backward), trials in order"
+    ax.set_xlabel(what + "; sequences at the top", fontsize=7)
+    ends = [*starts[1:], len(cols)]
+    step = max(1, math.ceil(8 / max(col_pt * min(b - a for a, b in zip(starts, ends, strict=True)), 1e-9)))
+    top = ax.secondary_xaxis("top")
+    shown = starts[::step]
+    top.set_xticks([(a + ends[starts.index(a)] - 1) / 2 for a in shown], [seqs[a] for a in shown], rotation=90)
+    top.tick_params(labelsize=6, length=0)
+
+
+def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "", adjust: str = "holm", alpha: float = 0.05):
+    """Box plots of a metric per method (outliers removed; best median at the top), each method's letter group in a
+    column inside the axes at the right, beside its box (methods sharing a letter do not differ); the title holds
+    Kruskal-Wallis' chi-square, df and p."""
     s = st.metrics[metric]
     methods = sorted(s.medians, key=lambda m: s.medians[m])
     data = [st.kept.loc[st.kept.method == m, metric].to_numpy(float) for m in methods]
-    fig, ax = plt.subplots(figsize=(max(5, 0.9 * len(methods)), 4))
-    ax.boxplot(data, showfliers=False)
-    ax.set_xticks(range(1, len(methods) + 1), methods, rotation=30, ha="right")
-    top = max((np.percentile(v, 75) + 1.5 * (np.percentile(v, 75) - np.percentile(v, 25))) for v in data if len(v))
-    for i, m in enumerate(methods, start=1):
-        ax.text(i, top, s.letters.get(m, ""), ha="center", va="bottom", fontsize=10, fontweight="bold")
-    ax.set_ylabel(LABELS.get(metric, metric))
-    ax.set_title(
-        _labelled(label, f"{LABELS.get(metric, metric)}: Kruskal-Wallis chi2 = {s.kruskal_chi2:.4g}"), fontsize=9
-    )
+    fig, ax = plt.subplots(figsize=(6.4, 1.7 + 0.42 * len(methods)), layout="constrained")
+    positions = list(range(len(methods), 0, -1))
+    parts = ax.boxplot(data, positions=positions, showfliers=False, widths=0.55, **HORIZONTAL)
+    ends = np.concatenate([w.get_xdata() for w in parts["whiskers"]] or [np.zeros(1)])
+    lo, hi = float(np.nanmin(ends)), float(np.nanmax(ends))
+    span = hi - lo or abs(hi) or 1.0
+    ax.set_xlim(lo - 0.05 * span, hi + 0.16 * span + 0.02 * span * max(len(v) for v in s.letters.values() or [""]))
+    ax.set_yticks(positions, [f"{m} (n={len(v)})" for m, v in zip(methods, data, strict=True)])
+    for pos, m in zip(positions, methods, strict=True):
+        ax.annotate(
+            s.letters.get(m, ""),
+            xy=(1, pos),
+            xycoords=("axes fraction", "data"),
+            xytext=(-5, 0),
+            textcoords="offset points",
+            ha="right",
+            va="center",
+            fontsize=10,
+            fontweight="bold",
+        )
+    ax.set_xlabel(LABELS.get(metric, metric))
+    ax.grid(True, axis="x", alpha=0.3)
+    test = f"Kruskal-Wallis chi2 = {s.kruskal_chi2:.4g}, df = {s.kruskal_df}, p = {s.kruskal_p:.3g}"
+    groups = f"letters (right): Wilcoxon rank-sum, {adjust}, alpha {alpha:g}"
+    ax.set_title(_labelled(label, LABELS.get(metric, metric)) + f"\n{test}; {groups}", fontsize=8)
     return save(fig, folder, f"box_{metric}")
 
 
-def trajectories(
-    runs: list[tuple[str, str, object]], gt, full, folder: Path, name: str, metric: str, label: str = ""
-) -> Path:
-    """Per method, its best, median and worst run by `metric` over the ground truth, top view: aligned as the
-    metric aligns them (ATE: a Sim(3) over every pose with ground truth; e_align: the start segment's Sim(3)).
-    `full` is the whole ground-truth path where the sequence has one (groundtruth_full.txt), else None."""
-    from runner.core.alignment import align_sim3
-    from runner.core.evaluation import associate
-
-    methods = list(dict.fromkeys(r[0] for r in runs))
-    fig, axes = plt.subplots(1, len(methods), figsize=(4.2 * len(methods), 4.4), squeeze=False)
-    valid = np.isfinite(gt.positions).all(axis=1)
-    n = len(gt)
-    styles = {"best": ("-", 1.4), "median": ("--", 1.1), "worst": (":", 1.1)}
-    for ax, method in zip(axes[0], methods, strict=True):
-        if full is not None:
-            ax.plot(full.positions[:, 0], full.positions[:, 1], "-", color="0.75", lw=3, label="ground truth")
-        for seg, color in ((slice(0, n // 2), "k"), (slice(n // 2, n), "0.4")):
-            idx = np.flatnonzero(valid[seg]) + (seg.start or 0)
-            ax.plot(gt.positions[idx, 0], gt.positions[idx, 1], ".", color=color, ms=2.5)
-        for label, which, traj in runs:
-            if label != method:
-                continue
-            match = associate(gt.timestamps, traj.timestamps)
-            use = (match >= 0) & valid[np.maximum(match, 0)]
-            if metric == "e_align":
-                use &= match < n // 2
-            if use.sum() < 3:
-                continue
-            sim = align_sim3(traj.positions[use], gt.positions[match[use]])
-            p = sim.apply(traj.positions)
-            style, lw = styles[which]
-            ax.plot(p[:, 0], p[:, 1], style, lw=lw, color="C0", label=which)
+def trajectories(paths: SequencePaths, folder: Path, label: str = "") -> Path:
+    """Top view of each method's best, median and worst run (by the paths' metric) over the ground truth, one panel
+    per method: the ground truth's two most spread coordinates, equal aspect, in the ground truth's units; the
+    start and the end of the ground truth marked; one legend for what the panels draw."""
+    methods = list(dict.fromkeys(r.method for r in paths.runs))
+    ncols = min(3, len(methods))
+    nrows = math.ceil(len(methods) / ncols)
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(4.0 * ncols + 0.6, 3.9 * nrows + 1.0), squeeze=False, layout="constrained"
+    )
+    a, b = paths.plane()
+    names = "xyz"
+    for ax in axes.flat[len(methods) :]:
+        ax.set_visible(False)
+    for ax, method in zip(axes.flat, methods, strict=False):
+        if paths.full is not None:
+            ax.plot(paths.full[:, a], paths.full[:, b], "-", color="0.86", lw=5, label="ground truth, whole path")
+        ax.plot(paths.gt[:, a], paths.gt[:, b], "-", color="0.55", lw=3, label=paths.gt_label())
+        for run in paths.runs:
+            if run.method == method:
+                color, style, lw = PICK_STYLES[run.which]
+                ax.plot(run.positions[:, a], run.positions[:, b], style, color=color, lw=lw, label=f"{run.which} run")
+        start, end = paths.ends()  # the start drawn over the end: a loop's two markers both show
+        ax.plot(*end[[a, b]], marker="s", mfc="white", mec="black", ms=10, ls="none", label="end (ground truth)")
+        ax.plot(*start[[a, b]], marker="^", color="black", ms=6, ls="none", label="start (ground truth)")
         ax.set_aspect("equal", adjustable="datalim")
-        ax.legend(fontsize=7)
-        ax.set_title(f"{method}", fontsize=9)
-    how = "Sim(3) over all poses (ATE)" if metric != "e_align" else "the start segment's Sim(3)"
-    title = f"{name}: best, median and worst run by {metric}, aligned by {how}; dots: ground truth"
-    fig.suptitle(_labelled(label, title), fontsize=8)
-    return save(fig, folder, f"trajectories_{name}")
+        ax.set_xlabel(f"{names[a]} ({paths.units})")
+        ax.set_ylabel(f"{names[b]} ({paths.units})")
+        ax.set_title(method, fontsize=9)
+        ax.grid(True, alpha=0.25)
+    handles: dict[str, object] = {}
+    for ax in axes.flat[: len(methods)]:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(lab, h)
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=min(4, len(handles)), fontsize=8)
+    title = f"{paths.sequence}: best, median and worst run of each method by {paths.metric}, {paths.aligned_by()}"
+    fig.suptitle(_labelled(label, title), fontsize=9)
+    return save(fig, folder, f"trajectories_{paths.sequence}")

@@ -13,7 +13,7 @@ from runner.analysis.stats import StudyStats
 
 def medians_with_letters(st: StudyStats, metrics: list[str]) -> pd.DataFrame:
     """Table 3/4 layout: one row per method (best first by the first metric), 'median letters' cells,
-    and a last row with the Kruskal-Wallis chi-square of each metric."""
+    and last rows with the Kruskal-Wallis chi-square, degrees of freedom and p-value of each metric."""
     first = st.metrics[metrics[0]]
     methods = sorted(first.medians, key=lambda m: first.medians[m])
     rows = []
@@ -24,7 +24,56 @@ def medians_with_letters(st: StudyStats, metrics: list[str]) -> pd.DataFrame:
             row[metric] = f"{s.medians[m]:.6g} {s.letters.get(m, '')}" if m in s.medians else "-"
         rows.append(row)
     rows.append({"method": "Kruskal-Wallis chi2", **{k: f"{st.metrics[k].kruskal_chi2:.5g}" for k in metrics}})
+    rows.append({"method": "Kruskal-Wallis df", **{k: str(st.metrics[k].kruskal_df) for k in metrics}})
+    rows.append({"method": "Kruskal-Wallis p", **{k: _p(st.metrics[k].kruskal_p) for k in metrics}})
     return pd.DataFrame(rows)
+
+
+def _p(p: float) -> str:
+    return "-" if not np.isfinite(p) else f"{p:.3g}"
+
+
+def tests_table(st: StudyStats) -> pd.DataFrame:
+    """Per metric every test of the procedure with its statistic and p-value: Kruskal-Wallis, Levene, and
+    Lilliefors per method."""
+    rows = []
+    for metric, s in st.metrics.items():
+        row = {
+            "metric": metric,
+            "Kruskal-Wallis chi2": s.kruskal_chi2,
+            "df": s.kruskal_df,
+            "Kruskal-Wallis p": s.kruskal_p,
+            "Levene F": s.levene_F,
+            "Levene p": s.levene_p,
+        }
+        row |= {f"Lilliefors p, {m}": p for m, p in s.lilliefors_p.items()}
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def pairwise_table(st: StudyStats, adjust: str = "holm", alpha: float = 0.05) -> pd.DataFrame:
+    """Per metric and pair of methods: the Wilcoxon rank-sum p adjusted as the letters are, unadjusted, and
+    whether the pair differs at `alpha` (adjusted p), in words."""
+    rows = []
+    for metric, s in st.metrics.items():
+        raw = {(r["a"], r["b"]): r["p"] for r in s.pairwise_none}
+        for r in s.pairwise_adjusted or s.pairwise_holm:
+            p = r["p"]
+            rows.append(
+                {
+                    "metric": metric,
+                    "method a": r["a"],
+                    "method b": r["b"],
+                    f"p ({adjust})": p,
+                    "p (unadjusted)": raw.get((r["a"], r["b"]), np.nan),
+                    f"different at {alpha:g}": _words(p < alpha) if np.isfinite(p) else "not known",
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def _words(different: bool) -> str:
+    return "yes" if different else "no"
 
 
 def resources_table(df: pd.DataFrame) -> pd.DataFrame:
@@ -85,7 +134,7 @@ def reproduction_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
                 "n new": len(new),
                 "n published": len(old),
                 "p (rank-sum)": p,
-                "different at 0.05": bool(p < 0.05) if np.isfinite(p) else None,
+                "different at 0.05": _words(p < 0.05) if np.isfinite(p) else "not known",
             }
         )
     return pd.DataFrame(rows)
@@ -129,9 +178,11 @@ def to_latex(df: pd.DataFrame, caption: str = "") -> str:
 
 
 def to_html(df: pd.DataFrame) -> str:
+    """The table as HTML."""
     import html
 
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in df.columns)
+    # a long column name may break after an underscore: the table keeps to the page's width
+    head = "".join(f"<th>{html.escape(str(c)).replace('_', '_<wbr>')}</th>" for c in df.columns)
     body = "".join(
         "<tr>" + "".join(f"<td>{html.escape(_cell(v))}</td>" for v in row) + "</tr>"
         for row in df.itertuples(index=False)
@@ -139,11 +190,14 @@ def to_html(df: pd.DataFrame) -> str:
     return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
 
 
-def write_all(df: pd.DataFrame, folder: Path, name: str, caption: str = "") -> None:
+def write_all(df: pd.DataFrame, folder: Path, name: str, caption: str = "", note: str = "") -> None:
+    """The table as CSV, Markdown and LaTeX (`caption` its LaTeX caption); `note`, what its values are, heads the
+    Markdown and LaTeX files as a comment (the files paste as they are)."""
     folder.mkdir(parents=True, exist_ok=True)
     df.to_csv(folder / f"{name}.csv", index=False)
-    (folder / f"{name}.md").write_text(to_markdown(df))
-    (folder / f"{name}.tex").write_text(to_latex(df, caption))
+    what = " ".join(f"{caption}. {note}".split()) if note else ""
+    (folder / f"{name}.md").write_text((f"<!-- {what.replace('--', '- -')} -->\n" if what else "") + to_markdown(df))
+    (folder / f"{name}.tex").write_text((f"% {what}\n" if what else "") + to_latex(df, caption))
 
 
 def _cell(v) -> str:
