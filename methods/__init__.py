@@ -20,6 +20,7 @@ from methods.external import External
 from methods.ldso import Ldso
 from methods.lsd_slam import LsdSlam
 from methods.orb_slam2 import OrbSlam2
+from methods.orb_slam3 import OrbSlam3
 from methods.reference_vo.adapter import ReferenceVO
 from methods.svo import Svo
 
@@ -40,6 +41,7 @@ REGISTRY: dict[str, type[Method]] = {
         CnnSvo,
         ReferenceVO,
         Colmap,
+        OrbSlam3,
         External,
     )
 }
