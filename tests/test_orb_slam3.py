@@ -66,6 +66,14 @@ def test_orb_slam3_patches_on_the_real_tree(tmp_path):
     assert off.index("pop_front()") < off.index("mpKeyFrameDB->add(mpCurrentKF)") < off.index("return false;")
     cmake = (root / "CMakeLists.txt").read_text()
     assert "-std=c++14" in cmake and "-std=c++11" not in cmake and "COMPILEDWITHC11" in cmake
+    # every source a target names exists in the stored archive (it lacks Examples_old/)
+    import re
+
+    named = re.findall(r"^\s*((?:Examples\w*|src)/\S+\.(?:cc|cpp))\)?\s*$", cmake, re.M)
+    assert "Examples/Monocular/mono_tum.cc" in named and "src/System.cc" in named
+    for src in named:
+        assert (root / src).is_file(), src
+    assert "Examples_old" not in cmake and "add_executable(mono_tum" in cmake
     assert "stdint-gcc.h" not in (root / "src/ORBmatcher.cc").read_text()
     # the trainer speaks ORB-SLAM3's names and its extractor's signature
     cc = (trainer / "train_orb_vocabulary.cc").read_text()

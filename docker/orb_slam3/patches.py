@@ -9,6 +9,7 @@ import os
 import sys
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "common"))
+from families import drop_after  # noqa: E402
 from patchlib import cxx_standard, include_once, patch, sub  # noqa: E402
 
 # ------------------------------------------------------------------------------------------------ trajectory
@@ -136,6 +137,9 @@ def orb_slam3(root):
     # Toolchain: C++14 (Eigen 3.4 and Boost 1.74 headers; COMPILEDWITHC11 stays defined: steady_clock), and
     # <stdint.h> rather than gcc's internal <stdint-gcc.h>.
     cxx_standard(root, "CMakeLists.txt", "-std=c++11")
+    # The CMakeLists ends with Examples_old/'s targets, a folder the stored archive lacks (CMake refuses a target
+    # without sources even when it is never built): cut there; none of them is the monocular example.
+    drop_after(root, "CMakeLists.txt", "#Old examples")
     patch(root, "src/ORBmatcher.cc", "replace", "#include<stdint-gcc.h>", "#include<stdint.h>")
 
 
