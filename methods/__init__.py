@@ -17,6 +17,7 @@ from methods.dsm import Dsm
 from methods.dso import Dso
 from methods.dynaslam import DynaSlam
 from methods.external import External
+from methods.glomap import Glomap
 from methods.ldso import Ldso
 from methods.lsd_slam import LsdSlam
 from methods.orb_slam2 import OrbSlam2
@@ -42,6 +43,7 @@ REGISTRY: dict[str, type[Method]] = {
         ReferenceVO,
         Colmap,
         OrbSlam3,
+        Glomap,
         External,
     )
 }
