@@ -82,3 +82,11 @@ def test_glomap_forward_and_backward_on_a_short_room(tmp_path):
     for run_dir in df.run_dir:
         t = read_tum(Path(run_dir) / "trajectory.txt").timestamps
         assert np.isin(np.round(t, 6), np.round(frames, 6)).all()
+
+
+def test_the_example_spec_runs_glomap_beside_colmap_natively():
+    from runner.engine.plan import plan
+
+    spec = load_spec(ROOT / "configs" / "glomap.yaml", check_files=False)
+    assert spec.backend == "local" and [m.name for m in spec.methods] == ["glomap", "colmap"]
+    assert spec.datasets[0].metrics == ["tum-mono", "ate"] and len(plan(spec)) == 16

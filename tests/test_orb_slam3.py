@@ -318,3 +318,14 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
         blank = frames[120:240]
         assert not np.isin(t, blank).any()  # no pose is invented for a frame that was not tracked
         assert (raw / INDEX).exists()
+
+
+def test_the_example_spec_runs_orb_slam3_beside_orb_slam2_without_loop_closure():
+    from runner.engine.plan import plan
+    from runner.engine.spec import load_spec
+
+    spec = load_spec(ROOT / "configs" / "orb_slam3.yaml", check_files=False)
+    assert spec.backend == "docker" and [m.name for m in spec.methods] == ["orb_slam3", "orb_slam2"]
+    built = [methods.get(m.name)(m.params) for m in spec.methods]
+    assert not any(m.params.loop_closure for m in built) and built[0].params.maps == "largest"
+    assert len(plan(spec)) == 2 * 2 * 2 * 2
