@@ -22,9 +22,11 @@ from methods.dsm import Dsm
 from methods.dso import Dso
 from methods.dynaslam import DynaSlam
 from methods.external import External
+from methods.glomap import Glomap
 from methods.ldso import Ldso
 from methods.lsd_slam import LsdSlam
 from methods.orb_slam2 import OrbSlam2
+from methods.orb_slam3 import OrbSlam3
 from methods.reference_vo.adapter import ReferenceVO
 from methods.svo import Svo
 
@@ -45,6 +47,8 @@ REGISTRY: dict[str, type[Method]] = {
         CnnSvo,
         ReferenceVO,
         Colmap,
+        OrbSlam3,
+        Glomap,
         External,
         Dpvo,
     )

@@ -1,5 +1,8 @@
 """The COLMAP process: `python -m methods.colmap_process --images ... --times ... --camera ... --out ...`.
 
+`--mapper incremental` (colmap) maps with COLMAP's incremental SfM, `--mapper global` (glomap) with GLOMAP's
+global SfM (`pycolmap.global_mapping`: rotation averaging, then global positioning, then bundle adjustment),
+both from the same features and sequential matches, with the camera's intrinsics fixed.
 Exit codes: 0 a trajectory was written, 2 no model was built, 1 bad input.
 """
 
@@ -29,8 +32,11 @@ def run(argv: list[str] | None = None) -> int:
         ("--global-ba-every", 20),
         ("--seed", 0),
         ("--first-octave", 0),
+        ("--ba-iterations", 3),
+        ("--min-num-matches", 15),
     ):
         ap.add_argument(name, type=int, default=default)
+    ap.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
     a = ap.parse_args(argv)
 
     threads = len(os.sched_getaffinity(0))
@@ -74,21 +80,14 @@ def run(argv: list[str] | None = None) -> int:
     pairing.quadratic_overlap = False
     pycolmap.match_sequential(db, matching_options=matching, pairing_options=pairing, device=pycolmap.Device.cpu)
     t2 = time.perf_counter()
-    opts = pycolmap.IncrementalPipelineOptions()
-    opts.num_threads = threads
-    opts.random_seed = a.seed
-    opts.extract_colors = False
-    opts.ba_refine_focal_length = False
-    opts.ba_refine_principal_point = False
-    opts.ba_refine_extra_params = False
-    opts.ba_global_frames_freq = a.global_ba_every
-    opts.ba_global_points_freq = 50 * a.global_ba_every
-    opts.multiple_models = True
-    models = pycolmap.incremental_mapping(db, a.images, sparse, options=opts)
+    if a.mapper == "global":
+        models = pycolmap.global_mapping(db, a.images, sparse, options=_global_options(pycolmap, a, threads))
+    else:
+        models = pycolmap.incremental_mapping(db, a.images, sparse, options=_incremental_options(pycolmap, a, threads))
     t3 = time.perf_counter()
     print(f"extraction {t1 - t0:.1f} s, matching {t2 - t1:.1f} s, mapping {t3 - t2:.1f} s; {len(models)} model(s)")
     if not models:
-        print(f"NOT INITIALIZED: COLMAP built no model from {len(chosen)} frames")
+        print(f"NOT INITIALIZED: {a.mapper} mapping built no model from {len(chosen)} frames")
         a.out.write_text("")
         return 2
     rec = max(models.values(), key=lambda r: r.num_reg_images())
@@ -108,6 +107,41 @@ def run(argv: list[str] | None = None) -> int:
             f.write(" ".join(f"{v:.9f}" for v in r) + "\n")
     print(f"registered {len(rows)} of {len(chosen)} frames in the largest of {len(models)} model(s)")
     return 0
+
+
+def _incremental_options(pycolmap, a: argparse.Namespace, threads: int):
+    """COLMAP's incremental mapper: intrinsics fixed, global bundle adjustment every `--global-ba-every` images."""
+    opts = pycolmap.IncrementalPipelineOptions()
+    opts.num_threads = threads
+    opts.random_seed = a.seed
+    opts.extract_colors = False
+    opts.ba_refine_focal_length = False
+    opts.ba_refine_principal_point = False
+    opts.ba_refine_extra_params = False
+    opts.ba_global_frames_freq = a.global_ba_every
+    opts.ba_global_points_freq = 50 * a.global_ba_every
+    opts.multiple_models = True
+    return opts
+
+
+def _global_options(pycolmap, a: argparse.Namespace, threads: int):
+    """GLOMAP's global mapper on the CPU: intrinsics fixed (the view's pinhole), `--ba-iterations` rounds of
+    bundle adjustment and retriangulation, image pairs with at least `--min-num-matches` inliers."""
+    opts = pycolmap.GlobalPipelineOptions()
+    opts.num_threads = threads
+    opts.random_seed = a.seed
+    opts.min_num_matches = a.min_num_matches
+    opts.multiple_models = True
+    mapper = opts.mapper
+    mapper.num_threads = threads
+    mapper.random_seed = a.seed
+    mapper.ba_num_iterations = a.ba_iterations
+    mapper.global_positioning.use_gpu = False
+    mapper.bundle_adjustment.ceres.use_gpu = False
+    mapper.bundle_adjustment.refine_focal_length = False
+    mapper.bundle_adjustment.refine_principal_point = False
+    mapper.bundle_adjustment.refine_extra_params = False
+    return opts
 
 
 def _quat(R):

@@ -48,6 +48,7 @@ VOCABULARIES = {
     "orb_slam2": Vocabulary("orb_slam2", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
     "df_orb_slam": Vocabulary("df_orb_slam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
     "dynaslam": Vocabulary("dynaslam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
+    "orb_slam3": Vocabulary("orb_slam3", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),  # the same as ORB-SLAM2's
 }
 
 

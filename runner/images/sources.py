@@ -38,7 +38,7 @@ class Source:
     commit: str  # full 40-hex commit
     sha256: str  # of the archive as stored in the study's folder of upstream archives
     tree: str  # tree_digest() of its content
-    absent: tuple[str, ...] = ()  # large files the stored archives lack (vocabularies, GIFs)
+    absent: tuple[str, ...] = ()  # files the stored archives lack (vocabularies, GIFs); "dir/": all files below
 
     @property
     def filename(self) -> str:
@@ -173,6 +173,22 @@ _TABLE = (
         "e9091b93701240867ccd1b424771a3b8831c0fcdd2fa264b0a1d2ebd1fdebe99",
         (),
     ),
+    (  # after the study (shared/upstream README, "Methods after the study"): ORB-SLAM3 v1.0; the stored archive
+        # lacks the vocabulary, Examples_old/ and the IMU data folders (one file a line in its .absent.txt)
+        "orb_slam3",
+        "UZ-SLAMLab/ORB_SLAM3",
+        "4452a3c4ab75b1cde34e5505a36ec3f9edcdc4c4",
+        "b1cdb64a70f5e2443d1db8ced2a2ae3f4980eda237776ddb51e9c511720147ff",
+        (
+            "Vocabulary/ORBvoc.txt.tar.gz",
+            "Examples_old/",
+            "Examples/Monocular-Inertial/EuRoC_IMU/",
+            "Examples/Monocular-Inertial/TUM_IMU/",
+            "Examples/Stereo-Inertial/EuRoC_IMU/",
+            "Examples/Stereo-Inertial/TUM_IMU/",
+            "evaluation/Ground_truth/EuRoC_imu/",
+        ),
+    ),
     (
         "g2o",
         "RainerKuemmerle/g2o",
@@ -207,6 +223,7 @@ _TREES = {
     "fast": "b67642e64abe584df9154e7533a70d51de09716518553ff0e40604b335c9156e",
     "monodepth-cpp": "ce43a2595cc78ee27ca5032022c3773984ef2aad97ec3acb66a80e28647dfac0",
     "g2o": "e56f748c20bffba0f6880ad1a7b8c65fbbdd551e57ed190735c04faa7d86a70d",
+    "orb_slam3": "6654390006ae4d273a344f485958a454790a6b6dbb00a98465424d410a0832bf",
     "mono_dataset_code": "1fbd1248c5b48a5f7047af46d8fc00da235c8b0e6783f313815fecb23b86fa25",
     "dpvo": "4372b2d0909e07a42cf662c73ae98abe687b1a17733fb4dbcb872b60ca36b4a9",
 }
@@ -217,11 +234,12 @@ SOURCES: dict[str, Source] = {
 
 def tree_digest(archive: Path, exclude: tuple[str, ...] = ()) -> str:
     """SHA-256 over the archive's tree (paths below the top folder, executable bits, contents, link targets),
-    leaving out the paths in `exclude`.
+    leaving out the paths in `exclude` (one ending in "/" leaves out every file below that folder).
 
     Independent of compression, member order and timestamps, so any faithful archive of a commit gives it.
     """
     entries = []
+    folders = tuple(e for e in exclude if e.endswith("/"))
     try:
         with tarfile.open(archive, "r:gz") as tar:
             for m in tar:
@@ -229,7 +247,7 @@ def tree_digest(archive: Path, exclude: tuple[str, ...] = ()) -> str:
                 if len(parts) < 2 or not parts[1] or m.isdir():
                     continue
                 rel = parts[1].rstrip("/")
-                if rel in exclude:
+                if rel in exclude or (folders and rel.startswith(folders)):
                     continue
                 if m.isfile():
                     data = tar.extractfile(m).read()
