@@ -22,6 +22,7 @@ from runner.datasets.sequence import (
     camera_problem,
     check_regular,
     folder_sequence,
+    number_rows,
     read_text,
     time_problem,
 )
@@ -78,15 +79,7 @@ def open_kitti(root: str | Path) -> Sequence:
 def read_poses(path: Path, times: np.ndarray) -> Trajectory:
     """poses/NN.txt at the frames' times; every problem named with its line."""
     rows = []
-    for n, line in enumerate(read_text(path).splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            values = [float(v) for v in line.split()]
-        except ValueError:
-            raise DatasetError(f"{path}:{n}: not numbers: {line.strip()[:60]!r}") from None
-        if len(values) != 12 or not np.isfinite(values).all():
-            raise DatasetError(f"{path}:{n}: {len(values)} values; expected 12 finite numbers (a 3x4 [R|t] row)")
+    for n, values in number_rows(path, 12, "12 finite numbers (a 3x4 [R|t] row)"):
         _check_pose(path, n, np.array(values).reshape(3, 4))
         rows.append(values)
     if len(rows) != len(times):

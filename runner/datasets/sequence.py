@@ -181,6 +181,21 @@ def read_text(path: Path) -> str:
     return read_text_bounded(path, MAX_TEXT_BYTES, "a text file", DatasetError)
 
 
+def number_rows(path: Path, count: int, expected: str) -> Iterator[tuple[int, list[float]]]:
+    """Each non-blank line of a text file of numbers (a pose a line): its line number and its `count` finite
+    numbers; any other line is a DatasetError naming the file and line, and saying `expected`."""
+    for n, line in enumerate(read_text(path).splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            values = [float(v) for v in line.split()]
+        except ValueError:
+            raise DatasetError(f"{path}:{n}: not numbers: {line.strip()[:60]!r}") from None
+        if len(values) != count or not np.isfinite(values).all():
+            raise DatasetError(f"{path}:{n}: {len(values)} values; expected {expected}")
+        yield n, values
+
+
 def key_bytes(path: Path) -> bytes:
     """A key file's content for identities and cache keys: "-" when missing, a marker when it cannot be read (a
     FIFO, a device, too large: validation names it). Never blocks."""

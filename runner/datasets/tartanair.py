@@ -23,7 +23,7 @@ from runner.core.camera import CameraFile, FovCamera
 from runner.core.trajectory import Trajectory, quat_to_rotmat, rotmat_to_quat
 from runner.datasets import frames
 from runner.datasets.protocol import Layout, Placed
-from runner.datasets.sequence import Sequence, check_regular, folder_sequence, read_text
+from runner.datasets.sequence import Sequence, check_regular, folder_sequence, number_rows, read_text
 from runner.errors import DatasetError
 
 if TYPE_CHECKING:
@@ -98,15 +98,7 @@ def read_poses(path: Path, times: np.ndarray) -> Trajectory:
     """pose_left.txt (NED) at the frames' times: 7 finite numbers a row (tx ty tz qx qy qz qw), a unit quaternion
     within 1e-3 (normalised); every problem named with its line."""
     rows = []
-    for n, line in enumerate(read_text(path).splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            values = [float(v) for v in line.split()]
-        except ValueError:
-            raise DatasetError(f"{path}:{n}: not numbers: {line.strip()[:60]!r}") from None
-        if len(values) != 7 or not np.isfinite(values).all():
-            raise DatasetError(f"{path}:{n}: {len(values)} values; expected 7 finite numbers: tx ty tz qx qy qz qw")
+    for n, values in number_rows(path, 7, "7 finite numbers: tx ty tz qx qy qz qw"):
         if abs(np.linalg.norm(values[3:]) - 1.0) > 1e-3:
             raise DatasetError(f"{path}:{n}: the quaternion {values[3:]} is not of unit length")
         rows.append(values)
