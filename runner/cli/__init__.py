@@ -7,10 +7,10 @@ import argparse
 import os
 import sys
 
-from runner.cli import analysis, campaign, data, evaluate, images, native
+from runner.cli import analysis, campaign, data, evaluate, images, native, serve
 from runner.errors import SlamRunError
 
-GROUPS = (campaign, evaluate, analysis, images, native, data)
+GROUPS = (campaign, evaluate, analysis, images, native, data, serve)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -44,12 +44,22 @@ def read_tracker(results: Path) -> Tracker | None:
         return None
     ledger = Ledger(path, read_only=True)
     try:
-        session = ledger.meta("session")
-        if session and not session.get("ended_at") and not session_alive(session):
-            session = {**session, "ended_at": session.get("last_seen") or session["started_at"], "crashed": True}
-        return Tracker(ledger.progress_rows(), session, ledger.meta("campaign", Path(results).name))
+        return tracker_of(ledger, Path(results).name)
     finally:
         ledger.close()
+
+
+def tracker_of(ledger: Ledger, name: str) -> Tracker:
+    """A Tracker over an open ledger's active runs; `name` when the ledger does not record its campaign's."""
+    return Tracker(ledger.progress_rows(), current_session(ledger), ledger.meta("campaign", name))
+
+
+def current_session(ledger: Ledger) -> dict | None:
+    """The ledger's session record; one whose process is gone is shown as ended (crashed)."""
+    session = ledger.meta("session")
+    if session and not session.get("ended_at") and not session_alive(session):
+        session = {**session, "ended_at": session.get("last_seen") or session["started_at"], "crashed": True}
+    return session
 
 
 def read_figures(results: Path, now: float | None = None) -> Figures | None:

@@ -1,0 +1,99 @@
+"""Starting and stopping `slamrun serve`: the address rules (loopback by default; any other address only with a
+warning and a token), the listening socket, and a clean end on Ctrl-C or SIGTERM."""
+
+from __future__ import annotations
+
+import asyncio
+import ipaddress
+import secrets
+import signal
+import socket
+import sys
+from pathlib import Path
+
+from runner.errors import SlamRunError
+from runner.serve.folders import LEDGER, campaigns
+
+MIN_TOKEN = 16
+
+
+def is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def check_folder(root: Path) -> dict[str, Path]:
+    found = campaigns(root)
+    if not found:
+        raise SlamRunError(
+            f"{root}: holds no campaign (no {LEDGER} in it or in a folder directly under it); "
+            "expected a results folder of `slamrun campaign`"
+        )
+    return found
+
+
+def serve(root: Path, host: str, port: int, token: str | None, interval_s: float) -> int:
+    """Serve `root` until interrupted; 0 when stopped by Ctrl-C or SIGTERM."""
+    check_folder(root)
+    loopback = is_loopback(host)
+    if loopback:
+        token = None
+    else:
+        if token is not None and len(token) < MIN_TOKEN:
+            raise SlamRunError(f"--token: at least {MIN_TOKEN} characters (a random one is made when none is given)")
+        token = token or secrets.token_urlsafe(24)
+    return asyncio.run(_serve(root, host, port, token, interval_s, loopback))
+
+
+async def _serve(root: Path, host: str, port: int, token: str | None, interval_s: float, loopback: bool) -> int:
+    from aiohttp import web
+
+    from runner.serve.app import make_app
+
+    sock = _listen(host, port)
+    bound = sock.getsockname()[1]
+    app = make_app(root, token=token, port=bound if loopback else None, interval_s=interval_s)
+    runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
+    await runner.setup()
+    await web.SockSite(runner, sock).start()
+    shown = f"[{host}]" if ":" in host else host
+    url = f"http://{shown}:{bound}/" + (f"?token={token}" if token else "")
+    if not loopback:
+        print(
+            f"slamrun serve: WARNING: listening on {host}, not this machine alone: anyone who can reach it and has "
+            "the token sees the campaign (its logs, paths and figures). The traffic is not encrypted.",
+            file=sys.stderr,
+        )
+    print(f"slamrun serve: {root} at {url} (Ctrl-C to stop)", flush=True)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    try:
+        await stop.wait()
+    finally:
+        await runner.cleanup()
+    return 0
+
+
+def _listen(host: str, port: int) -> socket.socket:
+    """The listening socket, or one line saying why there is none."""
+    try:
+        infos = socket.getaddrinfo(host.strip("[]"), port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE)
+    except socket.gaierror as exc:
+        raise SlamRunError(f"--host {host}: not an address of this machine ({exc.strerror})") from None
+    family, kind, proto, _, address = infos[0]
+    sock = socket.socket(family, kind, proto)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind(address)
+        sock.listen(128)
+    except OSError as exc:
+        sock.close()
+        raise SlamRunError(f"cannot listen on {host}:{port}: {exc.strerror}; choose another --port") from None
+    sock.setblocking(False)
+    return sock

@@ -1,0 +1,160 @@
+"""A campaign's state as the live page shows it, read from its ledger without writing or locking anything (as
+`slamrun status` reads it): progress and ETA, what each lane runs, failures by kind, medians so far per dataset
+and method, the values behind the live box plots, and the report's figures with their times.
+
+`snapshot(results)` is what the server sends; `Signature` says cheaply whether the ledger or the report changed
+since the last one, so many viewers of a 10,000-run campaign cost one read per change, not one per viewer."""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from runner.engine.ledger import Ledger
+from runner.engine.progress import Tracker
+from runner.engine.session import current_session
+from runner.results.vocabulary import SUMMARY_METRICS
+from runner.serve.folders import LEDGER
+
+MAX_FAILED = 100  # the newest failed runs listed (every failure is counted by kind)
+MAX_VALUES = 500  # per dataset and method: the live box plot's values (evenly taken from the runs, in key order)
+MAX_FIGURES = 200
+MESSAGE_CHARS = 300
+FIGURE_SUFFIXES = (".png", ".svg")
+RUN_COLUMNS = ("key", "label", "dataset", "sequence", "direction", "trial", "attempts", "started_at", "ended_at")
+
+
+@dataclass(frozen=True)
+class Signature:
+    """What changes when a campaign writes its ledger or its report: sizes and times of the ledger, its WAL and
+    the report's folder of figures."""
+
+    stamps: tuple
+
+    @classmethod
+    def of(cls, results: Path) -> Signature:
+        stamps = []
+        for path in (results / LEDGER, results / f"{LEDGER}-wal", results / "report" / "figures", results / "report"):
+            try:
+                st = os.stat(path)
+                stamps.append((st.st_mtime_ns, st.st_size, st.st_ino))
+            except OSError:
+                stamps.append(None)
+        return cls(tuple(stamps))
+
+
+def snapshot(results: Path, name: str, now: float | None = None) -> dict:
+    """The page's data for the campaign in `results` (written through runner.core.jsonio: NaN as null)."""
+    now = time.time() if now is None else now
+    ledger = Ledger(results / LEDGER, read_only=True)
+    try:
+        session = current_session(ledger)
+        campaign = ledger.meta("campaign", name)
+        progress = Tracker(ledger.progress_rows(), session, campaign).figures(now)
+        running = ledger.rows(state="running", columns=RUN_COLUMNS)
+        failed = ledger.rows(state="failed", columns=(*RUN_COLUMNS, "failure", "message"))
+        done = ledger.rows(state="done", columns=("label", "dataset", *SUMMARY_METRICS))
+    finally:
+        ledger.close()
+    return {
+        "campaign": campaign,
+        "name": name,
+        "generated_at": now,
+        "progress": progress.to_dict(),
+        "lanes": [_lane(r, now) for r in sorted(running, key=lambda r: r.get("started_at") or 0.0)],
+        "failed": _failed(failed),
+        "medians": medians(done),
+        "figures": report_figures(results),
+        "report": "report/index.html" if (results / "report" / "index.html").is_file() else None,
+    }
+
+
+def _lane(row: dict, now: float) -> dict:
+    started = row.get("started_at")
+    return {**_run(row), "running_s": max(now - started, 0.0) if started else None}
+
+
+def _run(row: dict) -> dict:
+    return {k: row.get(k) for k in RUN_COLUMNS}
+
+
+def _failed(rows: list[dict]) -> dict:
+    """Every failed run counted by kind (`infra`, the machine's fault, apart from the method's own kinds); the
+    newest MAX_FAILED listed with their messages."""
+    rows = sorted(rows, key=lambda r: r.get("ended_at") or 0.0, reverse=True)
+    kinds: dict[str, int] = {}
+    for r in rows:
+        kinds[r.get("failure") or "unknown"] = kinds.get(r.get("failure") or "unknown", 0) + 1
+    listed = [
+        {**_run(r), "failure": r.get("failure"), "message": (r.get("message") or "")[:MESSAGE_CHARS]}
+        for r in rows[:MAX_FAILED]
+    ]
+    return {"total": len(rows), "kinds": kinds, "runs": listed}
+
+
+def medians(done: list[dict]) -> dict:
+    """Per dataset (never pooled: metres of one dataset are not a population with another's), per method: the
+    runs done, the median of each summary metric that has values, and up to MAX_VALUES values of the dataset's
+    main metric (e_align where the runs have it, else ATE RMSE) for the live box plot."""
+    out: dict[str, dict] = {}
+    by_dataset: dict[str, list[dict]] = {}
+    for r in done:
+        by_dataset.setdefault(r.get("dataset") or "", []).append(r)
+    for dataset, rows in sorted(by_dataset.items()):
+        metrics = [m for m in SUMMARY_METRICS if any(_finite(r.get(m)) for r in rows)]
+        main = next((m for m in ("e_align", "ate_rmse") if m in metrics), None)
+        methods = []
+        values = {}
+        for label in sorted({r["label"] for r in rows}):
+            mine = [r for r in rows if r["label"] == label]
+            row = {"method": label, "done": len(mine)}
+            for m in metrics:
+                row[m] = _median([r[m] for r in mine if _finite(r.get(m))])
+            methods.append(row)
+            if main:
+                vs = [r[main] for r in mine if _finite(r.get(main))]
+                values[label] = _spread(vs, MAX_VALUES)
+        out[dataset] = {"metrics": metrics, "main": main, "methods": methods, "values": values}
+    return out
+
+
+def report_figures(results: Path) -> list[dict]:
+    """The report's figures (PNG, SVG when there is no PNG of the name), newest first, with their times: the page
+    reloads one when its time changes."""
+    folder = results / "report" / "figures"
+    try:
+        entries = [e for e in os.scandir(folder) if e.is_file(follow_symlinks=False)]
+    except OSError:
+        return []
+    names = {e.name for e in entries}
+    found = []
+    for e in entries:
+        stem, suffix = os.path.splitext(e.name)
+        if suffix not in FIGURE_SUFFIXES or e.name.startswith(".") or (suffix == ".svg" and f"{stem}.png" in names):
+            continue
+        found.append({"path": f"report/figures/{e.name}", "name": stem, "mtime": e.stat().st_mtime})
+    found.sort(key=lambda f: (-f["mtime"], f["name"]))
+    return found[:MAX_FIGURES]
+
+
+def _finite(v) -> bool:
+    return isinstance(v, int | float) and math.isfinite(v)
+
+
+def _median(values: list[float]) -> float | None:
+    if not values:
+        return None
+    s = sorted(values)
+    n = len(s)
+    return s[n // 2] if n % 2 else (s[n // 2 - 1] + s[n // 2]) / 2
+
+
+def _spread(values: list[float], limit: int) -> list[float]:
+    """At most `limit` of `values`, evenly taken (every value when there are fewer)."""
+    if len(values) <= limit:
+        return values
+    step = len(values) / limit
+    return [values[int(i * step)] for i in range(limit)]
