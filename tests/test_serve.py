@@ -1,0 +1,342 @@
+"""`slamrun serve` as a user meets it: a real campaign of the fake method, the real server as a process on
+127.0.0.1, its page in headless Chromium following the campaign as runs finish; the results folder byte for byte
+unchanged by serving it; paths out of the folder (`..`, encoded separators, symbolic links) refused; a token
+beyond loopback; a folder of several campaigns listed."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hashlib
+import http.client
+import json
+import os
+import re
+import selectors
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from tests.conftest import fake_method, one_sequence, write_spec
+from tests.test_report_page import chromium_page
+
+SLAMRUN = [sys.executable, "-m", "runner.cli"]
+
+
+def slamrun(*args, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run([*SLAMRUN, *map(str, args)], capture_output=True, text=True, timeout=timeout)
+
+
+@contextlib.contextmanager
+def serving(folder: Path, *extra: str):
+    """`slamrun serve FOLDER --port 0` as a process; yields its base URL (http://127.0.0.1:PORT); ended by SIGTERM,
+    which must end it cleanly (exit 0)."""
+    proc = subprocess.Popen(
+        [*SLAMRUN, "serve", str(folder), "--port", "0", "--interval", "0.3", *extra],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        sel = selectors.DefaultSelector()
+        sel.register(proc.stdout, selectors.EVENT_READ)
+        assert sel.select(timeout=60), "slamrun serve printed no address within 60 s"
+        line = proc.stdout.readline()
+        match = re.search(r"http://127\.0\.0\.1:(\d+)/", line)
+        assert match, f"no address in {line!r}; stderr: {proc.stderr.read() if proc.poll() is not None else ''}"
+        yield f"http://127.0.0.1:{match.group(1)}"
+    finally:
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGTERM)
+        try:
+            code = proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+            pytest.fail("slamrun serve did not end within 30 s of SIGTERM")
+        assert code == 0, f"slamrun serve ended with {code}: {proc.stderr.read()}"
+
+
+def get(base: str, path: str, headers: dict | None = None, method: str = "GET") -> tuple[int, bytes, dict]:
+    """One request with `path` sent exactly as written (no normalisation of `..` or of %-escapes)."""
+    host, port = base.removeprefix("http://").split(":")
+    conn = http.client.HTTPConnection(host, int(port), timeout=30)
+    try:
+        conn.putrequest(method, path, skip_host="Host" in (headers or {}), skip_accept_encoding=True)
+        for k, v in (headers or {}).items():
+            conn.putheader(k, v)
+        conn.endheaders()
+        r = conn.getresponse()
+        return r.status, r.read(), dict(r.getheaders())
+    finally:
+        conn.close()
+
+
+def events(base: str, path: str, seconds: float) -> list[dict]:
+    """The `state` events a server-sent-event stream delivers within `seconds`."""
+    host, port = base.removeprefix("http://").split(":")
+    sock = socket.create_connection((host, int(port)), timeout=seconds)
+    sock.sendall(f"GET {path} HTTP/1.1\r\nHost: {host}:{port}\r\nAccept: text/event-stream\r\n\r\n".encode())
+    data, end = b"", time.monotonic() + seconds
+    with contextlib.suppress(TimeoutError, socket.timeout):
+        while time.monotonic() < end:
+            sock.settimeout(max(end - time.monotonic(), 0.01))
+            chunk = sock.recv(65536)
+            if not chunk:
+                break
+            data += chunk
+    sock.close()
+    return [json.loads(m.group(1)) for m in re.finditer(rb"event: state\ndata: (.*)\n\n", data)]
+
+
+def folder_state(root: Path) -> dict[str, tuple]:
+    """Every entry under `root` (hidden ones too, links not followed): its kind, and for a file its size, mtime
+    and SHA-256."""
+    state = {}
+    for dirpath, dirnames, filenames in os.walk(root):
+        for name in dirnames + filenames:
+            path = Path(dirpath) / name
+            st = path.lstat()
+            if path.is_symlink():
+                state[str(path.relative_to(root))] = ("link", os.readlink(path))
+            elif path.is_file():
+                digest = hashlib.sha256(path.read_bytes()).hexdigest()
+                state[str(path.relative_to(root))] = ("file", st.st_size, st.st_mtime_ns, digest)
+            else:
+                state[str(path.relative_to(root))] = ("dir", st.st_mode)
+    return state
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory, tiny_dataset) -> Path:
+    """A finished campaign with done and failed runs and its report: tmp/results."""
+    root = tmp_path_factory.mktemp("served")
+    methods = [fake_method(label="steady", extra=["--noise", "0.002", "--vary"]), fake_method("crash", label="broken")]
+    spec = write_spec(root, tiny_dataset, methods, datasets=one_sequence(tiny_dataset), trials=2)
+    p = slamrun("campaign", spec)
+    assert p.returncode == 0, p.stdout + p.stderr
+    p = slamrun("report", root / "results")
+    assert p.returncode == 0, p.stdout + p.stderr
+    return root / "results"
+
+
+# ---------------------------------------------------------------- the live page in a browser
+
+
+def test_the_page_follows_a_running_campaign_in_chromium(tmp_path, tiny_dataset):
+    release = tmp_path / "release"
+    methods = [
+        fake_method(label="quick", extra=["--noise", "0.002", "--vary"]),
+        fake_method(label="held", extra=["--wait-for", str(release)]),
+        fake_method("crash", label="broken"),
+    ]
+    # three lanes: the two held runs (forward, backward) leave one for the others
+    spec = write_spec(
+        tmp_path, tiny_dataset, methods, datasets=one_sequence(tiny_dataset), trials=1, lanes=3, timeout_s=240
+    )
+    results = tmp_path / "results"
+    campaign = subprocess.Popen([*SLAMRUN, "campaign", str(spec)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        end = time.monotonic() + 120
+        while not (results / "ledger.sqlite").is_file() and time.monotonic() < end and campaign.poll() is None:
+            time.sleep(0.1)
+        with serving(results) as base, chromium_page(f"{base}/c/results/", tmp_path / "profile") as page:
+            progress = "document.getElementById('progress')"
+            assert page.until(f"{progress} && {progress}.dataset.total") == "6"
+            # the held runs are on the lanes, the others finish around them: what the page shows moves
+            page.until("[...document.querySelectorAll('#lanes td')].some(td => td.textContent === 'held')")
+            seen = {int(page.evaluate(f"{progress}.dataset.finished"))}
+            assert page.evaluate(f"{progress}.dataset.state") == "running"
+            assert max(seen) < 6  # nothing can be finished while the held runs wait
+            page.until(f"+{progress}.dataset.finished >= 4")  # quick and broken, each forward and backward
+            seen.add(int(page.evaluate(f"{progress}.dataset.finished")))
+            release.write_text("go")
+            page.until(f"{progress}.dataset.state === 'finished'", timeout_s=120)
+            seen.add(int(page.evaluate(f"{progress}.dataset.finished")))
+            assert len(seen) >= 2 and max(seen) == 6, seen
+            text = page.evaluate("document.body.innerText")
+            assert "6 of 6 runs finished" in text and "done 4" in text and "failed 2" in text
+            # the failures by kind, each with its log tail
+            assert "by kind: crashed 2" in text
+            page.evaluate("document.querySelector('#failures details').open = true")
+            tail = page.until(
+                "document.querySelector('#failures pre.log').dataset.loaded && "
+                "document.querySelector('#failures pre.log').textContent"
+            )
+            assert "Segmentation fault" in tail
+            # medians per dataset, with the live box plot drawn
+            assert page.until(
+                "document.querySelector('#medians table') && "
+                "document.querySelectorAll('#medians .box .main-svg').length > 0"
+            )
+            # a done run's path over its ground truth
+            page.evaluate("document.querySelector('#path button').click()")
+            page.until("document.querySelectorAll('#run-select option').length === 5")  # a prompt and 4 done runs
+            page.evaluate(
+                "(() => { const s = document.getElementById('run-select');"
+                " s.value = [...s.options].find(o => o.text.startsWith('quick')).value;"
+                " s.dispatchEvent(new Event('change')); })()"
+            )
+            traces = page.until(
+                "document.getElementById('run-path').data && document.getElementById('run-path').data.map(t => t.name)"
+            )
+            assert any(t.startswith("ground truth") for t in traces) and any(t.startswith("quick (") for t in traces)
+            # everything the page loaded came from the server itself
+            assert page.requests and all(u.startswith(base) for u in page.requests), page.requests
+        assert campaign.wait(timeout=120) == 0, campaign.stderr.read()
+    finally:
+        release.write_text("go")
+        if campaign.poll() is None:
+            campaign.kill()
+            campaign.wait()
+
+
+# ---------------------------------------------------------------- read-only, and nothing outside the folder
+
+
+def test_serving_leaves_the_results_folder_byte_for_byte_unchanged(finished):
+    before = folder_state(finished)
+    with serving(finished) as base:
+        assert get(base, "/")[0] == 302
+        status, body, _ = get(base, "/c/results/api/state")
+        assert status == 200
+        state = json.loads(body)
+        assert state["progress"]["finished"] == 8 and state["failed"]["kinds"] == {"crashed": 4}
+        assert state["figures"] and state["report"] == "report/index.html"
+        for figure in state["figures"][:5]:
+            assert get(base, f"/c/results/files/{figure['path']}")[0] == 200
+        assert get(base, "/c/results/files/report/index.html")[0] == 200
+        assert get(base, "/c/results/files/results.csv")[0] == 200
+        runs = json.loads(get(base, "/c/results/api/runs")[1])["runs"]
+        assert len(runs) == 4
+        for run in runs:
+            status, body, _ = get(base, f"/c/results/api/path?key={run['key']}")
+            assert status == 200 and json.loads(body)["data"]
+        failed = state["failed"]["runs"][0]["key"]
+        assert b"Segmentation fault" in get(base, f"/c/results/api/log?key={failed}")[1]
+        assert get(base, f"/c/results/api/path?key={failed}")[0] == 404  # a failed run has no path to draw
+        streamed = events(base, "/c/results/events", 2.0)
+        assert streamed and streamed[0]["progress"]["finished"] == 8
+        for static in ("/static/page.js", "/static/page.css", "/static/plotly.min.js"):
+            assert get(base, static)[0] == 200
+    assert folder_state(finished) == before
+
+
+SECRET = "the-secret-outside-the-results-folder"
+
+
+@pytest.fixture()
+def planted(finished, tmp_path) -> Path:
+    """A copy of the finished campaign with links out of it planted in its report folder, and a secret beside it."""
+    copy = tmp_path / "results"
+    shutil.copytree(finished, copy, symlinks=True)
+    (tmp_path / "secret.txt").write_text(SECRET)
+    (tmp_path / "outside").mkdir()
+    (tmp_path / "outside" / "secret.txt").write_text(SECRET)
+    (copy / "report" / "link.txt").symlink_to(tmp_path / "secret.txt")
+    (copy / "report" / "linkdir").symlink_to(tmp_path / "outside")
+    (copy / "runs" / "escape").symlink_to(tmp_path / "outside")
+    return copy
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/c/results/files/report/../../secret.txt",
+        "/c/results/files/../../secret.txt",
+        "/c/results/files/report/%2e%2e/%2e%2e/secret.txt",
+        "/c/results/files/report%2f..%2f..%2fsecret.txt",
+        "/c/results/files/report/..%2f..%2fsecret.txt",
+        "/c/results/files/report/..%5c..%5csecret.txt",
+        "/c/results/files/report/%252e%252e/%252e%252e/secret.txt",
+        "/c/results/files/report/link.txt",
+        "/c/results/files/report/linkdir/secret.txt",
+        "/c/results/files/runs/escape/secret.txt",
+        "/c/results/files//" + "etc/passwd",
+        "/c/results/files/%2fetc%2fpasswd",
+        "/c/results/files/ledger.sqlite",
+        "/c/results/files/runs/../../secret.txt",
+        "/c/..%2f..%2fsecret.txt/api/state",
+        "/c/results/api/log?key=escape",
+        "/c/results/api/log?key=../../secret.txt",
+        "/c/results/api/log?key=..%2F..%2Fsecret.txt",
+        "/c/results/api/path?key=escape",
+        "/static/..%2fapp.py",
+        "/static/../../secret.txt",
+    ],
+)
+def test_paths_out_of_the_folder_are_refused(planted, path):
+    with serving(planted) as base:
+        status, body, _ = get(base, path)
+        assert status in (400, 403, 404), (status, body[:200])
+        assert SECRET.encode() not in body and b"root:" not in body
+        assert get(base, "/c/results/files/report/index.html")[0] == 200  # the same server serves what it should
+
+
+def test_only_loopback_names_and_reads(finished):
+    with serving(finished) as base:
+        assert get(base, "/c/results/api/state", headers={"Host": "attacker.example:80"})[0] == 403
+        assert get(base, "/c/results/api/state", headers={"Host": base.removeprefix("http://")})[0] == 200
+        assert get(base, "/c/results/api/state", method="POST")[0] == 405
+        assert get(base, "/c/results/api/state", method="DELETE")[0] == 405
+        status, _, headers = get(base, "/c/results/")
+        assert status == 200 and "default-src 'self'" in headers["Content-Security-Policy"]
+        assert get(base, "/c/nosuch/api/state")[0] == 404
+
+
+def test_a_token_is_asked_of_every_request_when_one_is_set(finished):
+    from aiohttp.test_utils import TestClient, TestServer
+
+    from runner.serve.app import make_app
+
+    token = "t" * 24
+
+    async def check() -> None:
+        async with TestClient(TestServer(make_app(finished, token=token), host="127.0.0.1")) as client:
+            assert (await client.get("/c/results/api/state")).status == 401
+            assert (await client.get("/c/results/api/state?token=wrong-token-of-24-chars")).status == 401
+            first = await client.get(f"/c/results/?token={token}")
+            assert first.status == 200 and "slamrun_token" in first.cookies
+            assert (await client.get("/c/results/api/state")).status == 200  # the cookie it set
+
+    asyncio.run(check())
+
+
+def test_bad_arguments_are_one_line_before_anything_listens(tmp_path, finished):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    p = slamrun("serve", empty, "--port", "0")
+    assert p.returncode == 1 and "holds no campaign" in p.stderr and "Traceback" not in p.stderr
+    p = slamrun("serve", tmp_path / "missing", "--port", "0")
+    assert p.returncode == 1 and "no such folder" in p.stderr
+    p = slamrun("serve", finished, "--port", "70000")
+    assert p.returncode == 2 and "0 to 65535" in p.stderr
+    p = slamrun("serve", finished, "--host", "0.0.0.0", "--token", "short")
+    assert p.returncode == 1 and "at least 16 characters" in p.stderr  # refused before binding any address
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen(1)
+        p = slamrun("serve", finished, "--port", busy.getsockname()[1], timeout=60)
+    assert p.returncode == 1 and "cannot listen on 127.0.0.1" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_a_folder_of_several_campaigns_is_listed(finished, tmp_path):
+    root = tmp_path / "all"
+    for name in ("first", "second"):
+        shutil.copytree(finished, root / name, symlinks=True)
+    (root / "not-a-campaign").mkdir()
+    with serving(root) as base:
+        status, body, _ = get(base, "/")
+        assert status == 200 and b"data-view=campaigns" in body
+        listed = json.loads(get(base, "/api/campaigns")[1])["campaigns"]
+        assert [c["name"] for c in listed] == ["first", "second"]
+        assert all(c["finished"] == 8 and not c["active"] for c in listed)
+        assert get(base, "/c/second/api/state")[0] == 200
+        assert get(base, "/c/not-a-campaign/api/state")[0] == 404
