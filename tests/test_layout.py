@@ -17,6 +17,7 @@ LAYERS = [
     ("methods", "runner.backends"),
     ("runner.engine",),
     ("runner.analysis", "runner.images"),
+    ("runner.serve",),
     ("runner.cli",),
 ]
 

@@ -48,6 +48,7 @@ class Cached:
     read_at: float = 0.0
     body: bytes = b""
     version: int = 0
+    active: bool = False  # the campaign was running at the last read
     lock: asyncio.Lock = field(default_factory=asyncio.Lock)
 
 
@@ -82,12 +83,12 @@ class Hub:
             signature = Signature.of(folder)
             stale = signature != entry.signature
             if not stale and entry.body:
-                running = json.loads(entry.body)["progress"]["active"]
-                stale = running and time.monotonic() - entry.read_at >= REFRESH_S
+                stale = entry.active and time.monotonic() - entry.read_at >= REFRESH_S
             if stale or not entry.body:
                 data = await asyncio.to_thread(snapshot, folder, name)
                 body = jsonio.dumps(data).encode()
                 entry.signature, entry.read_at = signature, time.monotonic()
+                entry.active = bool(data["progress"]["active"])
                 if body != entry.body:
                     entry.body, entry.version = body, entry.version + 1
         return entry.body, entry.version

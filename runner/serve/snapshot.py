@@ -153,8 +153,9 @@ def _median(values: list[float]) -> float | None:
 
 
 def _spread(values: list[float], limit: int) -> list[float]:
-    """At most `limit` of `values`, evenly taken (every value when there are fewer)."""
-    if len(values) <= limit:
-        return values
-    step = len(values) / limit
-    return [values[int(i * step)] for i in range(limit)]
+    """At most `limit` of `values`, evenly taken (every value when there are fewer), to 4 significant digits (a
+    box plot's resolution: the page's data stays small)."""
+    if len(values) > limit:
+        step = len(values) / limit
+        values = [values[int(i * step)] for i in range(limit)]
+    return [float(f"{v:.4g}") for v in values]
