@@ -311,7 +311,7 @@ def bench_plan_status(tmp: Path) -> None:
         "datasets": [
             {"name": "tum", "path": str(tmp / "nowhere"), "sequences": [f"sequence_{i:02d}" for i in range(1, 51)]}
         ],
-        "methods": [{"name": "external", "label": f"m{i}", "params": {"argv": ["x", str(i)]}} for i in range(10)],
+        "methods": [{"name": "external", "label": f"m{i}", "params": {"argv": ["true", str(i)]}} for i in range(10)],
     }
     t0 = time.perf_counter()
     spec = validate_spec(raw, base_dir=tmp, check_files=False)

@@ -13,6 +13,7 @@ the clock-driven figures: elapsed, ETA)."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import hmac
 import html
 import json
@@ -49,6 +50,7 @@ class Cached:
     body: bytes = b""
     version: int = 0
     active: bool = False  # the campaign was running at the last read
+    cost_s: float = 0.0  # how long the last read took
     lock: asyncio.Lock = field(default_factory=asyncio.Lock)
 
 
@@ -77,17 +79,24 @@ class Hub:
         return folder
 
     async def state(self, name: str) -> tuple[bytes, int]:
+        """The campaign's snapshot: read again when the ledger or the report changed, but never sooner than
+        `interval_s`, nor than 4x the last read's own time after it (a 10,000-run ledger that changes all the time
+        costs at most a fifth of a core, whatever the number of viewers)."""
         folder = self.folder(name)
         entry = self.cached.setdefault(name, Cached())
         async with entry.lock:
+            if entry.body and time.monotonic() - entry.read_at < max(self.interval_s, 4 * entry.cost_s):
+                return entry.body, entry.version
             signature = Signature.of(folder)
             stale = signature != entry.signature
             if not stale and entry.body:
                 stale = entry.active and time.monotonic() - entry.read_at >= REFRESH_S
             if stale or not entry.body:
+                started = time.monotonic()
                 data = await asyncio.to_thread(snapshot, folder, name)
                 body = jsonio.dumps(data).encode()
                 entry.signature, entry.read_at = signature, time.monotonic()
+                entry.cost_s = entry.read_at - started
                 entry.active = bool(data["progress"]["active"])
                 if body != entry.body:
                     entry.body, entry.version = body, entry.version + 1
@@ -115,6 +124,12 @@ def make_app(root: Path, token: str | None = None, port: int | None = None, inte
     app = web.Application(middlewares=[_guard(token, port)], client_max_size=1024)
     app["hub"] = hub
     app["streams"] = 0
+    app["closing"] = asyncio.Event()  # set at shutdown: every event stream ends at once
+
+    async def closing(app: web.Application) -> None:
+        app["closing"].set()
+
+    app.on_shutdown.append(closing)
     app.router.add_get("/", index)
     app.router.add_get("/api/campaigns", list_campaigns)
     app.router.add_get("/static/{name}", static)
@@ -268,8 +283,11 @@ async def events(request: web.Request) -> web.StreamResponse:
             elif time.monotonic() - quiet_since > HEARTBEAT_S:
                 await response.write(b": still here\n\n")
                 quiet_since = time.monotonic()
-            await asyncio.sleep(hub.interval_s)
-    except (ConnectionResetError, asyncio.CancelledError):
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(app["closing"].wait(), timeout=hub.interval_s)
+            if app["closing"].is_set():
+                break
+    except ConnectionResetError:  # the viewer went away
         pass
     finally:
         app["streams"] -= 1
