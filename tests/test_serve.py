@@ -340,3 +340,15 @@ def test_a_folder_of_several_campaigns_is_listed(finished, tmp_path):
         assert all(c["finished"] == 8 and not c["active"] for c in listed)
         assert get(base, "/c/second/api/state")[0] == 200
         assert get(base, "/c/not-a-campaign/api/state")[0] == 404
+
+
+def test_a_ledger_damaged_while_served_is_one_line_not_a_crash(finished, tmp_path):
+    copy = tmp_path / "results"
+    shutil.copytree(finished, copy, symlinks=True)
+    with serving(copy) as base:
+        assert get(base, "/c/results/api/state")[0] == 200
+        (copy / "ledger.sqlite").write_bytes(b"not a database at all " * 100)
+        time.sleep(1.2)  # past the snapshot's shortest age
+        status, body, _ = get(base, "/c/results/api/state")
+        assert status == 503 and b"ledger" in body and b"Traceback" not in body, body
+        assert get(base, "/c/results/files/report/index.html")[0] == 200  # the server goes on
