@@ -139,7 +139,7 @@ def test_the_page_follows_a_running_campaign_in_chromium(tmp_path, tiny_dataset)
     ]
     # three lanes: the two held runs (forward, backward) leave one for the others
     spec = write_spec(
-        tmp_path, tiny_dataset, methods, datasets=one_sequence(tiny_dataset), trials=1, lanes=3, timeout_s=240
+        tmp_path, tiny_dataset, methods, datasets=one_sequence(tiny_dataset), trials=1, lanes=3, timeout_s=600
     )
     results = tmp_path / "results"
     campaign = subprocess.Popen([*SLAMRUN, "campaign", str(spec)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
@@ -149,16 +149,20 @@ def test_the_page_follows_a_running_campaign_in_chromium(tmp_path, tiny_dataset)
             time.sleep(0.1)
         with serving(results) as base, chromium_page(f"{base}/c/results/", tmp_path / "profile") as page:
             progress = "document.getElementById('progress')"
-            assert page.until(f"{progress} && {progress}.dataset.total") == "6"
+            assert page.until(f"{progress} && {progress}.dataset.total", timeout_s=180) == "6"
             # the held runs are on the lanes, the others finish around them: what the page shows moves
-            page.until("[...document.querySelectorAll('#lanes td')].some(td => td.textContent === 'held')")
+            page.until(
+                "[...document.querySelectorAll('#lanes td')].some(td => td.textContent === 'held')", timeout_s=180
+            )
             seen = {int(page.evaluate(f"{progress}.dataset.finished"))}
             assert page.evaluate(f"{progress}.dataset.state") == "running"
             assert max(seen) < 6  # nothing can be finished while the held runs wait
-            page.until(f"+{progress}.dataset.finished >= 4")  # quick and broken, each forward and backward
+            page.until(
+                f"+{progress}.dataset.finished >= 4", timeout_s=180
+            )  # quick and broken, each forward and backward
             seen.add(int(page.evaluate(f"{progress}.dataset.finished")))
             release.write_text("go")
-            page.until(f"{progress}.dataset.state === 'finished'", timeout_s=120)
+            page.until(f"{progress}.dataset.state === 'finished'", timeout_s=180)
             seen.add(int(page.evaluate(f"{progress}.dataset.finished")))
             assert len(seen) >= 2 and max(seen) == 6, seen
             text = page.evaluate("document.body.innerText")
