@@ -270,6 +270,16 @@ def blank_out(sequence: Path, first: int, last: int) -> None:
             zf.writestr(n, members[n])
 
 
+def slowed(sequence: Path, factor: float) -> None:
+    """A synthetic TUM-Mono sequence played `factor` times slower: its frame times and ground truth stretched alike
+    (the same frames, the same motion per frame)."""
+    for name, time_column in (("times.txt", 1), ("groundtruth_full.txt", 0), ("groundtruthSync.txt", 0)):
+        rows = [line.split() for line in (sequence / name).read_text().splitlines()]
+        for row in rows:
+            row[time_column] = f"{1.0 + (float(row[time_column]) - 1.0) * factor:.6f}"
+        (sequence / name).write_text("".join(" ".join(row) + "\n" for row in rows))
+
+
 def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path):
     """The image on a synthetic room forward and backward (done, evaluated, every tracked frame at a frame time,
     the vocabulary stated in run.json), and on a room with 3.3 s of blank frames in the middle: ORB-SLAM3 is lost
@@ -285,9 +295,15 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
     data = tmp_path / "data"
     generate(data / "room", frames=300, seed=0)
     generate(data / "split", frames=360, seed=0)
-    # 100 frames (3.3 s at 30 fps: more than the 3 s ORB-SLAM3 stays `recently lost`) between two textured stretches
-    # of 130 frames, each long enough for a map of more than 10 keyframes (a smaller one is reset, not kept)
+    # 100 frames (more than the 3 s ORB-SLAM3 stays `recently lost`) between two textured stretches of 130 frames,
+    # each long enough for a map of more than 10 keyframes (a smaller one is reset, not kept)
     blank_out(data / "split", 130, 229)
+    # Played at 6 fps, not 30: mono_tum paces frames in real time, and on a loaded machine ORB-SLAM3's local mapper
+    # fell behind (0.8-3.1 s per keyframe of the 5x features it extracts for `Camera.fps` frames after initialising;
+    # a monocular tracker takes no keyframe while it is busy) and lost the room in both directions (CI under load,
+    # 2026-11-26). Slower playback and a shorter 5x window leave the mapper the time it has on an idle machine.
+    for sequence in ("room", "split"):
+        slowed(data / sequence, 5.0)
     spec = write_spec(
         tmp_path,
         data,
@@ -300,11 +316,9 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
     res = run_campaign(load_spec(spec), log=lambda *a: None)
     df = pd.read_csv(res.results_csv)
     room = df[df.sequence == "room"]
-    # ORB-SLAM3 loses about one run in eight on these rooms (19 of 24 verification runs done, 2026-11-26): a run
-    # may fail, but only as `lost`, with its maps recorded; at least one direction tracks the room within 5 %
-    assert set(room.failure.dropna()) <= {"lost"}, room.to_string()
+    # both directions track the room, within 5 % of its extent
     good = room[(room.status == "done") & (room.eval_status == "ok")]
-    assert len(good) >= 1 and (good.e_align / scene_extent(data / "room") < 0.05).all(), room.to_string()
+    assert len(good) == 2 and (good.e_align / scene_extent(data / "room") < 0.05).all(), room.to_string()
     record = json.loads((Path(good.run_dir.iloc[0]) / "run.json").read_text())
     assert "UZ-SLAMLab/ORB_SLAM3@4452a3c4ab75b1cde34e5505a36ec3f9edcdc4c4" in record["image"]["sources"]
     assert record["image"]["vocabulary"].startswith(("trained", "given", "source"))
