@@ -186,13 +186,13 @@ def test_settings_are_the_authors_defaults(patched):
 # ---------------------------------------------------------------- the method
 
 
-def test_registered_native_needing_a_gpu_with_its_image_not_built_yet():
+def test_registered_native_needing_a_gpu_with_an_image_recipe():
     cls = methods.get("dpvo")
     assert cls is Dpvo and cls.needs_gpu is True and cls.native and cls.profile is Profile.rectified
-    assert Dpvo().problems("docker")[0].startswith("dpvo's image slamrun/dpvo:latest is not built yet")
+    assert Dpvo().problems("docker") == []  # docker/dpvo/Dockerfile (tests/test_dpvo_image.py)
     from runner.images.build import buildable
 
-    assert "dpvo" not in buildable()  # no recipe to build yet
+    assert buildable()["dpvo"] == ("slamrun/dpvo:latest", ROOT / "docker" / "dpvo" / "Dockerfile")
 
 
 def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:
