@@ -21,9 +21,11 @@ python3 "$patches" "$tree"
 
 cd "$tree"
 start=$(date +%s)
+# NVCC_APPEND_FLAGS: nvcc compiles one file's targets in parallel (lietorch_gpu.cu alone takes most of the time)
 CUDA_HOME=$cuda TORCH_CUDA_ARCH_LIST="$arch" MAX_JOBS=$jobs EIGEN_INCLUDE_DIR=/usr/include/eigen3 \
-  PATH="$cuda/bin:/opt/venv/bin:$PATH" "$py" setup.py build_ext --inplace
+  NVCC_APPEND_FLAGS="--threads $jobs" PATH="$cuda/bin:/opt/venv/bin:$PATH" "$py" setup.py build_ext --inplace
 echo "build-extensions: compiled for compute capability $arch in $(( $(date +%s) - start )) s with $jobs jobs"
 rm -rf build thirdparty
+strip --strip-debug ./*.so  # Debian's Python compiles with -g
 ls -la ./*.so
 "$py" -c "import torch, cuda_corr, cuda_ba, lietorch_backends; print('extensions import with torch', torch.__version__)"
