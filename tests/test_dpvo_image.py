@@ -216,7 +216,12 @@ def test_the_compiled_extensions_and_dpvo_import_inside_the_image_without_a_gpu(
     assert got["gpu"] is False  # no GPU given: nothing above touched CUDA
     assert all(f.startswith(f"/opt/dpvo/{got['record']['tree']}/") and f.endswith(".so") for f in got["ext"])
     assert got["record"]["arch"] == labels["slamrun.cuda-arch"]
-    assert got["record"]["weights"].split(":")[0] in labels["slamrun.weights"] or "given" in got["record"]["weights"]
+    label = json.loads(labels["slamrun.weights"])["dpvo.pth"]  # what `slamrun images` chose, said in the image too
+    standin = got["record"]["weights"].startswith("untrained stand-in")
+    if standin:
+        assert "NOT the trained network" in label and "NOT the trained network" in got["record"]["weights"]
+    else:  # the given file's SHA-256
+        assert label.split(" sha256 ")[-1] in got["record"]["weights"]
     assert json.loads(labels["slamrun.sources"]) == {"dpvo": f"princeton-vl/DPVO@{src.SOURCES['dpvo'].commit}"}
     status, out = run_in_image(api, ["sh", "-c", "id -u; ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin"])
     assert out.split()[0] == "1000"  # the image's user, not root

@@ -218,7 +218,7 @@ def vocabulary_choice(name: str, archives: dict[str, Path], opts: BuildOptions) 
 
 def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path, log: Callable[[str], None]) -> dict:
     """Fill `ctx` with what the build of `name` reads; returns the labels describing it."""
-    model, detail = model_choice(name, opts)  # a missing network is said before anything is fetched
+    model, model_detail = model_choice(name, opts)  # a missing network is said before anything is fetched
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
     shutil.copytree(ROOT / "docker", ctx / "docker", ignore=ignore)
     shutil.copytree(ROOT / "methods", ctx / "methods", ignore=ignore)
@@ -264,7 +264,7 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
             shutil.copyfile(path, inputs / "weights" / wname)
             weights[wname] = f"{path.name} sha256 {src.file_sha256(path)}"
     if model == "standin":
-        weights[WEIGHTS[name].name] = detail
+        weights[WEIGHTS[name].name] = model_detail
     if weights:
         labels[f"{LABEL}.weights"] = json.dumps(weights)
         log(f"weights of {name}: {json.dumps(weights)}")
