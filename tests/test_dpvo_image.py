@@ -131,6 +131,29 @@ def test_labels_name_torch_cuda_and_the_targets():
     assert toolchain_labels(reference, pypi_files_of(reference), {}) == {}  # not a GPU image
 
 
+def test_the_context_of_a_standin_build_is_labelled_with_what_it_holds(tmp_path):
+    """The build context `slamrun images --method dpvo --standin-model` assembles (the real archive, the fetched
+    wheels, when this machine's download cache holds them): its labels say what the image will hold."""
+    from runner.images.build import assemble_context
+
+    missing = [f for f in pypi_files_of(DOCKERFILE) if not (src.default_cache() / f).is_file()]
+    if missing:
+        pytest.skip(reason=f"{len(missing)} wheels not in {src.default_cache()} (slamrun images --method dpvo fetches)")
+    opts = BuildOptions(sources_dir=require_upstream(), standin_model=True, build_args={"TORCH_CUDA_ARCH_LIST": "9.0"})
+    (tmp_path / "ctx").mkdir()
+    labels = assemble_context("dpvo", DOCKERFILE, opts, tmp_path / "ctx", lambda line: None)
+    assert "NOT the trained network" in json.loads(labels["slamrun.weights"])["dpvo.pth"]
+    assert json.loads(labels["slamrun.build-args"]) == {
+        "VOCABULARY": "none",
+        "DPVO_MODEL": "standin",
+        "TORCH_CUDA_ARCH_LIST": "9.0",
+    }
+    assert labels["slamrun.torch"] == "2.11.0" and labels["slamrun.cuda-arch"] == "9.0"
+    assert set(json.loads(labels["slamrun.pypi"])) == set(pypi_files_of(DOCKERFILE))
+    assert (tmp_path / "ctx" / "sources" / "dpvo.tar.gz").is_file()
+    assert sorted(p.name for p in (tmp_path / "ctx" / "pypi").iterdir()) == sorted(pypi_files_of(DOCKERFILE))
+
+
 def test_weights_choice_is_given_standin_or_an_error_naming_the_file(tmp_path):
     assert model_choice("dpvo", BuildOptions(weights={"dpvo.pth": tmp_path / "x"}))[0] == "given"
     kind, detail = model_choice("dpvo", BuildOptions(standin_model=True))
