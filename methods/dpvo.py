@@ -6,7 +6,8 @@ non-keyframes from their keyframe's pose, as its demo.py does). Its CUDA extensi
 lietorch_backends) come from one of:
 - `backend: local`: a native build in slamrun's cache, compiled once by `slamrun native-build dpvo` from the pinned
   archive with docker/dpvo/patches.py, by and for the Python that runs slamrun (PyTorch with CUDA, nvcc);
-- `backend: docker`: the image slamrun/dpvo, NOT BUILT YET (docker/dpvo holds only the patches so far).
+- `backend: docker|podman`: the image slamrun/dpvo (docker/dpvo/Dockerfile, `slamrun images --method dpvo`): the same
+  archive and patches, compiled without a GPU for compute capability 7.5 to 9.0, its network in /opt/dpvo/weights.
 The network (dpvo.pth) is the one the build holds (`--weights dpvo.pth=FILE|URL#sha256=HEX`, or `--standin-model`: a
 random-init network from a fixed seed, plumbing only, accuracy meaningless; build.json and every run's log say
 which), or params.weights. The parameters are DPVO's config/default.yaml and demo.py defaults.
@@ -26,8 +27,8 @@ from methods.base import Method, PythonProcess
 from runner.datasets.view import PreparedView, Profile
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-RECIPE = REPO_ROOT / "docker" / "dpvo" / "Dockerfile"  # the image's recipe; absent while the image is not written
-IMAGE_WEIGHTS = "/opt/dpvo/weights/dpvo.pth"  # where the image will hold its network
+RECIPE = REPO_ROOT / "docker" / "dpvo" / "Dockerfile"  # the image's recipe
+IMAGE_WEIGHTS = "/opt/dpvo/weights/dpvo.pth"  # where the image holds its network (docker/dpvo/network.sh)
 IMAGE_BUILD = "/opt/dpvo"
 WEIGHTS_NAME = "dpvo.pth"
 
@@ -90,7 +91,7 @@ class DpvoParams(BaseModel):
 
 class Dpvo(PythonProcess, Method):
     name = "dpvo"
-    image = "slamrun/dpvo:latest"  # not built yet: no docker/dpvo/Dockerfile
+    image = "slamrun/dpvo:latest"  # docker/dpvo/Dockerfile
     profile = Profile.rectified
     needs_gpu = True
     native = True

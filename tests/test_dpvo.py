@@ -71,6 +71,8 @@ def test_patches_make_the_tree_fit_todays_pytorch(patched):
     top_imports = {ast.unparse(n) for n in top if isinstance(n, ast.Import | ast.ImportFrom)}
     assert not any("einops" in i or "optim_utils" in i for i in top_imports), top_imports
     assert "autocast = torch.cuda.amp.autocast" not in (patched / "dpvo/dpvo.py").read_text()
+    net = ast.parse((patched / "dpvo/net.py").read_text())  # DPVO's process imports it: no matplotlib needed
+    assert not [n for n in ast.walk(net) if isinstance(n, ast.Import) and any("matplotlib" in a.name for a in n.names)]
 
 
 def test_a_moved_anchor_or_a_second_run_fails_naming_the_file(tmp_path, patched):
@@ -186,13 +188,13 @@ def test_settings_are_the_authors_defaults(patched):
 # ---------------------------------------------------------------- the method
 
 
-def test_registered_native_needing_a_gpu_with_its_image_not_built_yet():
+def test_registered_native_needing_a_gpu_with_an_image_recipe():
     cls = methods.get("dpvo")
     assert cls is Dpvo and cls.needs_gpu is True and cls.native and cls.profile is Profile.rectified
-    assert Dpvo().problems("docker")[0].startswith("dpvo's image slamrun/dpvo:latest is not built yet")
+    assert Dpvo().problems("docker") == []  # docker/dpvo/Dockerfile (tests/test_dpvo_image.py)
     from runner.images.build import buildable
 
-    assert "dpvo" not in buildable()  # no recipe to build yet
+    assert buildable()["dpvo"] == ("slamrun/dpvo:latest", ROOT / "docker" / "dpvo" / "Dockerfile")
 
 
 def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:

@@ -234,6 +234,7 @@ def test_images_and_what_their_builds_take():
         "cnn_svo",
         "reference_vo",
         "orb_slam3",
+        "dpvo",
     }
 
 

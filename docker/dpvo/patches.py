@@ -12,6 +12,7 @@
 - patchgraph.py imports einops and the loop-closure module (numba, pypose) at the top, for DPV-SLAM's loop closure
   only: the imports move into PatchGraph.edges_loop, so the VO runs without them.
 - `torch.cuda.amp.autocast` (deprecated, a FutureWarning at every call site): `torch.autocast("cuda", ...)`.
+- net.py imports matplotlib.pyplot and never uses it: the import goes (the image has no matplotlib).
 usage: patches.py DPVO_ROOT
 """
 import os
@@ -74,12 +75,17 @@ def autocast(root):
         patch(root, path, "replace", "autocast = torch.cuda.amp.autocast\n", AUTOCAST)
 
 
+def unused_imports(root):
+    patch(root, "dpvo/net.py", "replace", "import matplotlib.pyplot as plt\n", "")
+
+
 def dpvo(root):
     dispatch(root)
     eigen(root)
     scatter(root)
     lazy_loop_closure(root)
     autocast(root)
+    unused_imports(root)
 
 
 if __name__ == "__main__":

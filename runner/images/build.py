@@ -122,7 +122,7 @@ def buildable() -> dict[str, tuple[str, Path]]:
     out = {}
     for name, cls in sorted(methods.REGISTRY.items()):
         dockerfile = ROOT / "docker" / name / "Dockerfile"
-        if cls.native and not dockerfile.exists():  # runs natively; its image's recipe is not written yet (dpvo)
+        if cls.native and not dockerfile.exists():  # runs natively; its image's recipe is not written yet
             continue
         if isinstance(cls.image, str):  # `external` names its image per spec (a property), not built here
             out[name] = (cls.image, dockerfile)
@@ -137,6 +137,28 @@ def pypi_files_of(dockerfile: Path) -> list[str]:
         if line.strip().upper().startswith(("COPY", "ADD")):
             names += [n for n in PYPI_RE.findall(line) if n not in names]
     return names
+
+
+ARCH_ARG = re.compile(r'^ARG\s+TORCH_CUDA_ARCH_LIST=(?:"([^"]*)"|(\S*))', re.MULTILINE)
+
+
+def toolchain_labels(dockerfile: Path, wheels: list[str], build_args: dict[str, str]) -> dict[str, str]:
+    """What a GPU image is compiled with ({} for the others): PyTorch's version and CUDA's (from the PyPI files it
+    copies: torch, cuda-toolkit, nvidia-cuda-nvcc) and the compute capabilities (TORCH_CUDA_ARCH_LIST: the build
+    argument given, else the recipe's default)."""
+    versions = {src.PYPI_FILES[w].project: src.PYPI_FILES[w].version for w in wheels}
+    if "torch" not in versions:
+        return {}
+    labels = {f"{LABEL}.torch": versions["torch"]}
+    if "cuda-toolkit" in versions:
+        toolkit = versions["cuda-toolkit"]
+        nvcc = f", nvcc {versions['nvidia-cuda-nvcc']}" if "nvidia-cuda-nvcc" in versions else ""
+        labels[f"{LABEL}.cuda"] = f"{'.'.join(toolkit.split('.')[:2])} (cuda-toolkit {toolkit}{nvcc})"
+    m = ARCH_ARG.search(dockerfile.read_text())
+    arch = build_args.get("TORCH_CUDA_ARCH_LIST") or (m and (m.group(1) or m.group(2)))
+    if arch:
+        labels[f"{LABEL}.cuda-arch"] = arch
+    return labels
 
 
 def model_choice(name: str, opts: BuildOptions) -> tuple[str, str]:
@@ -196,6 +218,7 @@ def vocabulary_choice(name: str, archives: dict[str, Path], opts: BuildOptions) 
 
 def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path, log: Callable[[str], None]) -> dict:
     """Fill `ctx` with what the build of `name` reads; returns the labels describing it."""
+    model, model_detail = model_choice(name, opts)  # a missing network is said before anything is fetched
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
     shutil.copytree(ROOT / "docker", ctx / "docker", ignore=ignore)
     shutil.copytree(ROOT / "methods", ctx / "methods", ignore=ignore)
@@ -232,8 +255,8 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
             _link_or_copy(path, ctx / "pypi" / filename)
             log(f"PyPI file {filename} ({path})")
         labels[f"{LABEL}.pypi"] = json.dumps({f: src.PYPI_FILES[f].sha256 for f in wheels})
+        labels |= toolchain_labels(dockerfile, wheels, opts.build_args)
     weights = {}
-    model, detail = model_choice(name, opts)
     if opts.weights:
         (inputs / "weights").mkdir()
         for wname, given in opts.weights.items():
@@ -241,7 +264,7 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
             shutil.copyfile(path, inputs / "weights" / wname)
             weights[wname] = f"{path.name} sha256 {src.file_sha256(path)}"
     if model == "standin":
-        weights[WEIGHTS[name].name] = detail
+        weights[WEIGHTS[name].name] = model_detail
     if weights:
         labels[f"{LABEL}.weights"] = json.dumps(weights)
         log(f"weights of {name}: {json.dumps(weights)}")

@@ -28,10 +28,11 @@ from runner.images import sources as src
 from runner.images.build import ROOT, BuildOptions, _weights_file, model_choice
 
 PATCHES = ROOT / "docker" / "dpvo" / "patches.py"
+STANDIN = ROOT / "docker" / "dpvo" / "standin_model.py"  # the stand-in network, the image's too
 DEFAULT_CUDA = "/usr/local/cuda"
 EIGEN_CANDIDATES = ("/usr/include/eigen3", "/usr/local/include/eigen3")
 EXTENSIONS = ("cuda_corr", "cuda_ba", "lietorch_backends")
-STANDIN_SEED = 0
+STANDIN_SEED = 0  # the same as docker/dpvo/network.sh's
 # A random network's flow head gives sub-pixel updates, which DPVO's motion probe (median >= 2 px before it starts)
 # takes for a still camera: it would never initialise. The stand-in's flow head (update.d, Linear(384, 2)) is scaled
 # so that its updates are a few pixels and the whole pipeline runs (patches, BA, keyframes, terminate).
@@ -240,16 +241,8 @@ def place_weights(opts: NativeOptions, model: str, tree: Path, stage: Path, log:
 
 def standin_network(python: str, tree: Path, dest: Path, seed: int, flow_gain: float) -> None:
     """DPVO's VONet with random weights from `seed`, its flow head scaled by `flow_gain`, saved as a state dict
-    (needs the compiled extensions, not a GPU)."""
-    code = (
-        "import sys, torch; sys.path.insert(0, sys.argv[1]); torch.manual_seed(int(sys.argv[3]))\n"
-        "from dpvo.net import VONet\n"
-        "net = VONet()\n"
-        "with torch.no_grad():\n"
-        "    for p in net.update.d[1].parameters(): p.mul_(float(sys.argv[4]))\n"
-        "torch.save(net.state_dict(), sys.argv[2])\n"
-    )
-    argv = [python, "-c", code, str(tree), str(dest), str(seed), str(flow_gain)]
+    (docker/dpvo/standin_model.py, as the image makes it; needs the compiled extensions, not a GPU)."""
+    argv = [python, str(STANDIN), str(tree), str(dest), str(seed), str(flow_gain)]
     res = subprocess.run(argv, capture_output=True, text=True)
     if res.returncode != 0:
         raise NativeBuildError(f"the stand-in network could not be made: {_last_line(res.stderr)}")

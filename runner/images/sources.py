@@ -469,6 +469,108 @@ wrapt-1.15.0-cp27-cp27mu-manylinux2010_x86_64.whl
 """
 
 
+# DPVO's image (docker/dpvo/Dockerfile): PyTorch 2.11.0, the PyPI build for CUDA 13.0 (cp311, Debian 12's Python),
+# with every file pip resolves for it, and the CUDA 13.0 compiler as PyPI wheels (no GPU needed to compile). CUDA 13
+# because PyPI's CUDA 12 compiler wheels (nvidia-cuda-nvcc-cu12, 12.1 to 12.9) hold ptxas alone, no nvcc or cicc.
+# Found with `pip download --only-binary=:all: --python-version 3.11 --platform manylinux_2_{5..36}_x86_64
+# torch==2.11.0 'cuda-toolkit[nvcc,cccl,crt,nvvm]==13.0.2' ninja==1.13.0 numpy==2.2.6
+# opencv-python-headless==4.11.0.86` (and pip==26.3). The runtime stage keeps DPVO_TORCH only
+# (docker/dpvo/requirements.txt); DPVO_TOOLCHAIN compiles the extensions in the build stage and is uninstalled
+# before the runtime stage copies the environment (docker/dpvo/requirements-build.txt); tests/test_dpvo_image.py
+# checks both files against these lists.
+DPVO_TORCH = """
+# pip: installs everything below with --no-index --require-hashes (Debian's venv has no pip of its own)
+pip-26.3-py3-none-any.whl
+    f3b60b20ffaadd4415ed7957212a38ac63fa4c5fa375bd0f4a797777940fad13
+# torch: the PyPI build for CUDA 13.0 (torch.version.cuda 13.0: kernels for compute capability 7.5 to 12.0); its CUDA
+# libraries come as cuda-toolkit 13.0.2's wheels, which pins each one
+torch-2.11.0-cp311-cp311-manylinux_2_28_x86_64.whl
+    7aa2f9bbc6d4595ba72138026b2074be1233186150e9292865e04b7a63b8c67a
+cuda_toolkit-13.0.2-py2.py3-none-any.whl
+    b198824cf2f54003f50d64ada3a0f184b42ca0846c1c94192fa269ecd97a66eb
+# the CUDA 13.0 runtime libraries cuda-toolkit 13.0.2 names for torch (the extras cublas, cudart, cufft, cufile,
+# cupti, curand, cusolver, cusparse, nvjitlink, nvrtc, nvtx)
+nvidia_cuda_runtime-13.0.96-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    7f82250d7782aa23b6cfe765ecc7db554bd3c2870c43f3d1821f1d18aebf0548
+nvidia_cuda_nvrtc-13.0.88-py3-none-manylinux2010_x86_64.manylinux_2_12_x86_64.whl
+    ad9b6d2ead2435f11cbb6868809d2adeeee302e9bb94bcf0539c7a40d80e8575
+nvidia_cuda_cupti-13.0.85-py3-none-manylinux_2_25_x86_64.whl
+    4eb01c08e859bf924d222250d2e8f8b8ff6d3db4721288cf35d14252a4d933c8
+nvidia_cublas-13.1.0.3-py3-none-manylinux_2_27_x86_64.whl
+    ee8722c1f0145ab246bccb9e452153b5e0515fd094c3678df50b2a0888b8b171
+nvidia_cufft-12.0.0.61-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    6c44f692dce8fd5ffd3e3df134b6cdb9c2f72d99cf40b62c32dde45eea9ddad3
+nvidia_cufile-1.15.1.6-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    08a3ecefae5a01c7f5117351c64f17c7c62efa5fffdbe24fc7d298da19cd0b44
+nvidia_curand-10.4.0.35-py3-none-manylinux_2_27_x86_64.whl
+    1aee33a5da6e1db083fe2b90082def8915f30f3248d5896bcec36a579d941bfc
+nvidia_cusolver-12.0.4.66-py3-none-manylinux_2_27_x86_64.whl
+    0a759da5dea5c0ea10fd307de75cdeb59e7ea4fcb8add0924859b944babf1112
+nvidia_cusparse-12.6.3.3-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    2b3c89c88d01ee0e477cb7f82ef60a11a4bcd57b6b87c33f789350b59759360b
+nvidia_nvjitlink-13.0.88-py3-none-manylinux2010_x86_64.manylinux_2_12_x86_64.whl
+    13a74f429e23b921c1109976abefacc69835f2f433ebd323d3946e11d804e47b
+nvidia_nvtx-13.0.85-py3-none-manylinux1_x86_64.manylinux_2_5_x86_64.whl
+    4936d1d6780fbe68db454f5e72a42ff64d1fd6397df9f363ae786930fd5c1cd4
+# the libraries torch 2.11.0 pins beside cuda-toolkit: cuDNN, cuSPARSELt, NCCL, NVSHMEM, CUDA's Python bindings
+nvidia_cudnn_cu13-9.19.0.56-py3-none-manylinux_2_27_x86_64.whl
+    d20e1734305e9d68889a96e3f35094d733ff1f83932ebe462753973e53a572bf
+nvidia_cusparselt_cu13-0.8.0-py3-none-manylinux2014_x86_64.whl
+    25e30a8a7323935d4ad0340b95a0b69926eee755767e8e0b1cf8dd85b197d3fd
+nvidia_nccl_cu13-2.28.9-py3-none-manylinux_2_18_x86_64.whl
+    e4553a30f34195f3fa1da02a6da3d6337d28f2003943aa0a3d247bbc25fefc42
+nvidia_nvshmem_cu13-3.4.5-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    290f0a2ee94c9f3687a02502f3b9299a9f9fe826e6d0287ee18482e78d495b80
+cuda_bindings-13.5.0-cp311-cp311-manylinux_2_24_x86_64.manylinux_2_28_x86_64.whl
+    08b7e8d674c3266facb00453a7e34ea7d3ea965c2f594bb728f269f45f39fbe2
+cuda_pathfinder-1.9.1-py3-none-any.whl
+    b743c132f90ad2d1e71d43fd28f31ebcde518f943e50fd44aca62b2a80d5230d
+# triton: a requirement of torch on Linux (torch.compile only; DPVO does not use it)
+triton-3.6.0-cp311-cp311-manylinux_2_27_x86_64.manylinux_2_28_x86_64.whl
+    e8e323d608e3a9bfcc2d9efcc90ceefb764a82b99dea12a86d643c72539ad5d3
+# torch's pure-Python requirements (setuptools: torch 2.11 requires it, <82; it also runs DPVO's setup.py)
+filelock-4.3.1-py3-none-any.whl
+    79e43df8e9fe509cd83a3899a7c186c8077cbbe4d200a1ed3705c2f3bb6bc487
+fsspec-2026.9.0-py3-none-any.whl
+    8dd6e646e99ea382bd85f97a45e6b526a442d79423a7dc673f1e2756d05fcb5f
+jinja2-3.1.6-py3-none-any.whl
+    85ece4451f492d0c13c5dd7c13a64681a86afae63a5f347908daf103ce6d2f67
+markupsafe-3.0.4-cp311-cp311-manylinux2014_x86_64.manylinux_2_17_x86_64.manylinux_2_28_x86_64.whl
+    6da83a088f8ef93b2d483a8232a4dbf4d69d3d8496b568a03c56becac43e1808
+mpmath-1.3.0-py3-none-any.whl
+    a0b2b9fe80bbcd81a6647ff13108738cfb482d481d826cc0e02f5b35e5c88d2c
+networkx-3.6.1-py3-none-any.whl
+    d47fbf302e7d9cbbb9e2555a0d267983d2aa476bac30e90dfbe5669bd57f3762
+setuptools-81.0.0-py3-none-any.whl
+    fdd925d5c5d9f62e4b74b30d6dd7828ce236fd6ed998a08d81de62ce5a6310d6
+sympy-1.14.0-py3-none-any.whl
+    e091cc3e99d2141a0ba2847328f5479b05d94a6635cb96148ccb3f34671bd8f5
+typing_extensions-4.16.0-py3-none-any.whl
+    481caa481374e813c1b176ada14e97f1f67a4539ce9cfeb3f350d78d6370c2e8
+# what slamrun's DPVO process reads frames with (the same files as the reference VO's image)
+numpy-2.2.6-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl
+    ba10f8411898fc418a521833e014a77d3ca01c15b0c6cdcce6a0d2897e6dbbdf
+opencv_python_headless-4.11.0.86-cp37-abi3-manylinux_2_17_x86_64.manylinux2014_x86_64.whl
+    0e0a27c19dd1f40ddff94976cfe43066fbbe9dfbb2ec1907d66c19caef42a57b
+"""
+DPVO_TOOLCHAIN = """
+# the CUDA 13.0 compiler as cuda-toolkit 13.0.2 pins it (its extras nvcc, crt, nvvm, cccl): nvcc, ptxas, fatbinary
+# and cudafe++; the crt headers; nvvm (cicc, libdevice); cccl (thrust, cub, libcu++). All land in nvidia/cu13
+# beside the runtime's headers and libraries: that folder is CUDA_HOME
+nvidia_cuda_nvcc-13.0.88-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    56fe502eb77625a12f25172caa3cdddb4e4c8ba2c8c17dba44b164761b380f03
+nvidia_cuda_crt-13.0.88-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    2c8043c7c9e02492716426e9919fc78d2c5b3b2a7a768a88e952676b08aa55a4
+nvidia_nvvm-13.0.88-py3-none-manylinux2010_x86_64.manylinux_2_12_x86_64.whl
+    c5f41ffeb6466944a026dfa5317d7d85355c119bbec279205d22f1869d1054e0
+nvidia_cuda_cccl-13.0.85-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    e0da7ad981f3a8aff08241b5bfc1af868742a63e2762f53a5171c492ef242649
+# ninja: PyTorch's BuildExtension compiles in parallel with it (MAX_JOBS)
+ninja-1.13.0-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    fb46acf6b93b8dd0322adc3a4945452a4e774b75b91293bafcc7b7f8e6517dfa
+"""
+
+
 def pypi_file(filename: str, sha256: str) -> PypiFile:
     """A PyPI file named by the conventions of wheels (`<project>-<version>-<tags>.whl`) and sdists
     (`<project>-<version>.tar.gz|.zip`), its project name normalised as PyPI does."""
@@ -524,6 +626,8 @@ PYPI_FILES: dict[str, PypiFile] = {
             "0e0a27c19dd1f40ddff94976cfe43066fbbe9dfbb2ec1907d66c19caef42a57b",
         ),
         *pypi_table(PY27_DYNASLAM),
+        *pypi_table(DPVO_TORCH),
+        *pypi_table(DPVO_TOOLCHAIN),
     )
 }
 

@@ -1,0 +1,1 @@
+"""Inside the DPVO image: only slamrun's DPVO process, without the runner's method registry."""

@@ -1,0 +1,271 @@
+"""DPVO's image (docker/dpvo): its recipe against the pins (every PyPI file by SHA-256, one CUDA version for PyTorch
+and the compiler, the compiler left out of the runtime stage, the native route's patches and stand-in reused), the
+labels `slamrun images` gives it, its refusal without a network before any download, and, when the image
+slamrun/dpvo has been built, its compiled extensions and DPVO's package imported inside it without a GPU."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from runner.images import native
+from runner.images import sources as src
+from runner.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
+from tests.conftest import UPSTREAM, require_upstream
+
+ROOT = Path(__file__).resolve().parents[1]
+RECIPE = ROOT / "docker" / "dpvo"
+DOCKERFILE = RECIPE / "Dockerfile"
+IMAGE = "slamrun/dpvo:latest"
+ARCHS = "7.5 8.0 8.6 8.9 9.0"  # Turing, A100, Ampere consumer, Ada, Hopper (issue 41)
+TOOLCHAIN = {"nvidia-cuda-nvcc", "nvidia-cuda-crt", "nvidia-nvvm", "nvidia-cuda-cccl"}
+HASHED = re.compile(r"^([a-z0-9-]+)==([^ ]+) --hash=sha256:([0-9a-f]{64})$")
+
+
+def pins(path: Path) -> list[str]:
+    return [line for line in path.read_text().splitlines() if line and not line.startswith("#")]
+
+
+def stages(text: str) -> list[str]:
+    """The recipe's stages, each from its FROM line."""
+    return ["FROM" + part for part in re.split(r"^FROM", text, flags=re.MULTILINE)[1:]]
+
+
+# ---------------------------------------------------------------- the recipe and its pins
+
+
+def test_every_file_the_recipe_installs_is_pinned_by_hash_and_generated_from_the_table():
+    torch_files, tool_files = src.pypi_table(src.DPVO_TORCH), src.pypi_table(src.DPVO_TOOLCHAIN)
+    assert pypi_files_of(DOCKERFILE) == [f.filename for f in (*torch_files, *tool_files)]  # nothing else copied
+    assert all(src.PYPI_FILES[f.filename] == f for f in (*torch_files, *tool_files))
+    for name, table in (("requirements.txt", torch_files), ("requirements-build.txt", tool_files)):
+        lines = pins(RECIPE / name)
+        assert "\n".join(lines) + "\n" == src.requirements(list(table)), name
+        for line, f in zip(lines, table, strict=True):
+            m = HASHED.match(line)
+            assert m and m.groups() == (f.project, f.version, f.sha256), line
+    projects = [f.project for f in (*torch_files, *tool_files)]
+    assert len(projects) == len(set(projects))  # one file per project
+    assert {f.project for f in tool_files} == TOOLCHAIN | {"ninja"}
+    text = DOCKERFILE.read_text()
+    installs = [i for i in re.sub(r"\\\n", " ", text).splitlines() if "pip install" in i]
+    assert len(installs) == 2 and all("--no-index" in i for i in installs)
+    assert all(i.count("--require-hashes") == 1 for i in installs if "-r /opt" in i)
+
+
+def test_pytorch_and_the_compiler_are_one_cuda_version():
+    files = {f.project: f for f in (*src.pypi_table(src.DPVO_TORCH), *src.pypi_table(src.DPVO_TOOLCHAIN))}
+    cuda = ".".join(files["cuda-toolkit"].version.split(".")[:2])
+    assert cuda == "13.0" and files["torch"].version == "2.11.0"
+    for project in (*TOOLCHAIN, "nvidia-cuda-runtime", "nvidia-cuda-nvrtc", "nvidia-nvjitlink", "nvidia-cuda-cupti"):
+        assert files[project].version.startswith(cuda + "."), (project, files[project].version)
+    assert not [p for p in files if p.endswith("-cu12")]  # no library of another CUDA major version
+    assert "cp311" in files["torch"].filename  # Debian 12's Python
+
+
+def test_the_toolchain_is_what_cuda_toolkit_pins_when_its_wheel_is_at_hand():
+    """cuda-toolkit 13.0.2's own metadata (independent of this project's table) names the compiler's versions."""
+    f = src.PYPI_FILES[next(n for n in src.PYPI_FILES if n.startswith("cuda_toolkit-"))]
+    wheel = src.default_cache() / f.filename
+    if not wheel.is_file():
+        pytest.skip(reason=f"{wheel} not fetched (slamrun images --method dpvo fetches it)")
+    assert src.file_sha256(wheel) == f.sha256
+    with zipfile.ZipFile(wheel) as zf:
+        meta = zf.read(next(n for n in zf.namelist() if n.endswith(".dist-info/METADATA"))).decode()
+    extras = "nvcc|crt|nvvm|cccl|cudart"
+    pinned = dict(re.findall(rf"Requires-Dist: ([a-z-]+)==([\d.]+)\.\*; .*extra == '(?:{extras})'", meta))
+    table = {f.project: f.version for f in src.pypi_table(src.DPVO_TORCH + src.DPVO_TOOLCHAIN)}
+    assert set(pinned) == TOOLCHAIN | {"nvidia-cuda-runtime"}
+    assert all(table[p] == v for p, v in pinned.items()), (pinned, table)
+
+
+def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_patches():
+    build, runtime = stages(DOCKERFILE.read_text())
+    assert build.startswith("FROM debian:bookworm-slim AS build") and runtime.startswith("FROM debian:bookworm-slim\n")
+    uninstalled = re.search(r"pip uninstall -y --no-cache-dir \\\n\s+([^\\\n]+)", build).group(1).split()
+    assert set(uninstalled) == TOOLCHAIN | {"ninja"}  # every build-only wheel is removed before the copy
+    assert "pypi" not in runtime and "g++" not in runtime and "sources/" not in runtime
+    assert "! ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin/nvcc" in runtime
+    assert "USER slam" in runtime and "useradd --create-home --uid 1000 slam" in runtime
+    assert ARCH_ARG.search(build).group(1) == ARCHS
+    # the native route's files, not copies: patches.py (with the torch_scatter stand-in) and the stand-in network
+    assert native.PATCHES == RECIPE / "patches.py" and native.STANDIN == RECIPE / "standin_model.py"
+    assert "docker/dpvo/patches.py docker/dpvo/torch_scatter_compat.py" in build
+    assert "docker/dpvo/standin_model.py" in build
+    script = (RECIPE / "network.sh").read_text()
+    seed, gain = re.search(r"seed=(\d+) gain=(\d+)", script).groups()
+    assert (int(seed), float(gain)) == (native.STANDIN_SEED, native.STANDIN_FLOW_GAIN)
+
+
+def test_the_extension_build_script_compiles_with_the_wheels_toolkit_for_the_given_targets():
+    script = (RECIPE / "build-extensions.sh").read_text()
+    assert 'CUDA_HOME=$cuda TORCH_CUDA_ARCH_LIST="$arch"' in script and "cuda=$site/nvidia/cu13" in script
+    assert "libcudart.so.13" in script and 'python3 "$patches" "$tree"' in script
+    assert "import torch, cuda_corr, cuda_ba, lietorch_backends" in script
+    res = subprocess.run(["bash", "-n", str(RECIPE / "build-extensions.sh")], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    res = subprocess.run(["bash", "-n", str(RECIPE / "network.sh")], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+
+
+# ---------------------------------------------------------------- what `slamrun images` says of it
+
+
+def test_labels_name_torch_cuda_and_the_targets():
+    wheels = pypi_files_of(DOCKERFILE)
+    labels = toolchain_labels(DOCKERFILE, wheels, {})
+    assert labels == {
+        "slamrun.torch": "2.11.0",
+        "slamrun.cuda": "13.0 (cuda-toolkit 13.0.2, nvcc 13.0.88)",
+        "slamrun.cuda-arch": ARCHS,
+    }
+    assert toolchain_labels(DOCKERFILE, wheels, {"TORCH_CUDA_ARCH_LIST": "9.0"})["slamrun.cuda-arch"] == "9.0"
+    reference = ROOT / "docker" / "reference_vo" / "Dockerfile"
+    assert toolchain_labels(reference, pypi_files_of(reference), {}) == {}  # not a GPU image
+
+
+def test_the_context_of_a_standin_build_is_labelled_with_what_it_holds(tmp_path):
+    """The build context `slamrun images --method dpvo --standin-model` assembles (the real archive, the fetched
+    wheels, when this machine's download cache holds them): its labels say what the image will hold."""
+    from runner.images.build import assemble_context
+
+    missing = [f for f in pypi_files_of(DOCKERFILE) if not (src.default_cache() / f).is_file()]
+    if missing:
+        pytest.skip(reason=f"{len(missing)} wheels not in {src.default_cache()} (slamrun images --method dpvo fetches)")
+    opts = BuildOptions(sources_dir=require_upstream(), standin_model=True, build_args={"TORCH_CUDA_ARCH_LIST": "9.0"})
+    (tmp_path / "ctx").mkdir()
+    labels = assemble_context("dpvo", DOCKERFILE, opts, tmp_path / "ctx", lambda line: None)
+    assert "NOT the trained network" in json.loads(labels["slamrun.weights"])["dpvo.pth"]
+    assert json.loads(labels["slamrun.build-args"]) == {
+        "VOCABULARY": "none",
+        "DPVO_MODEL": "standin",
+        "TORCH_CUDA_ARCH_LIST": "9.0",
+    }
+    assert labels["slamrun.torch"] == "2.11.0" and labels["slamrun.cuda-arch"] == "9.0"
+    assert set(json.loads(labels["slamrun.pypi"])) == set(pypi_files_of(DOCKERFILE))
+    assert (tmp_path / "ctx" / "sources" / "dpvo.tar.gz").is_file()
+    assert sorted(p.name for p in (tmp_path / "ctx" / "pypi").iterdir()) == sorted(pypi_files_of(DOCKERFILE))
+
+
+def test_weights_choice_is_given_standin_or_an_error_naming_the_file(tmp_path):
+    assert model_choice("dpvo", BuildOptions(weights={"dpvo.pth": tmp_path / "x"}))[0] == "given"
+    kind, detail = model_choice("dpvo", BuildOptions(standin_model=True))
+    assert kind == "standin" and "NOT the trained network" in detail
+
+
+def test_images_without_a_network_stop_before_fetching_anything(tmp_path):
+    """`slamrun images --method dpvo` with neither --weights nor --standin-model: one line naming dpvo.pth and where
+    it is published, before 2.6 GB of wheels are fetched (here from a PyPI address that answers nothing)."""
+    from runner.backends.docker import DockerBackend
+    from runner.errors import InfraError
+
+    try:
+        DockerBackend().client.api.version()
+    except (InfraError, Exception) as exc:  # noqa: BLE001 - `slamrun images` needs an engine to start at all
+        pytest.skip(reason=f"no Docker engine: {exc}")
+    sources = tmp_path / "sources"
+    sources.mkdir()
+    archive = require_upstream(UPSTREAM / src.SOURCES["dpvo"].filename)
+    os.symlink(archive, sources / archive.name)
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "SLAMRUN_PYPI_URL": "http://127.0.0.1:9"}
+    argv = [sys.executable, "-m", "runner.cli", "images", "--method", "dpvo", "--sources", str(sources)]
+    res = subprocess.run([*argv, "--log-dir", str(tmp_path / "logs")], capture_output=True, text=True, env=env)
+    assert res.returncode != 0
+    assert "dpvo needs dpvo.pth" in res.stderr and "models.zip" in res.stderr and "--standin-model" in res.stderr
+    assert "Traceback" not in res.stderr and "cannot find" not in res.stderr
+    assert not (tmp_path / "cache" / "slamrun" / "sources").exists()  # nothing fetched
+
+
+# ---------------------------------------------------------------- inside the built image (no GPU)
+
+
+def built_image():
+    """The Docker API client and the built image's labels, or a skip saying why."""
+    from runner.backends.docker import DockerBackend
+    from runner.errors import InfraError
+
+    try:
+        api = DockerBackend().client.api
+    except InfraError as exc:
+        pytest.skip(reason=f"no Docker engine: {exc}")
+    if not api.images(name=IMAGE):
+        pytest.skip(reason=f"{IMAGE} is not built (slamrun images --method dpvo --standin-model; CI builds DSO's only)")
+    return api, (api.inspect_image(IMAGE).get("Config") or {}).get("Labels") or {}
+
+
+def run_in_image(api, command: list[str], volumes: dict | None = None, timeout: int = 600) -> tuple[int, str]:
+    """`command` in a container of the image, without a network or a GPU: (exit status, output)."""
+    binds = {str(k): {"bind": v, "mode": "ro"} for k, v in (volumes or {}).items()}
+    container = api.create_container(
+        IMAGE,
+        command=command,
+        volumes=[b["bind"] for b in binds.values()],
+        host_config=api.create_host_config(network_mode="none", binds=binds),
+    )
+    try:
+        api.start(container)
+        status = api.wait(container, timeout=timeout)["StatusCode"]
+        return status, api.logs(container).decode(errors="replace")
+    finally:
+        api.remove_container(container, force=True)
+
+
+IMPORTS = """
+import json, sys
+record = json.load(open('/opt/dpvo/build.json'))
+sys.path.insert(0, '/opt/dpvo/' + record['tree'])
+import torch
+import cuda_corr, cuda_ba, lietorch_backends, dpvo
+from dpvo.net import VONet
+import dpvo.lietorch, dpvo.altcorr, dpvo.fastba
+print(json.dumps({'torch': torch.__version__, 'cuda': torch.version.cuda, 'gpu': torch.cuda.is_available(),
+                  'ext': [m.__file__ for m in (cuda_corr, cuda_ba, lietorch_backends)], 'record': record}))
+"""
+
+
+def test_the_compiled_extensions_and_dpvo_import_inside_the_image_without_a_gpu():
+    api, labels = built_image()
+    status, out = run_in_image(api, ["python3", "-c", IMPORTS])
+    assert status == 0, out[-3000:]
+    got = json.loads(out.strip().splitlines()[-1])
+    assert got["torch"].startswith(labels["slamrun.torch"]) and got["cuda"] == labels["slamrun.cuda"].split()[0]
+    assert got["gpu"] is False  # no GPU given: nothing above touched CUDA
+    assert all(f.startswith(f"/opt/dpvo/{got['record']['tree']}/") and f.endswith(".so") for f in got["ext"])
+    assert got["record"]["arch"] == labels["slamrun.cuda-arch"]
+    label = json.loads(labels["slamrun.weights"])["dpvo.pth"]  # what `slamrun images` chose, said in the image too
+    standin = got["record"]["weights"].startswith("untrained stand-in")
+    if standin:
+        assert "NOT the trained network" in label and "NOT the trained network" in got["record"]["weights"]
+    else:  # the given file's SHA-256
+        assert label.split(" sha256 ")[-1] in got["record"]["weights"]
+    assert json.loads(labels["slamrun.sources"]) == {"dpvo": f"princeton-vl/DPVO@{src.SOURCES['dpvo'].commit}"}
+    status, out = run_in_image(api, ["sh", "-c", "id -u; ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin"])
+    assert out.split()[0] == "1000"  # the image's user, not root
+    assert "nvcc" not in out  # the compiler stayed in the build stage
+
+
+def test_slamruns_dpvo_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
+    """The image's `python3 -m methods.dpvo_process`, as the docker backend runs it, on a real prepared view: it reads
+    the frames and the network, imports PyTorch, and exits 3 saying there is no GPU."""
+    from methods.dpvo import IMAGE_BUILD, IMAGE_WEIGHTS
+    from runner.datasets.cache import prepare
+    from runner.datasets.synth import generate
+    from runner.datasets.view import Direction, Profile
+
+    api, _ = built_image()
+    view = prepare(generate(tmp_path / "room", frames=20, seed=3), Direction.forward, Profile.rectified, tmp_path / "c")
+    argv = [
+        "python3", "-m", "methods.dpvo_process", "--build", IMAGE_BUILD, "--weights", IMAGE_WEIGHTS,
+        "--images", f"/data/{view.images_dir}", "--times", f"/data/{view.times}",
+        "--camera", "/data/camera_pinhole.json",
+        "--out", "/tmp/trajectory.txt",
+    ]  # fmt: skip
+    status, out = run_in_image(api, argv, {view.root: "/data"})
+    assert status == 3 and "NO GPU" in out, out[-3000:]
