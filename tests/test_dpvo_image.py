@@ -91,6 +91,7 @@ def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_pat
     assert build.startswith("FROM debian:bookworm-slim AS build") and runtime.startswith("FROM debian:bookworm-slim\n")
     uninstalled = re.search(r"pip uninstall -y --no-cache-dir \\\n\s+([^\\\n]+)", build).group(1).split()
     assert set(uninstalled) == TOOLCHAIN | {"ninja"}  # every build-only wheel is removed before the copy
+    assert "pip uninstall -y --no-cache-dir triton" in build  # torch.compile's, not DPVO's
     assert "pypi" not in runtime and "g++" not in runtime and "sources/" not in runtime
     assert "! ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin/nvcc" in runtime
     assert "USER slam" in runtime and "useradd --create-home --uid 1000 slam" in runtime
@@ -249,6 +250,8 @@ def test_the_compiled_extensions_and_dpvo_import_inside_the_image_without_a_gpu(
     status, out = run_in_image(api, ["sh", "-c", "id -u; ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin"])
     assert out.split()[0] == "1000"  # the image's user, not root
     assert "nvcc" not in out  # the compiler stayed in the build stage
+    status, out = run_in_image(api, ["python3", "-c", "import importlib.util as u; print(u.find_spec('triton'))"])
+    assert status == 0 and out.split()[-1] == "None", out  # torch.compile's compiler left out (641 MB)
 
 
 def test_slamruns_dpvo_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
