@@ -34,7 +34,7 @@ NO_GPU = "needs a GPU; this host has none"
 @pytest.fixture(scope="module")
 def gpu_less():
     if host_gpus():
-        pytest.skip("this host has a GPU: these tests are about one without")
+        pytest.skip(reason="this host has a GPU: these tests are about one without")
 
 
 def slamrun(*args, env=None, cwd=None) -> subprocess.CompletedProcess:
@@ -310,7 +310,7 @@ def wheels(tmp_path_factory) -> Path:
         and "pip" in res.stderr
         and re.search(r"No matching distribution|connection", res.stderr, re.I)
     ):
-        pytest.skip(f"no package index reachable for the wheels: {res.stderr.strip()[-200:]}")
+        pytest.skip(reason=f"no package index reachable for the wheels: {res.stderr.strip()[-200:]}")
     assert res.returncode == 0, res.stderr
     return folder
 

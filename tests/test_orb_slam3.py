@@ -251,7 +251,7 @@ def image_or_skip() -> str:
 
     engine_with_base()
     if subprocess.run(["docker", "image", "inspect", IMAGE], capture_output=True).returncode != 0:
-        pytest.skip(f"{IMAGE} is not built: slamrun images --method orb_slam3 --sources ../shared/upstream")
+        pytest.skip(reason=f"{IMAGE} is not built: slamrun images --method orb_slam3 --sources ../shared/upstream")
     return IMAGE
 
 
