@@ -301,6 +301,8 @@ def wheels(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("whl")
     ver = f"{sys.version_info.major}.{sys.version_info.minor}"
     shared = Path(os.environ.get("SLAMRUN_SHARED", ROOT.parent / "shared")) / "upstream"
+    if not any(shared.glob("DPVO-*.tar.gz")):
+        pytest.skip(reason=f"no DPVO archive in {shared}: the pinned sources live in shared/upstream beside the repo")
     env = {**os.environ, "PY": sys.executable, "SOURCES": str(shared)}
     res = subprocess.run(
         ["bash", "scripts/gpu-wheels.sh", str(folder), ver], cwd=ROOT, env=env, capture_output=True, text=True
