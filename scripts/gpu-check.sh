@@ -11,7 +11,8 @@
 # --until-gpu: stop before the first step that needs the GPU machine (the DPVO compile), after the install, the
 # synthetic room and the unpacked, patched DPVO tree (tests/test_gpu.py runs it so on a machine without a GPU).
 # Settings (environment): PYTHON (python3), WHEELS (.whl), WORK (scratch folder, default $TMPDIR/slamrun-gpu-check),
-# FRAMES (160), TRIALS (2 per direction), JOBS (all cores), ARCH (this GPU's compute capability).
+# FRAMES (160), TRIALS (2 per direction), JOBS (all cores), ARCH (this GPU's compute capability), REUSE_BUILD (1: keep
+# a native build already in WORK, for a second try on the same machine).
 set -Eeuo pipefail
 
 UNTIL_GPU=0
@@ -19,7 +20,7 @@ POSITIONAL=()
 for arg in "$@"; do
   case $arg in
     --until-gpu) UNTIL_GPU=1 ;;
-    -h|--help) sed -n '2,16p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
     *) POSITIONAL+=("$arg") ;;
   esac
 done
@@ -93,10 +94,17 @@ if [ $UNTIL_GPU = 1 ]; then
   exit 0
 fi
 
-step build "DPVO's CUDA extensions with $JOBS jobs for this GPU${ARCH:+ (compute capability $ARCH)}, a stand-in network"
-logged "${SLAMRUN[@]}" native-build dpvo --sources "$WHEELS/sources" --eigen "$EIGEN" --jobs "$JOBS" \
-  --standin-model ${ARCH:+--arch "$ARCH"}
 BUILD="$XDG_CACHE_HOME/slamrun/native/dpvo"
+if [ "${REUSE_BUILD:-0}" = 1 ] && [ -f "$BUILD/build.json" ]; then
+  step build "reusing the native build in $BUILD (REUSE_BUILD=1)"
+else
+  step build "DPVO's CUDA extensions with $JOBS jobs for this GPU${ARCH:+ (compute capability $ARCH)}, a stand-in network"
+  logged "${SLAMRUN[@]}" native-build dpvo --sources "$WHEELS/sources" --eigen "$EIGEN" --jobs "$JOBS" \
+    --standin-model ${ARCH:+--arch "$ARCH"}
+fi
+# each compiled file's seconds (ninja's log: start ms, end ms, ..., target)
+find "$BUILD" -name .ninja_log -exec awk -v OFS='\t' '!/^#/ {print ($2 - $1) / 1000 " s", $4}' {} + \
+  >"$OUT_DIR/logs/compile-seconds.txt" 2>/dev/null || true
 cp "$BUILD/build.json" "$OUT_DIR/native-build.json"
 cp "$BUILD/build.log" "$OUT_DIR/logs/native-build-compiler.log"
 
