@@ -199,7 +199,8 @@ def run(argv: list[str] | None = None) -> int:
     write_tum(args.out, times[index], np.asarray(poses, dtype=np.float64))
     peak_mb = torch.cuda.max_memory_allocated() / 2**20
     print(
-        f"dpvo: {len(index)} poses ({n_keyframes} keyframes) in {seconds:.2f} s ({len(paths) / seconds:.1f} fps{steady}); "
+        f"dpvo: {len(index)} poses ({n_keyframes} keyframes) in {seconds:.2f} s "
+        f"({len(paths) / seconds:.1f} fps{steady}); "
         f"PyTorch's peak allocation {peak_mb:.0f} MB",
         flush=True,
     )
