@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import statistics
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,7 +113,8 @@ def medians(done: list[dict]) -> dict:
             mine = [r for r in rows if r["label"] == label]
             row = {"method": label, "done": len(mine)}
             for m in metrics:
-                row[m] = _median([r[m] for r in mine if _finite(r.get(m))])
+                finite = [r[m] for r in mine if _finite(r.get(m))]
+                row[m] = statistics.median(finite) if finite else None
             methods.append(row)
             if main:
                 vs = [r[main] for r in mine if _finite(r.get(main))]
@@ -142,14 +144,6 @@ def report_figures(results: Path) -> list[dict]:
 
 def _finite(v) -> bool:
     return isinstance(v, int | float) and math.isfinite(v)
-
-
-def _median(values: list[float]) -> float | None:
-    if not values:
-        return None
-    s = sorted(values)
-    n = len(s)
-    return s[n // 2] if n % 2 else (s[n // 2 - 1] + s[n // 2]) / 2
 
 
 def _spread(values: list[float], limit: int) -> list[float]:
