@@ -44,7 +44,8 @@ clean:
 	rm -rf $(VENV) results .cache
 
 # The GPU check (scripts/gpu-check.sh): `make gpu-wheels` here fills .whl/ with what a GPU machine without network
-# lacks (wheels for Python $(GPU_PY), Eigen's headers, DPVO's archive); there, `make gpu-check OUT=DIR`.
+# lacks (wheels for Python $(GPU_PY), Eigen's headers, the GPU methods' archives); there, `make gpu-check OUT=DIR`
+# (METHOD=droid_slam for DROID-SLAM; dpvo by default).
 WHEELS ?= .whl
 GPU_PY ?= 3.12
 OUT ?= gpu-check-out
@@ -53,4 +54,4 @@ gpu-wheels:
 	PY=$(PYTHON) scripts/gpu-wheels.sh $(WHEELS) $(GPU_PY)
 
 gpu-check:
-	WHEELS=$(WHEELS) bash scripts/gpu-check.sh $(OUT)
+	WHEELS=$(WHEELS) METHOD=$(or $(METHOD),dpvo) bash scripts/gpu-check.sh $(OUT)

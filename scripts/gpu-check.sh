@@ -1,18 +1,18 @@
 #!/usr/bin/env bash
 # slamrun's GPU check, for a bare Linux machine with one NVIDIA GPU, PyTorch with CUDA, nvcc, no Docker, no network,
 # the working tree copied there with .whl/ (`make gpu-wheels` fills it here) beside it. From the repository root:
-#   bash scripts/gpu-check.sh [OUT] [--until-gpu]          (make gpu-check [OUT=DIR])
+#   bash scripts/gpu-check.sh [OUT] [--until-gpu]          (make gpu-check [OUT=DIR] [METHOD=droid_slam])
 # It installs slamrun into $PYTHON's environment from the tree with the carried wheels, generates a synthetic room,
-# compiles DPVO natively (all cores, this GPU's architecture only) with an untrained stand-in network, runs
-# `slamrun campaign` with backend: local, forward and backward, and leaves in OUT (default $OUT, else
-# ./gpu-check-out): results.csv, the runs' resource series (resources/), the runs' logs and run.json (runs/), the
+# compiles the GPU method $METHOD (dpvo, else droid_slam) natively (all cores, this GPU's architecture only) with an
+# untrained stand-in network, runs `slamrun campaign` with backend: local, forward and backward, and leaves in OUT
+# (default $OUT, else ./gpu-check-out): results.csv, the runs' resource series (resources/), the runs' logs and run.json (runs/), the
 # native build's record and log, the spec, the step logs (logs/) and a one-page summary.txt. Each step is printed
 # with the time; the first failure stops it, naming the step and its log.
-# --until-gpu: stop before the first step that needs the GPU machine (the DPVO compile), after the install, the
-# synthetic room and the unpacked, patched DPVO tree (tests/test_gpu.py runs it so on a machine without a GPU).
-# Settings (environment): PYTHON (python3), WHEELS (.whl), WORK (scratch folder, default $TMPDIR/slamrun-gpu-check),
-# FRAMES (160), TRIALS (2 per direction), JOBS (all cores), ARCH (this GPU's compute capability), REUSE_BUILD (1: keep
-# a native build already in WORK, for a second try on the same machine).
+# --until-gpu: stop before the first step that needs the GPU machine (the compile), after the install, the
+# synthetic room and the method's unpacked, patched tree (tests/test_gpu.py runs it so on a machine without a GPU).
+# Settings (environment): METHOD (dpvo), PYTHON (python3), WHEELS (.whl), WORK (scratch folder, default
+# $TMPDIR/slamrun-gpu-check), FRAMES (160), TRIALS (2 per direction), JOBS (all cores), ARCH (this GPU's compute
+# capability), REUSE_BUILD (1: keep a native build already in WORK, for a second try on the same machine).
 set -Eeuo pipefail
 
 UNTIL_GPU=0
@@ -31,7 +31,13 @@ WORK=${WORK:-${TMPDIR:-/tmp}/slamrun-gpu-check}
 FRAMES=${FRAMES:-160}
 TRIALS=${TRIALS:-2}
 JOBS=${JOBS:-$(nproc)}
-DPVO_ARCHIVE=DPVO-859bbbfdac6c6185f345003b3c473901fcd13ace.tar.gz
+METHOD=${METHOD:-dpvo}
+case $METHOD in  # the pinned archives the native build takes (runner/images/sources.py), carried in .whl/sources
+  dpvo) ARCHIVES=(DPVO-859bbbfdac6c6185f345003b3c473901fcd13ace.tar.gz) ;;
+  droid_slam) ARCHIVES=(DROID-SLAM-2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99.tar.gz
+                        lietorch-7f687644fcea81ab337831749445224503c1290d.tar.gz) ;;
+  *) echo "gpu-check: METHOD=$METHOD: expected dpvo or droid_slam" >&2; exit 2 ;;
+esac
 
 mkdir -p "$OUT_DIR/logs"
 OUT_DIR=$(cd "$OUT_DIR" && pwd)
@@ -53,7 +59,7 @@ step preflight "the machine: Python, the carried wheels and sources$([ $UNTIL_GP
 logged "$PYTHON" -c 'import sys; print(sys.version); assert sys.version_info >= (3, 11), "slamrun needs Python 3.11+"' \
   || fail "$PYTHON is no Python 3.11+ (set PYTHON)"
 ls "$WHEELS"/pydantic-*.whl "$WHEELS"/pydantic_core-*.whl "$WHEELS/eigen3-headers.tar.gz" \
-  "$WHEELS/sources/$DPVO_ARCHIVE" >>"$STEP_LOG" 2>&1 || fail "$WHEELS lacks the carried files: run 'make gpu-wheels' and carry .whl"
+  "${ARCHIVES[@]/#/$WHEELS/sources/}" >>"$STEP_LOG" 2>&1 || fail "$WHEELS lacks the carried files: run 'make gpu-wheels' and carry .whl"
 if [ $UNTIL_GPU = 0 ]; then
   logged "$PYTHON" -c 'import torch; print("torch", torch.__version__, "cuda", torch.version.cuda); assert torch.cuda.is_available(), "no CUDA device"; print(torch.cuda.get_device_name(0), torch.cuda.get_device_capability(0))' \
     || fail "PyTorch with a CUDA device is needed in $PYTHON (see $STEP_LOG)"
@@ -70,7 +76,7 @@ fi
 logged "$PYTHON" -m pip install --no-index --no-deps --no-build-isolation -e .
 SLAMRUN=("$PYTHON" -m runner.cli)
 logged "${SLAMRUN[@]}" --version
-logged "$PYTHON" -c 'import pydantic, runner.engine.spec, methods; print("dpvo" in methods.REGISTRY)'
+logged "$PYTHON" -c "import pydantic, runner.engine.spec, methods; assert '$METHOD' in methods.REGISTRY"
 
 step eigen "Eigen 3.4's headers from the carried archive"
 if [ -f /usr/include/eigen3/Eigen/Core ]; then
@@ -86,20 +92,20 @@ step synth "a synthetic room: $FRAMES frames at 640x480 (slamrun synth)"
 rm -rf "$WORK/data" && mkdir -p "$WORK/data"
 logged "${SLAMRUN[@]}" synth --frames "$FRAMES" --size 640x480 --seed 0 --scene indoor "$WORK/data/room"
 
-step unpack "DPVO's pinned source, checked, unpacked and patched (docker/dpvo/patches.py)"
-rm -rf "$WORK/dpvo-patched"
-logged "${SLAMRUN[@]}" native-build dpvo --unpack-only --sources "$WHEELS/sources" --into "$WORK/dpvo-patched"
+step unpack "$METHOD's pinned sources, checked, unpacked and patched (docker/$METHOD/patches.py)"
+rm -rf "$WORK/$METHOD-patched"
+logged "${SLAMRUN[@]}" native-build "$METHOD" --unpack-only --sources "$WHEELS/sources" --into "$WORK/$METHOD-patched"
 if [ $UNTIL_GPU = 1 ]; then
   say "stopped before the GPU steps (--until-gpu): work in $WORK"
   exit 0
 fi
 
-BUILD="$XDG_CACHE_HOME/slamrun/native/dpvo"
+BUILD="$XDG_CACHE_HOME/slamrun/native/$METHOD"
 if [ "${REUSE_BUILD:-0}" = 1 ] && [ -f "$BUILD/build.json" ]; then
   step build "reusing the native build in $BUILD (REUSE_BUILD=1)"
 else
-  step build "DPVO's CUDA extensions with $JOBS jobs for this GPU${ARCH:+ (compute capability $ARCH)}, a stand-in network"
-  logged "${SLAMRUN[@]}" native-build dpvo --sources "$WHEELS/sources" --eigen "$EIGEN" --jobs "$JOBS" \
+  step build "$METHOD's CUDA extensions with $JOBS jobs for this GPU${ARCH:+ (compute capability $ARCH)}, a stand-in network"
+  logged "${SLAMRUN[@]}" native-build "$METHOD" --sources "$WHEELS/sources" --eigen "$EIGEN" --jobs "$JOBS" \
     --standin-model ${ARCH:+--arch "$ARCH"}
 fi
 # each compiled file's seconds (ninja's log: start ms, end ms, ..., target)
@@ -108,7 +114,7 @@ find "$BUILD" -name .ninja_log -exec awk -v OFS='\t' '!/^#/ {print ($2 - $1) / 1
 cp "$BUILD/build.json" "$OUT_DIR/native-build.json"
 cp "$BUILD/build.log" "$OUT_DIR/logs/native-build-compiler.log"
 
-step campaign "slamrun campaign: dpvo (stand-in network), backend local, forward and backward, $TRIALS trial(s) each"
+step campaign "slamrun campaign: $METHOD (stand-in network), backend local, forward and backward, $TRIALS trial(s) each"
 SPEC="$OUT_DIR/gpu-check.yaml"
 cat >"$SPEC" <<EOF
 # written by scripts/gpu-check.sh
@@ -120,8 +126,8 @@ datasets:
     path: $WORK/data
     sequences: [room]
 methods:
-  - name: dpvo
-    label: dpvo-standin   # an untrained stand-in network: plumbing and resources only, accuracy meaningless
+  - name: $METHOD
+    label: $METHOD-standin   # an untrained stand-in network: plumbing and resources only, accuracy meaningless
 directions: [forward, backward]
 trials: $TRIALS
 timeout_s: 300

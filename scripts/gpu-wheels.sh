@@ -2,14 +2,16 @@
 # What scripts/gpu-check.sh carries to a GPU machine without network, into one ignored folder (default .whl/):
 # the wheels slamrun needs that such a machine lacks (Python 3.12, manylinux x86_64; PyTorch, NumPy, SciPy, pandas,
 # pyarrow, OpenCV, matplotlib, psutil, rich, PyYAML and requests are there already), ninja (PyTorch's parallel
-# extension build), Eigen 3.4's headers (DPVO's extensions include them) and DPVO's pinned source archive.
+# extension build), Eigen 3.4's headers (the extensions include them) and the GPU methods' pinned source archives
+# (DPVO; DROID-SLAM with its lietorch submodule).
 # usage: scripts/gpu-wheels.sh [DIR] [PYTHON_VERSION]      (make gpu-wheels [WHEELS=DIR] [GPU_PY=3.12])
 set -euo pipefail
 DIR=${1:-.whl}
 PYVER=${2:-3.12}
 PY=${PY:-python3}
 SOURCES=${SOURCES:-../shared/upstream}
-DPVO=DPVO-859bbbfdac6c6185f345003b3c473901fcd13ace.tar.gz
+ARCHIVES=(DPVO-859bbbfdac6c6185f345003b3c473901fcd13ace.tar.gz DROID-SLAM-2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99.tar.gz
+          lietorch-7f687644fcea81ab337831749445224503c1290d.tar.gz)
 # pinned as tested with slamrun (pyproject: pydantic>=2.5); typing-extensions: pydantic 2.14 needs >= 4.14.1;
 # setuptools: installed there only when its own cannot build an editable wheel (older than 70.1, no `wheel`)
 WHEELS=(pydantic==2.14.4 pydantic-core==2.50.5 annotated-types==0.8.0 typing-inspection==0.4.5
@@ -34,11 +36,13 @@ if [ ! -s "$DIR/eigen3-headers.tar.gz" ]; then
   fi
 fi
 
-# DPVO's pinned archive (checked again by slamrun native-build)
-if [ ! -s "$DIR/sources/$DPVO" ]; then
-  mkdir -p "$DIR/sources"
-  [ -s "$SOURCES/$DPVO" ] || { echo "gpu-wheels: $SOURCES/$DPVO not found (give SOURCES=DIR)" >&2; exit 1; }
-  cp "$SOURCES/$DPVO" "$DIR/sources/"
-fi
-(cd "$DIR" && sha256sum ./*.whl eigen3-headers.tar.gz "sources/$DPVO" > SHA256SUMS)
+# the pinned archives (checked again by slamrun native-build)
+mkdir -p "$DIR/sources"
+for archive in "${ARCHIVES[@]}"; do
+  if [ ! -s "$DIR/sources/$archive" ]; then
+    [ -s "$SOURCES/$archive" ] || { echo "gpu-wheels: $SOURCES/$archive not found (give SOURCES=DIR)" >&2; exit 1; }
+    cp "$SOURCES/$archive" "$DIR/sources/"
+  fi
+done
+(cd "$DIR" && sha256sum ./*.whl eigen3-headers.tar.gz "${ARCHIVES[@]/#/sources/}" > SHA256SUMS)
 du -sh "$DIR"

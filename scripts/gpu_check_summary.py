@@ -1,7 +1,8 @@
 """The one-page summary of scripts/gpu-check.sh: `python scripts/gpu_check_summary.py OUT SECONDS` -> OUT/summary.txt.
 
-Reads what the script left in OUT: results.csv (one row per run), native-build.json (the DPVO build's record) and
-runs/*/log.txt (DPVO's own line: poses, keyframes, processing fps, PyTorch's peak allocation). Standard library only.
+Reads what the script left in OUT: results.csv (one row per run), native-build.json (the native build's record: dpvo
+or droid_slam) and runs/*/log.txt (the method's own line: poses, keyframes, processing fps, PyTorch's peak
+allocation). Standard library only.
 """
 
 from __future__ import annotations
@@ -29,8 +30,9 @@ COLUMNS = (  # results.csv column, heading, format
     ("ram_peak_mb", "RAM MB", "{:.0f}"),
     ("ate_rmse", "ATE m", "{:.3f}"),
 )
-DPVO_LINE = re.compile(r"^dpvo: \d+ poses .*$", re.M)
-PAPER = "DPVO's paper: about 60 fps at its default setting on an RTX 3090"
+OWN_LINE = re.compile(r"^(?:dpvo|droid_slam): \d+ poses .*$", re.M)
+NAMES = {"dpvo": "DPVO", "droid_slam": "DROID-SLAM"}
+PAPER = {"dpvo": "DPVO's paper: about 60 fps at its default setting on an RTX 3090."}
 
 
 def cell(row: dict, key: str, fmt: str) -> str:
@@ -80,11 +82,13 @@ def summary(out: Path, seconds: float) -> str:
         build = json.loads((out / "native-build.json").read_text())
     except (OSError, ValueError):
         build = {}
+    method = build.get("method", "dpvo")
+    name = NAMES.get(method, method)
     lines = [
         f"slamrun GPU check, {time.strftime('%Y-%m-%d %H:%M:%S')}, {seconds:.0f} s in all, host {platform.node()}",
         f"GPU: {gpu_line()}",
         f"PyTorch {build.get('torch', '?')} (CUDA {build.get('cuda', '?')}), Python {platform.python_version()}",
-        f"DPVO build: {build.get('source', '?')}, compute capability {build.get('arch', '?')}, "
+        f"{name} build: {build.get('source', '?')}, compute capability {build.get('arch', '?')}, "
         f"{build.get('seconds', '?')} s",
         f"network: {build.get('weights', '?')}",
         "",
@@ -94,12 +98,12 @@ def summary(out: Path, seconds: float) -> str:
         f"means: wall {means(rows, 'wall_s')} s, fps {means(rows, 'fps')}, GPU memory peak "
         f"{means(rows, 'gpu_mem_peak_mb')} MB, GPU utilisation {means(rows, 'gpu_util_mean_pct')} %",
         "fps above: frames fed / the process's wall time (Python, CUDA and network start-up included);",
-        f"DPVO's own processing rate is in its log lines below. {PAPER}.",
+        f"{name}'s own processing rate is in its log lines below. {PAPER.get(method, '')}".rstrip(),
         "",
     ]
     for log in sorted((out / "runs").glob("*/log.txt")):
-        found = DPVO_LINE.findall(log.read_text(errors="replace"))
-        lines.append(f"{log.parent.name}: {found[-1] if found else '(no DPVO summary line)'}")
+        found = OWN_LINE.findall(log.read_text(errors="replace"))
+        lines.append(f"{log.parent.name}: {found[-1] if found else f'(no {name} summary line)'}")
     return "\n".join(lines) + "\n"
 
 
