@@ -145,7 +145,9 @@ class Dpvo(PythonProcess, Method):
         return argv + (["--seed", str(p.seed)] if p.seed is not None else [])
 
 
-def native_problems(build: Path, weights: str | None, method: str = "dpvo", weights_name: str = WEIGHTS_NAME) -> list[str]:
+def native_problems(
+    build: Path, weights: str | None, method: str = "dpvo", weights_name: str = WEIGHTS_NAME
+) -> list[str]:
     """Why a native build of `method` (DPVO, or another GPU method built by `slamrun native-build`) at `build` cannot
     run here ([] when it can)."""
     how = f"run `slamrun native-build {method}` (a PyTorch with CUDA and nvcc needed), or give params.build"
