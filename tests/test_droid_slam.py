@@ -381,3 +381,108 @@ def test_the_cli_offers_every_native_recipe():
     for name, m in native.NATIVE.items():
         assert methods.get(name).native and m.patches.is_file() and m.standin.is_file()
         assert m.default_build().name == name
+
+
+# ---------------------------------------------------------------- the process's own logic, DROID and PyTorch faked
+
+FAKE_TORCH = '''"""A stand-in for PyTorch: just what slamrun's DROID-SLAM process calls itself (NumPy underneath)."""
+import numpy as np
+
+__version__ = "0+fake"
+
+
+class Tensor:
+    def __init__(self, a):
+        self.a = np.asarray(a)
+
+    shape = property(lambda self: self.a.shape)
+
+    def permute(self, *dims):
+        return Tensor(self.a.transpose(dims))
+
+    def __getitem__(self, key):
+        return Tensor(self.a[key])
+
+
+def as_tensor(a):
+    return Tensor(a)
+
+
+def manual_seed(seed):
+    pass
+
+
+class cuda:
+    is_available = staticmethod(lambda: True)
+    synchronize = staticmethod(lambda: None)
+    max_memory_allocated = staticmethod(lambda: 0)
+'''
+
+FAKE_DROID = '''"""A stand-in for DROID's Droid: each tracked frame a keyframe; terminate() numbers the frames given."""
+import json
+from types import SimpleNamespace
+
+import numpy as np
+
+
+class Droid:
+    def __init__(self, args):
+        self.args, self.tracked = args, []
+        self.video = SimpleNamespace(counter=SimpleNamespace(value=0))
+        self.frontend = SimpleNamespace(is_initialized=False)
+
+    def track(self, t, image, intrinsics=None):
+        assert image.shape == (1, 3, *self.args.image_size), image.shape
+        self.tracked.append(int(t))
+        self.video.counter.value = len(self.tracked)
+        self.frontend.is_initialized = len(self.tracked) >= self.args.warmup
+
+    def terminate(self, stream):
+        filled = [(int(t), intr.a.tolist()) for t, image, intr in stream]
+        print("FAKE", json.dumps({"tracked": self.tracked, "filled": [t for t, _ in filled], "intr": filled[0][1],
+                                  "args": vars(self.args)}))
+        poses = np.zeros((len(filled), 7))
+        poses[:, 0] = [t for t, _ in filled]
+        poses[:, 6] = 1.0
+        return poses
+'''
+
+
+@pytest.fixture
+def fake_droid(tmp_path) -> Path:
+    """A build folder whose tree holds the fakes where DROID's flat modules go (ahead of everything on sys.path)."""
+    build = fake_build(tmp_path / "fake", "x")
+    (build / TOP / "droid_slam").mkdir(parents=True)
+    (build / TOP / "droid_slam" / "torch.py").write_text(FAKE_TORCH)
+    (build / TOP / "droid_slam" / "droid.py").write_text(FAKE_DROID)
+    return build
+
+
+def test_process_tracks_every_strided_frame_and_writes_every_frames_pose(tmp_path, room_view, fake_droid):
+    out = tmp_path / "t.txt"
+    argv = process_argv(room_view, fake_droid, fake_droid / "weights/droid.pth", out)
+    res = subprocess.run([*argv, "--stride", "3", "--upsample", "1"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    fake = json.loads(next(ln for ln in res.stdout.splitlines() if ln.startswith("FAKE "))[5:])
+    assert fake["tracked"] == list(range(0, 40, 3))  # demo.py's [::stride]
+    assert fake["filled"] == list(range(40))  # terminate() is given every frame
+    cam = json.loads(room_view.path("camera_pinhole.json").read_text())
+    h1, w1, h, w = proc.resized(cam["height"], cam["width"])
+    assert fake["args"]["image_size"] == [h, w] and fake["args"]["upsample"] is True
+    assert fake["args"]["disable_vis"] is True and fake["args"]["stereo"] is False and fake["args"]["warmup"] == 8
+    sx, sy = w1 / cam["width"], h1 / cam["height"]
+    np.testing.assert_allclose(fake["intr"], [cam["fx"] * sx, cam["fy"] * sy, cam["cx"] * sx, cam["cy"] * sy])
+    raw = read_tum(out)
+    np.testing.assert_allclose(raw.timestamps, room_view.view_timestamps())  # one row per frame, in order
+    np.testing.assert_allclose(raw.positions[:, 0], np.arange(40))  # row i is frame i's pose
+    assert "droid_slam: 40 poses (14 keyframes)" in res.stdout
+
+
+def test_process_says_not_initialized_and_a_full_buffer(tmp_path, room_view, fake_droid):
+    argv = process_argv(room_view, fake_droid, fake_droid / "weights/droid.pth", tmp_path / "t.txt")
+    res = subprocess.run([*argv, "--warmup", "20"], capture_output=True, text=True)  # 14 frames tracked at stride 3
+    assert res.returncode == 2 and "NOT INITIALIZED: DROID-SLAM kept 14 keyframe(s), it starts at 20" in res.stdout
+    assert DroidSlam().failure_from_log(res.stdout) == "not_initialized"
+    res = subprocess.run([*argv, "--stride", "1", "--buffer", "50"], capture_output=True, text=True)
+    assert res.returncode == 4 and "40 keyframes fill the buffer of 50" in res.stderr and "params.buffer" in res.stderr
+    assert not (tmp_path / "t.txt").exists()
