@@ -223,7 +223,7 @@ SCATTER = """
 import sys, torch
 ns = {}
 exec(open('/ref/utils.py').read(), ns)
-exec(open('/ref/scatter.py').read().split('def scatter_mul(')[0].replace('from .utils import broadcast', ''), ns)
+exec(open('/ref/scatter.py').read().replace('from .utils import broadcast', ''), ns)  # torch.ops: in bodies only
 import json
 record = json.load(open('/opt/droid_slam/build.json'))
 sys.path.insert(0, '/opt/droid_slam/' + record['tree'] + '/droid_slam')
