@@ -94,7 +94,9 @@ class DroidSlam(PythonProcess, Method):
 
     def problems(self, backend: str) -> list[str]:
         if backend != "local":
-            return []  # the image's recipe is docker/droid_slam/Dockerfile; a missing image is said by the backend
+            if RECIPE.exists():
+                return []  # a missing image is said by the backend, naming `slamrun images --method droid_slam`
+            return [f"droid_slam's image {self.image} has no recipe (no {RECIPE}): use backend: local"]
         build = Path(self.params.build or default_build())
         return native_problems(build, self.params.weights, self.name, WEIGHTS_NAME)
 

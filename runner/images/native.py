@@ -121,7 +121,7 @@ class NativeOptions:
     arch: str | None = None  # compute capability, e.g. 9.0; default: the local GPU's
     jobs: int = field(default_factory=lambda: os.cpu_count() or 2)
     eigen: Path | None = None  # a folder holding Eigen/Core
-    weights: dict[str, Path] = field(default_factory=dict)  # dpvo.pth -> file or URL#sha256=HEX
+    weights: dict[str, Path] = field(default_factory=dict)  # dpvo.pth or droid.pth -> file or URL#sha256=HEX
     standin_model: bool = False
     into: Path | None = None  # the build folder (default: slamrun's cache)
     python: str = sys.executable
