@@ -18,6 +18,7 @@ from methods.cnn_svo import CnnSvo
 from methods.colmap import Colmap
 from methods.df_orb_slam import DfOrbSlam
 from methods.dpvo import Dpvo
+from methods.droid_slam import DroidSlam
 from methods.dsm import Dsm
 from methods.dso import Dso
 from methods.dynaslam import DynaSlam
@@ -51,6 +52,7 @@ REGISTRY: dict[str, type[Method]] = {
         Glomap,
         External,
         Dpvo,
+        DroidSlam,
     )
 }
 

@@ -145,25 +145,28 @@ class Dpvo(PythonProcess, Method):
         return argv + (["--seed", str(p.seed)] if p.seed is not None else [])
 
 
-def native_problems(build: Path, weights: str | None) -> list[str]:
-    """Why a native build of DPVO at `build` cannot run here ([] when it can)."""
-    how = "run `slamrun native-build dpvo` (a PyTorch with CUDA and nvcc needed), or give params.build"
+def native_problems(
+    build: Path, weights: str | None, method: str = "dpvo", weights_name: str = WEIGHTS_NAME
+) -> list[str]:
+    """Why a native build of `method` (DPVO, or another GPU method built by `slamrun native-build`) at `build` cannot
+    run here ([] when it can)."""
+    how = f"run `slamrun native-build {method}` (a PyTorch with CUDA and nvcc needed), or give params.build"
     record = read_build_record(build)
     if record is None:
-        return [f"dpvo has no native build at {build} (no build.json): {how}"]
+        return [f"{method} has no native build at {build} (no build.json): {how}"]
     torch = installed_torch()
     if torch is None:
-        return [f"dpvo runs on PyTorch, which this Python ({sys.executable}) lacks: install it, then {how}"]
+        return [f"{method} runs on PyTorch, which this Python ({sys.executable}) lacks: install it, then {how}"]
     if record.get("torch_dist") != torch:  # the distribution's version (torch.__version__ may add +cuXXX)
         return [
-            f"dpvo's native build at {build} was made for PyTorch {record.get('torch_dist')}, this Python has "
-            f"{torch}: rebuild it (`slamrun native-build dpvo`)"
+            f"{method}'s native build at {build} was made for PyTorch {record.get('torch_dist')}, this Python has "
+            f"{torch}: rebuild it (`slamrun native-build {method}`)"
         ]
     if weights is not None:
-        return [] if Path(weights).is_file() else [f"dpvo: params.weights: {weights} not found"]
-    if not (build / record.get("weights_file", f"weights/{WEIGHTS_NAME}")).is_file():
+        return [] if Path(weights).is_file() else [f"{method}: params.weights: {weights} not found"]
+    if not (build / record.get("weights_file", f"weights/{weights_name}")).is_file():
         return [
-            f"dpvo's native build at {build} holds no network: rebuild with --weights {WEIGHTS_NAME}=FILE (or "
+            f"{method}'s native build at {build} holds no network: rebuild with --weights {weights_name}=FILE (or "
             f"--standin-model for plumbing tests), or give params.weights"
         ]
     return []

@@ -76,6 +76,8 @@ def spec_file(folder: Path, methods: list[dict], backend: str = "local", **extra
     [
         ("local", {"name": "dpvo"}),
         ("docker", {"name": "dpvo"}),
+        ("local", {"name": "droid_slam"}),
+        ("docker", {"name": "droid_slam"}),
         ("docker", {"name": "cnn_svo", "params": {"gpu": True}}),
     ],
 )

@@ -235,6 +235,7 @@ def test_images_and_what_their_builds_take():
         "reference_vo",
         "orb_slam3",
         "dpvo",
+        "droid_slam",
     }
 
 

@@ -6,13 +6,13 @@ from pathlib import Path
 
 from runner.cli.console import console
 
-NATIVE = ("dpvo",)
+NATIVE = ("dpvo", "droid_slam")  # runner/images/native.py NATIVE
 
 
 def add_commands(sub) -> None:
     nb = sub.add_parser(
         "native-build",
-        help="compile a GPU method (dpvo) for backend: local, with this Python's PyTorch, into slamrun's cache",
+        help="compile a GPU method (dpvo, droid_slam) for backend: local with this Python's PyTorch, into the cache",
     )
     nb.add_argument("method", choices=NATIVE, help="the method to build")
     nb.add_argument("--sources", type=Path, help="folder holding the pinned source archive (no network needed)")
@@ -21,7 +21,11 @@ def add_commands(sub) -> None:
     nb.add_argument("--jobs", type=int, help="parallel compile jobs (default: all cores)")
     nb.add_argument("--eigen", type=Path, help="folder holding Eigen 3.4's Eigen/Core (default: the system's)")
     nb.add_argument(
-        "--weights", action="append", default=[], metavar="dpvo.pth=FILE", help="the network: a file, or URL#sha256=HEX"
+        "--weights",
+        action="append",
+        default=[],
+        metavar="NAME.pth=FILE",
+        help="the network (dpvo.pth, droid.pth): a file, or URL#sha256=HEX",
     )
     nb.add_argument(
         "--standin-model",
@@ -37,7 +41,7 @@ def add_commands(sub) -> None:
 
 def cmd_native_build(args) -> int:
     from runner.cli.images import _pair
-    from runner.images.native import NativeOptions, build_dpvo, unpack_only
+    from runner.images.native import NativeOptions, build, unpack_only
 
     opts = NativeOptions(
         sources_dir=args.sources,
@@ -51,8 +55,8 @@ def cmd_native_build(args) -> int:
     if args.jobs:
         opts.jobs = args.jobs
     if args.unpack_only:
-        unpack_only(opts, log=lambda m: print(m, flush=True))
+        unpack_only(opts, log=lambda m: print(m, flush=True), name=args.method)
         return 0
-    record = build_dpvo(opts, log=lambda m: print(m, flush=True))
-    console.print(f"dpvo: {record['weights']}")
+    record = build(args.method, opts, log=lambda m: print(m, flush=True))
+    console.print(f"{args.method}: {record['weights']}")
     return 0

@@ -86,6 +86,13 @@ WEIGHTS = {
         standin=True,
         arg="DPVO_MODEL",
     ),
+    "droid_slam": Weights(
+        "droid.pth",
+        "DROID-SLAM's tools/download_model.sh (`gdown 1PpqVt1H4maBa_GbPJp4NwxRsd9jk-elh`, a Google Drive file: "
+        "https://drive.google.com/uc?id=1PpqVt1H4maBa_GbPJp4NwxRsd9jk-elh)",
+        standin=True,
+        arg="DROID_MODEL",
+    ),
 }
 
 

@@ -203,6 +203,28 @@ _TABLE = (
         "40c43ebe3be51e5c6e1c9d1a0d866b84b8e285093ce132d8b53ae97bf8b49dfb",
         (),
     ),
+    (  # a method after the study: `slamrun native-build droid_slam` compiles it (docker/droid_slam/patches.py)
+        "droid_slam",
+        "princeton-vl/DROID-SLAM",
+        "2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99",
+        "03488a61c5741994523bee7a52ec1a9c0b17175e8fd5a8cf16de4c5fdebd8d91",
+        (),
+    ),
+    (  # DROID-SLAM's submodule thirdparty/lietorch, at the commit it records (Lie groups on PyTorch, compiled with it)
+        "lietorch",
+        "princeton-vl/lietorch",
+        "7f687644fcea81ab337831749445224503c1290d",
+        "2c9c9be882509068e5ec78721d33ebd1258d1311cae2ee82ab399fc77cb94863",
+        (),
+    ),
+    (  # DROID-SLAM's submodule thirdparty/pytorch_scatter, at the commit it records: not compiled (its scatter_sum and
+        # scatter_mean, pure Python there, are docker/dpvo/torch_scatter_compat.py's); the tests check them against it
+        "pytorch_scatter",
+        "rusty1s/pytorch_scatter",
+        "6cf77c420f837a427b0d57965e414d68c1bd89ec",
+        "97e3bddb38fc873a37a8a9f35b1cb08e268ee96effd25dee68dbb9389681e87d",
+        (),
+    ),
 )
 # tree_digest() of each source (absent files excluded), computed from the stored archives
 _TREES = {
@@ -226,6 +248,9 @@ _TREES = {
     "orb_slam3": "6654390006ae4d273a344f485958a454790a6b6dbb00a98465424d410a0832bf",
     "mono_dataset_code": "1fbd1248c5b48a5f7047af46d8fc00da235c8b0e6783f313815fecb23b86fa25",
     "dpvo": "4372b2d0909e07a42cf662c73ae98abe687b1a17733fb4dbcb872b60ca36b4a9",
+    "droid_slam": "e7828067e7d5343e85473a5bda4f9b62b5dbcd19cfeb83ca8512334ea717e6ea",
+    "lietorch": "15a27b463eaa0afe8b81101f338c899604d98d1c2c6fe22d9ce100357482fdcb",
+    "pytorch_scatter": "fa24f4f0b8da8c8b98689cdb58b4e1d95489f1a9a93486dd825f8b1e1316ec1f",
 }
 SOURCES: dict[str, Source] = {
     name: Source(name, repo, commit, sha, _TREES[name], absent) for name, repo, commit, sha, absent in _TABLE
@@ -469,9 +494,11 @@ wrapt-1.15.0-cp27-cp27mu-manylinux2010_x86_64.whl
 """
 
 
-# DPVO's image (docker/dpvo/Dockerfile): PyTorch 2.11.0, the PyPI build for CUDA 13.0 (cp311, Debian 12's Python),
-# with every file pip resolves for it, and the CUDA 13.0 compiler as PyPI wheels (no GPU needed to compile). CUDA 13
-# because PyPI's CUDA 12 compiler wheels (nvidia-cuda-nvcc-cu12, 12.1 to 12.9) hold ptxas alone, no nvcc or cicc.
+# DPVO's image (docker/dpvo/Dockerfile), and DROID-SLAM's (docker/droid_slam/Dockerfile, whose build stage starts
+# with the same steps and the same requirement files: one list for both): PyTorch 2.11.0, the PyPI build for CUDA 13.0
+# (cp311, Debian 12's Python), with every file pip resolves for it, and the CUDA 13.0 compiler as PyPI wheels (no GPU
+# needed to compile). CUDA 13 because PyPI's CUDA 12 compiler wheels (nvidia-cuda-nvcc-cu12, 12.1 to 12.9) hold ptxas
+# alone, no nvcc or cicc.
 # Found with `pip download --only-binary=:all: --python-version 3.11 --platform manylinux_2_{5..36}_x86_64
 # torch==2.11.0 'cuda-toolkit[nvcc,cccl,crt,nvvm]==13.0.2' ninja==1.13.0 numpy==2.2.6
 # opencv-python-headless==4.11.0.86` (and pip==26.3). The runtime stage keeps DPVO_TORCH only
