@@ -361,6 +361,13 @@ def test_gpu_check_until_its_gpu_steps_in_a_fresh_venv(tmp_path, wheels):
     assert (work / "eigen3" / "Eigen" / "Core").is_file() or Path("/usr/include/eigen3/Eigen/Core").is_file()
     for step in steps:
         assert (out / "logs" / f"{step}.log").is_file()
+    res = subprocess.run(
+        ["bash", "scripts/gpu-check.sh", str(tmp_path / "out-droid"), "--until-gpu"],
+        cwd=tree, env={**env, "METHOD": "droid_slam"}, capture_output=True, text=True,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    droid = next((work / "droid_slam-patched").glob("DROID-SLAM-*"))
+    assert (droid / "thirdparty" / "lietorch" / "setup.py").is_file() and (droid / "droid_slam" / "droid.py").is_file()
     empty = tmp_path / "empty"
     empty.mkdir()
     res = subprocess.run(
