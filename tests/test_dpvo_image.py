@@ -18,6 +18,7 @@ import pytest
 from runner.images import native
 from runner.images import sources as src
 from runner.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
+from tests import images
 from tests.conftest import UPSTREAM, require_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -188,34 +189,11 @@ def test_images_without_a_network_stop_before_fetching_anything(tmp_path):
 
 
 def built_image():
-    """The Docker API client and the built image's labels, or a skip saying why."""
-    from runner.backends.docker import DockerBackend
-    from runner.errors import InfraError
-
-    try:
-        api = DockerBackend().client.api
-    except InfraError as exc:
-        pytest.skip(reason=f"no Docker engine: {exc}")
-    if not api.images(name=IMAGE):
-        pytest.skip(reason=f"{IMAGE} is not built (slamrun images --method dpvo --standin-model; CI builds DSO's only)")
-    return api, (api.inspect_image(IMAGE).get("Config") or {}).get("Labels") or {}
+    return images.built_image(IMAGE, "slamrun images --method dpvo --standin-model; CI builds DSO's only")
 
 
 def run_in_image(api, command: list[str], volumes: dict | None = None, timeout: int = 600) -> tuple[int, str]:
-    """`command` in a container of the image, without a network or a GPU: (exit status, output)."""
-    binds = {str(k): {"bind": v, "mode": "ro"} for k, v in (volumes or {}).items()}
-    container = api.create_container(
-        IMAGE,
-        command=command,
-        volumes=[b["bind"] for b in binds.values()],
-        host_config=api.create_host_config(network_mode="none", binds=binds),
-    )
-    try:
-        api.start(container)
-        status = api.wait(container, timeout=timeout)["StatusCode"]
-        return status, api.logs(container).decode(errors="replace")
-    finally:
-        api.remove_container(container, force=True)
+    return images.run_in_image(api, IMAGE, command, volumes, timeout)
 
 
 IMPORTS = """
@@ -247,7 +225,9 @@ def test_the_compiled_extensions_and_dpvo_import_inside_the_image_without_a_gpu(
     else:  # the given file's SHA-256
         assert label.split(" sha256 ")[-1] in got["record"]["weights"]
     assert json.loads(labels["slamrun.sources"]) == {"dpvo": f"princeton-vl/DPVO@{src.SOURCES['dpvo'].commit}"}
-    status, out = run_in_image(api, ["sh", "-c", "id -u; ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin"])
+    status, out = run_in_image(
+        api, ["sh", "-c", "id -u; ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin 2>&1"]
+    )
     assert out.split()[0] == "1000"  # the image's user, not root
     assert "nvcc" not in out  # the compiler stayed in the build stage
     status, out = run_in_image(api, ["python3", "-c", "import importlib.util as u; print(u.find_spec('triton'))"])

@@ -20,6 +20,7 @@ from runner.errors import SlamRunError
 from runner.images import native
 from runner.images import sources as src
 from runner.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
+from tests import images
 from tests.conftest import UPSTREAM, require_upstream
 from tests.test_dpvo_image import stages
 
@@ -117,34 +118,11 @@ def test_weights_are_given_standin_or_an_error_naming_droid_pth_and_where_it_is_
 
 
 def built_image():
-    """The Docker API client and the built image's labels, or a skip saying why."""
-    from runner.backends.docker import DockerBackend
-    from runner.errors import InfraError
-
-    try:
-        api = DockerBackend().client.api
-    except InfraError as exc:
-        pytest.skip(reason=f"no Docker engine: {exc}")
-    if not api.images(name=IMAGE):
-        pytest.skip(reason=f"{IMAGE} is not built (slamrun images --method droid_slam --standin-model, about an hour)")
-    return api, (api.inspect_image(IMAGE).get("Config") or {}).get("Labels") or {}
+    return images.built_image(IMAGE, "slamrun images --method droid_slam --standin-model, about an hour")
 
 
 def run_in_image(api, command: list[str], volumes: dict | None = None, timeout: int = 600) -> tuple[int, str]:
-    """`command` in a container of the image, without a network or a GPU: (exit status, output)."""
-    binds = {str(k): {"bind": v, "mode": "ro"} for k, v in (volumes or {}).items()}
-    container = api.create_container(
-        IMAGE,
-        command=command,
-        volumes=[b["bind"] for b in binds.values()],
-        host_config=api.create_host_config(network_mode="none", binds=binds),
-    )
-    try:
-        api.start(container)
-        status = api.wait(container, timeout=timeout)["StatusCode"]
-        return status, api.logs(container).decode(errors="replace")
-    finally:
-        api.remove_container(container, force=True)
+    return images.run_in_image(api, IMAGE, command, volumes, timeout)
 
 
 IMPORTS = """
@@ -185,7 +163,9 @@ def test_the_compiled_extensions_and_droid_import_inside_the_image_without_a_gpu
         assert label.split(" sha256 ")[-1] in got["record"]["weights"]
     commits = {s: f"{src.SOURCES[s].repo}@{src.SOURCES[s].commit}" for s in ("droid_slam", "lietorch")}
     assert json.loads(labels["slamrun.sources"]) == commits
-    status, out = run_in_image(api, ["sh", "-c", "id -u; ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin"])
+    status, out = run_in_image(
+        api, ["sh", "-c", "id -u; ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin 2>&1"]
+    )
     assert out.split()[0] == "1000" and "nvcc" not in out
     status, out = run_in_image(api, ["python3", "-c", "import importlib.util as u; print(u.find_spec('triton'))"])
     assert status == 0 and out.split()[-1] == "None", out

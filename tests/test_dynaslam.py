@@ -14,6 +14,7 @@ import pytest
 from runner.images import sources as src
 from runner.images.build import BuildOptions, model_choice, pypi_files_of, vocabulary_choice
 from runner.images.sources import SourceError, obtain_pypi
+from tests import images
 from tests.conftest import UPSTREAM, loopback_server, require_upstream, unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -149,17 +150,7 @@ def test_the_vocabulary_is_trained_when_the_archive_lacks_it():
 
 
 def built_image():
-    """The Docker API client and the built image's labels, or a skip saying why."""
-    from runner.backends.docker import DockerBackend
-    from runner.errors import InfraError
-
-    try:
-        api = DockerBackend().client.api
-    except InfraError as exc:
-        pytest.skip(reason=f"no Docker engine: {exc}")
-    if not api.images(name=IMAGE):
-        pytest.skip(reason=f"{IMAGE} is not built (make images METHOD=dynaslam ARGS=--standin-model)")
-    return api, (api.inspect_image(IMAGE).get("Config") or {}).get("Labels") or {}
+    return images.built_image(IMAGE, "make images METHOD=dynaslam ARGS=--standin-model")
 
 
 def test_python_2_7_loads_mask_rcnn_inside_the_image():
