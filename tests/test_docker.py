@@ -213,7 +213,9 @@ def test_campaign_with_reference_vo_image(backend, image, tmp_path, vo_dataset):
     assert (df.cpu_mean_pct > 10).all() and (df.ram_peak_mb > 20).all() and (df.fps > 0).all()
     assert df.gpu_mem_peak_mb.isna().all()
     series = pd.read_csv(Path(df.run_dir[0]) / "resources.csv")
-    assert len(series) >= 2 * 0.5 * df.wall_s[0] * 0.8  # about 2 Hz
+    # sampled through the run (how many samples depends on the engine's load: a stats call can take a second; the
+    # schedule, 2 Hz from the first sample, is checked on a fake clock in tests/test_monitor_rate.py)
+    assert len(series) >= 3 and series.t_s.is_monotonic_increasing and series.t_s.iloc[-1] <= df.wall_s[0]
     assert _no_containers(backend, "t")
 
 

@@ -341,9 +341,14 @@ class ContainerMonitor:
         return self.series
 
     def _loop(self) -> None:
+        """One sample every interval_s from the first: the stats call's own time (up to a second on a busy engine) is
+        not added to the period; when a call outlasts it, the next one starts at once, with no burst to catch up."""
+        due = time.monotonic()
         while not self._stop.is_set():
             self.sample()
-            self._stop.wait(self.interval_s)
+            now = time.monotonic()
+            due = max(due + self.interval_s, now)
+            self._stop.wait(due - now)
 
     def sample(self) -> None:
         try:
