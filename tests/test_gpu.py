@@ -406,3 +406,40 @@ def test_summary_is_one_page_from_what_the_script_leaves(tmp_path):
     text = (tmp_path / "summary.txt").read_text()
     assert "runs: 2 (2 done)" in text and "GPU memory peak 1830.0 MB, GPU utilisation 41.5 %" in text
     assert "(57.1 fps)" in text and len(text.splitlines()) < 60
+
+
+# ---------------------------------------------------------------- podman: the GPU through CDI, podman 5.4 or later
+
+
+def fake_podman(folder: Path, version: str) -> Path:
+    folder.mkdir(exist_ok=True)
+    podman = folder / "podman"
+    podman.write_text(f"#!/bin/sh\necho 'podman version {version}'\n")
+    podman.chmod(0o755)
+    return folder
+
+
+@pytest.mark.parametrize(("version", "refused"), [("4.3.1", True), ("5.3.2", True), ("5.4.0", False), ("6.0.1", False)])
+def test_podman_before_5_4_is_refused_for_a_gpu_method_before_any_run(tmp_path, version, refused):
+    h100 = "GPU 0: NVIDIA H100 80GB HBM3 (UUID: GPU-0d4c8a4e-1111-2222-3333-444455556666)"
+    path = [fake_smi(tmp_path / "smi", h100).parent, fake_podman(tmp_path / "podman", version)]
+    env = {**os.environ, "PATH": os.pathsep.join([*map(str, path), os.environ["PATH"]])}
+    spec = spec_file(tmp_path / "s", [{"name": "cnn_svo", "params": {"gpu": True}}, {"name": "dso"}], "podman")
+    res = slamrun("validate", spec, env=env)
+    assert NO_GPU not in res.stderr, res.stderr
+    said = f"methods[0]: cnn_svo needs podman 5.4 or later to give a container the GPU (this is podman {version}"
+    assert (said in res.stderr) is refused, res.stderr
+    if refused:
+        assert "nvidia-ctk cdi generate" in res.stderr and "backend: docker" in res.stderr
+    assert "methods[1]: dso needs podman" not in res.stderr  # a CPU method runs on any podman
+
+
+def test_the_gpu_request_is_the_engines_own():
+    import docker
+    from runner.backends.docker import DockerBackend
+    from runner.backends.podman import PodmanBackend
+
+    (nvidia,) = DockerBackend.gpu_requests()  # Docker: the nvidia runtime's `gpu` capability, every GPU
+    assert nvidia == docker.types.DeviceRequest(count=-1, capabilities=[["gpu"]])
+    (cdi,) = PodmanBackend.gpu_requests()  # podman's API ignores that one; from 5.4 it honours a CDI request
+    assert cdi["Driver"] == "cdi" and cdi["DeviceIDs"] == ["nvidia.com/gpu=all"]

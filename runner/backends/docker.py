@@ -122,6 +122,11 @@ class DockerBackend(Defaults):
     def missing_image(self, tag: str, method: str) -> str:
         return f"image {tag} for method {method!r} is missing; build it: make images METHOD={method}"
 
+    @staticmethod
+    def gpu_requests() -> list:
+        """How a container is given the host's GPUs: the NVIDIA runtime's `gpu` capability, every GPU."""
+        return [_docker().types.DeviceRequest(count=-1, capabilities=[["gpu"]])]
+
     def container_options(self) -> dict:
         """Engine-specific options of every container (none for Docker)."""
         return {}
@@ -206,7 +211,7 @@ class DockerBackend(Defaults):
             kwargs["mem_limit"] = f"{req.memory_mb}m"
             kwargs["memswap_limit"] = f"{req.memory_mb}m"
         if req.needs_gpu and self.gpu.available:
-            kwargs["device_requests"] = [docker.types.DeviceRequest(count=-1, capabilities=[["gpu"]])]
+            kwargs["device_requests"] = self.gpu_requests()
         try:
             container = self.client.containers.create(**kwargs)
         except docker.errors.ImageNotFound:

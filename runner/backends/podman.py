@@ -27,6 +27,33 @@ from runner.errors import DaemonUnreachable, InfraError
 
 IDLE_EXIT_S = 0  # never by itself: an idle exit between two runs would look like a lost engine
 START_WAIT_S = 30
+# podman's Docker API ignores Docker's `gpu` capability request (containers/podman#22645); from 5.4 it honours a CDI
+# device request (containers/podman#25171), for the devices of the CDI spec that `nvidia-ctk cdi generate` writes
+CDI_MIN_VERSION = (5, 4)
+CDI_ALL_GPUS = "nvidia.com/gpu=all"
+
+
+def podman_version(podman: str = "podman") -> tuple[tuple[int, ...], str] | None:
+    """podman's version (`podman --version`) as numbers and as printed, or None where it does not answer."""
+    try:
+        out = subprocess.run([podman, "--version"], capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    text = out.stdout.split()[-1] if out.returncode == 0 and out.stdout.split() else ""
+    numbers = tuple(int(x) for x in text.split("-")[0].split(".") if x.isdigit())
+    return (numbers, text) if numbers else None
+
+
+def gpu_problem(method: str) -> str | None:
+    """Why podman here cannot give `method`'s containers the GPU, or None (podman absent: said elsewhere)."""
+    found = podman_version()
+    if found is None or found[0] >= CDI_MIN_VERSION:
+        return None
+    return (
+        f"{method} needs podman 5.4 or later to give a container the GPU (this is podman {found[1]}, whose Docker "
+        "API ignores GPU requests): upgrade podman and write the CDI spec (nvidia-ctk cdi generate "
+        "--output=/etc/cdi/nvidia.yaml), or use backend: docker"
+    )
 
 
 def _die_with_parent() -> None:
@@ -129,6 +156,11 @@ class PodmanBackend(DockerBackend):
 
     def container_options(self) -> dict:
         return {"ulimits": container_ulimits()}
+
+    @staticmethod
+    def gpu_requests() -> list:
+        """Every GPU of the host's CDI spec (podman 5.4+: the spec checks refuse an older podman before any run)."""
+        return [_docker().types.DeviceRequest(driver="cdi", device_ids=[CDI_ALL_GPUS])]
 
     def out_of_memory(self, container, exit_code: int | None, req) -> bool:
         """podman reports OOM kills only where conmon sees the cgroup's OOM event (not on cgroup v1 hosts like this

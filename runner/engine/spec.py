@@ -372,6 +372,10 @@ def validate_spec(
             found = method.problems(backend) + method.launch_problems() + method.executable_problems(backend)
             if method.needs_gpu and gpu_here.missing():
                 found.append(f"{m['name']} needs a GPU; this host has none (neither NVML nor nvidia-smi answers)")
+            elif method.needs_gpu and gpu_here.check and backend == "podman":
+                from runner.backends.podman import gpu_problem
+
+                found += filter(None, [gpu_problem(m["name"])])
             problems += [f"methods[{i}]: {p}" for p in found]
         label = m.get("label") or m["name"]
         if label in labels:
