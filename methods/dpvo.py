@@ -15,15 +15,12 @@ which), or params.weights. The parameters are DPVO's config/default.yaml and dem
 
 from __future__ import annotations
 
-import json
-import os
-import sys
 from pathlib import Path
 from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from methods.base import Method, PythonProcess
+from methods.native_gpu import NativeGpuMethod, native_root
 from runner.datasets.view import PreparedView, Profile
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -33,33 +30,8 @@ IMAGE_BUILD = "/opt/dpvo"
 WEIGHTS_NAME = "dpvo.pth"
 
 
-def native_root() -> Path:
-    """slamrun's cache of native builds ($XDG_CACHE_HOME/slamrun/native, default ~/.cache/slamrun/native)."""
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "slamrun" / "native"
-
-
 def default_build() -> Path:
     return native_root() / "dpvo"
-
-
-def read_build_record(build: Path) -> dict | None:
-    """The build.json of a native build (what `slamrun native-build dpvo` wrote), or None when there is none."""
-    try:
-        record = json.loads((build / "build.json").read_text())
-    except (OSError, ValueError):
-        return None
-    return record if isinstance(record, dict) else None
-
-
-def installed_torch() -> str | None:
-    """The version of PyTorch installed beside slamrun (read from its metadata: importing it takes seconds)."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("torch")
-    except PackageNotFoundError:
-        return None
 
 
 class DpvoParams(BaseModel):
@@ -89,43 +61,18 @@ class DpvoParams(BaseModel):
     seed: int | None = Field(None, description="Seed of PyTorch's generators (default: unseeded, as upstream).")
 
 
-class Dpvo(PythonProcess, Method):
+class Dpvo(NativeGpuMethod):
     name = "dpvo"
     image = "slamrun/dpvo:latest"  # docker/dpvo/Dockerfile
     profile = Profile.rectified
-    needs_gpu = True
-    native = True
     Params = DpvoParams
     not_initialized_pattern = r"^NOT INITIALIZED"
-    backend: str = "local"
+    image_build = IMAGE_BUILD
+    weights_name = WEIGHTS_NAME
+    recipe = RECIPE
 
-    def for_backend(self, backend: str) -> Method:
-        method = super().for_backend(backend)
-        method.backend = backend
-        return method
-
-    def build_dir(self) -> str:
-        if self.backend != "local":
-            return IMAGE_BUILD
-        return self.params.build or str(default_build())
-
-    def weights(self) -> str:
-        if self.params.weights:
-            return self.params.weights
-        if self.backend != "local":
-            return IMAGE_WEIGHTS
-        record = read_build_record(Path(self.build_dir())) or {}
-        return str(Path(self.build_dir()) / record.get("weights_file", f"weights/{WEIGHTS_NAME}"))
-
-    def problems(self, backend: str) -> list[str]:
-        if backend != "local":
-            if RECIPE.exists():
-                return []
-            return [
-                f"dpvo's image {self.image} is not built yet (no docker/dpvo/Dockerfile): use backend: local "
-                "with a native build (`slamrun native-build dpvo`)"
-            ]
-        return native_problems(Path(self.params.build or default_build()), self.params.weights)
+    def default_build(self) -> Path:
+        return default_build()
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params
@@ -143,30 +90,3 @@ class Dpvo(PythonProcess, Method):
             "--buffer-size", str(p.buffer_size),
         ]  # fmt: skip
         return argv + (["--seed", str(p.seed)] if p.seed is not None else [])
-
-
-def native_problems(
-    build: Path, weights: str | None, method: str = "dpvo", weights_name: str = WEIGHTS_NAME
-) -> list[str]:
-    """Why a native build of `method` (DPVO, or another GPU method built by `slamrun native-build`) at `build` cannot
-    run here ([] when it can)."""
-    how = f"run `slamrun native-build {method}` (a PyTorch with CUDA and nvcc needed), or give params.build"
-    record = read_build_record(build)
-    if record is None:
-        return [f"{method} has no native build at {build} (no build.json): {how}"]
-    torch = installed_torch()
-    if torch is None:
-        return [f"{method} runs on PyTorch, which this Python ({sys.executable}) lacks: install it, then {how}"]
-    if record.get("torch_dist") != torch:  # the distribution's version (torch.__version__ may add +cuXXX)
-        return [
-            f"{method}'s native build at {build} was made for PyTorch {record.get('torch_dist')}, this Python has "
-            f"{torch}: rebuild it (`slamrun native-build {method}`)"
-        ]
-    if weights is not None:
-        return [] if Path(weights).is_file() else [f"{method}: params.weights: {weights} not found"]
-    if not (build / record.get("weights_file", f"weights/{weights_name}")).is_file():
-        return [
-            f"{method}'s native build at {build} holds no network: rebuild with --weights {weights_name}=FILE (or "
-            f"--standin-model for plumbing tests), or give params.weights"
-        ]
-    return []

@@ -21,8 +21,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from methods.base import Method, PythonProcess
-from methods.dpvo import native_problems, native_root, read_build_record
+from methods.native_gpu import NativeGpuMethod, native_root
 from runner.datasets.view import PreparedView, Profile
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -64,41 +63,18 @@ class DroidSlamParams(BaseModel):
     seed: int | None = Field(None, description="Seed of PyTorch's generators (default: unseeded, as upstream).")
 
 
-class DroidSlam(PythonProcess, Method):
+class DroidSlam(NativeGpuMethod):
     name = "droid_slam"
     image = "slamrun/droid_slam:latest"  # docker/droid_slam/Dockerfile
     profile = Profile.rectified
-    needs_gpu = True
-    native = True
     Params = DroidSlamParams
     not_initialized_pattern = r"^NOT INITIALIZED"
-    backend: str = "local"
+    image_build = IMAGE_BUILD
+    weights_name = WEIGHTS_NAME
+    recipe = RECIPE
 
-    def for_backend(self, backend: str) -> Method:
-        method = super().for_backend(backend)
-        method.backend = backend
-        return method
-
-    def build_dir(self) -> str:
-        if self.backend != "local":
-            return IMAGE_BUILD
-        return self.params.build or str(default_build())
-
-    def weights(self) -> str:
-        if self.params.weights:
-            return self.params.weights
-        if self.backend != "local":
-            return IMAGE_WEIGHTS
-        record = read_build_record(Path(self.build_dir())) or {}
-        return str(Path(self.build_dir()) / record.get("weights_file", f"weights/{WEIGHTS_NAME}"))
-
-    def problems(self, backend: str) -> list[str]:
-        if backend != "local":
-            if RECIPE.exists():
-                return []  # a missing image is said by the backend, naming `slamrun images --method droid_slam`
-            return [f"droid_slam's image {self.image} has no recipe (no {RECIPE}): use backend: local"]
-        build = Path(self.params.build or default_build())
-        return native_problems(build, self.params.weights, self.name, WEIGHTS_NAME)
+    def default_build(self) -> Path:
+        return default_build()
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params

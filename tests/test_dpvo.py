@@ -18,7 +18,8 @@ import yaml
 
 import methods
 from methods import dpvo_process
-from methods.dpvo import Dpvo, DpvoParams, native_problems
+from methods.dpvo import Dpvo, DpvoParams
+from methods.native_gpu import native_problems as gpu_native_problems
 from runner.core.trajectory import read_tum
 from runner.datasets.cache import prepare
 from runner.datasets.synth import generate
@@ -209,18 +210,18 @@ def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:
 
 
 def test_native_problems_say_what_to_do(tmp_path):
-    from methods.dpvo import installed_torch
+    from methods.native_gpu import installed_torch
 
-    assert "no native build" in native_problems(tmp_path / "none", None)[0]
-    assert "slamrun native-build dpvo" in native_problems(tmp_path / "none", None)[0]
+    assert "no native build" in problems(tmp_path / "none", None)[0]
+    assert "slamrun native-build dpvo" in problems(tmp_path / "none", None)[0]
     here = installed_torch()
     if here is None:
-        assert "lacks" in native_problems(fake_build(tmp_path / "a", "2.11.0"), None)[0]
+        assert "lacks" in problems(fake_build(tmp_path / "a", "2.11.0"), None)[0]
         return
-    assert "made for PyTorch 0.1" in native_problems(fake_build(tmp_path / "b", "0.1"), None)[0]
-    assert "holds no network" in native_problems(fake_build(tmp_path / "c", here, weights=False), None)[0]
-    assert "params.weights: /nope.pth not found" in native_problems(fake_build(tmp_path / "d", here), "/nope.pth")[0]
-    assert native_problems(tmp_path / "d", None) == []
+    assert "made for PyTorch 0.1" in problems(fake_build(tmp_path / "b", "0.1"), None)[0]
+    assert "holds no network" in problems(fake_build(tmp_path / "c", here, weights=False), None)[0]
+    assert "params.weights: /nope.pth not found" in problems(fake_build(tmp_path / "d", here), "/nope.pth")[0]
+    assert problems(tmp_path / "d", None) == []
 
 
 def test_command_carries_the_settings_and_the_build(tmp_path):
@@ -331,3 +332,7 @@ def test_unpack_only_checks_and_patches_the_pinned_archive(tmp_path):
     assert tree == tmp_path / "tree" / SOURCES["dpvo"].top and (tree / "dpvo" / "_scatter.py").is_file()
     with pytest.raises(native.NativeBuildError, match="is not empty"):
         native.unpack_only(opts, log=lambda m: None)
+
+
+def problems(build, weights):
+    return gpu_native_problems(build, weights, "dpvo", "dpvo.pth")

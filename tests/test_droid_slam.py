@@ -224,7 +224,7 @@ def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:
 
 
 def test_problems_on_the_local_backend_say_what_to_do(tmp_path):
-    from methods.dpvo import installed_torch
+    from methods.native_gpu import installed_torch
 
     got = DroidSlam({"build": str(tmp_path / "none")}).problems("local")
     assert len(got) == 1 and "droid_slam has no native build" in got[0]
