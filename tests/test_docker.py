@@ -156,10 +156,22 @@ def test_nonzero_exit_and_contract(backend, image, tmp_path, view):
     assert (req.workdir / "out.txt").read_text() == "ok" and (req.workdir / "masks" / "m.txt").read_text() == "ok"
 
 
-def test_memory_limit_is_oom(backend, image, tmp_path, view):
+def test_memory_limit_is_oom(backend, image, tmp_path, view, monkeypatch):
+    """An out-of-memory run is said so, and leaves nothing in the folder slamrun was started from (podman's conmon
+    writes an `oom` marker into its working directory, which it inherits from the API service)."""
+    cwd = tmp_path / "started-here"
+    cwd.mkdir()
+    monkeypatch.chdir(cwd)
+    from runner.backends import make_local_backend
+
+    started_here = make_local_backend(backend.name)  # its engine's helpers (podman's service) start in `cwd`
     req = _request(tmp_path, view, ["python3", "-c", "x = bytearray(600 * 2**20); print(len(x))"], memory_mb=100)
-    res = backend.execute(req, threading.Event())
+    try:
+        res = started_here.execute(req, threading.Event())
+    finally:
+        started_here.close()
     assert res.oom and res.exit_code != 0
+    assert sorted(p.name for p in cwd.iterdir()) == []
 
 
 def test_log_flood_is_capped(backend, image, tmp_path, view):

@@ -101,6 +101,7 @@ class PodmanService:
             stdin=subprocess.DEVNULL,
             stdout=log,
             stderr=subprocess.STDOUT,
+            cwd=self.dir,  # conmon inherits it and writes an `oom` marker there when the kernel kills a container
             preexec_fn=_die_with_parent,
         )
         log.close()
