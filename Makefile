@@ -45,7 +45,7 @@ clean:
 
 # The GPU check (scripts/gpu-check.sh): `make gpu-wheels` here fills .whl/ with what a GPU machine without network
 # lacks (wheels for Python $(GPU_PY), Eigen's headers, the GPU methods' archives); there, `make gpu-check OUT=DIR`
-# (METHOD=droid_slam for DROID-SLAM; dpvo by default).
+# (METHOD=droid_slam for DROID-SLAM, METHOD=all for both, their builds side by side; dpvo by default).
 WHEELS ?= .whl
 GPU_PY ?= 3.12
 OUT ?= gpu-check-out
@@ -54,4 +54,8 @@ gpu-wheels:
 	PY=$(PYTHON) scripts/gpu-wheels.sh $(WHEELS) $(GPU_PY)
 
 gpu-check:
+ifeq ($(METHOD),all)
+	WHEELS=$(WHEELS) bash scripts/gpu-check-all.sh $(OUT)
+else
 	WHEELS=$(WHEELS) METHOD=$(or $(METHOD),dpvo) bash scripts/gpu-check.sh $(OUT)
+endif
