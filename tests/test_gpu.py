@@ -368,12 +368,12 @@ def test_gpu_check_until_its_gpu_steps_in_a_fresh_venv(tmp_path, wheels):
     assert res.returncode == 0, res.stdout + res.stderr
     droid = next((work / "droid_slam-patched").glob("DROID-SLAM-*"))
     assert (droid / "thirdparty" / "lietorch" / "setup.py").is_file() and (droid / "droid_slam" / "droid.py").is_file()
-    res = subprocess.run(
-        ["bash", "scripts/gpu-check-all.sh", str(tmp_path / "out-all")], cwd=tree, env=env, capture_output=True, text=True
-    )  # both methods: the setup once, then both builds side by side, which need the GPU machine's PyTorch
+    # both methods: the setup once, then both builds side by side, which need the GPU machine's PyTorch
+    all_out = str(tmp_path / "out-all")
+    res = subprocess.run(["bash", "scripts/gpu-check-all.sh", all_out], cwd=tree, env=env, capture_output=True, text=True)
     assert res.returncode == 1 and "stopped before the GPU steps" in res.stdout, res.stdout + res.stderr
     for method in ("dpvo", "droid_slam"):
-        assert f"FAILED: the build of {method}; its log {tmp_path / 'out-all'}/build-{method}.log" in res.stdout
+        assert f"FAILED: the build of {method}; its log {all_out}/build-{method}.log" in res.stdout
     assert res.stdout.count("cannot import PyTorch") == 2 and "step campaign" not in res.stdout
     empty = tmp_path / "empty"
     empty.mkdir()
