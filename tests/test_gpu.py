@@ -370,7 +370,8 @@ def test_gpu_check_until_its_gpu_steps_in_a_fresh_venv(tmp_path, wheels):
     assert (droid / "thirdparty" / "lietorch" / "setup.py").is_file() and (droid / "droid_slam" / "droid.py").is_file()
     # both methods: the setup once, then both builds side by side, which need the GPU machine's PyTorch
     all_out = str(tmp_path / "out-all")
-    res = subprocess.run(["bash", "scripts/gpu-check-all.sh", all_out], cwd=tree, env=env, capture_output=True, text=True)
+    both = ["bash", "scripts/gpu-check-all.sh", all_out]
+    res = subprocess.run(both, cwd=tree, env=env, capture_output=True, text=True)
     assert res.returncode == 1 and "stopped before the GPU steps" in res.stdout, res.stdout + res.stderr
     for method in ("dpvo", "droid_slam"):
         assert f"FAILED: the build of {method}; its log {all_out}/build-{method}.log" in res.stdout
