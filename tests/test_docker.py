@@ -183,6 +183,29 @@ def test_log_flood_is_capped(backend, image, tmp_path, view):
     assert req.log_path.stat().st_size < 1.1 * 2**20 and text.rstrip().endswith("END") and "log capped" in text
 
 
+def test_a_slowly_read_log_is_read_to_its_end(backend, image, tmp_path, view, monkeypatch):
+    """After the container exits its log is read on while bytes still come, however slowly (on a loaded machine a
+    flooded log came for more than the 10 s slamrun waited, and its end was cut). The engine's stream is slowed here
+    to 8 kB/s: 100 kB take 12.5 s."""
+    read = type(backend)._pump_logs
+
+    class Slow:
+        def __init__(self, log):
+            self.log = log
+
+        def write(self, data: bytes) -> None:
+            time.sleep(len(data) / 8000)
+            self.log.write(data)
+
+    monkeypatch.setattr(backend, "_pump_logs", lambda container, log, follow=True: read(container, Slow(log), follow))
+    script = "for i in range(100): print('%05d' % i + 'x' * 994)\nprint('END')"
+    req = _request(tmp_path, view, ["python3", "-c", script])
+    res = backend.execute(req, threading.Event())
+    text = req.log_path.read_text()
+    assert res.exit_code == 0 and not res.log_truncated
+    assert text.count("x" * 994) == 100 and text.rstrip().endswith("END"), text[-300:]
+
+
 def test_missing_image_is_infra(backend, tmp_path, view):
     with pytest.raises(InfraError, match="make images" if backend.name == "docker" else "podman load -i"):
         backend.check({"nonexistent": "slamrun/does-not-exist:latest"})

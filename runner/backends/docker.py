@@ -25,6 +25,9 @@ WORK = Path("/work")
 CONTAINER_UID = 1000  # the non-root user our images create; a root host hands /work to it
 LABEL_CAMPAIGN = "slamrun.campaign"
 LABEL_RUN = "slamrun.run"
+# After a container exits, its log is read on while bytes still come (a loaded engine sends a flooded log slowly);
+# a stream that sends nothing for this long is given up on, and the log says so.
+LOG_STALL_S = 30.0
 
 
 def docker_host() -> str:
@@ -291,7 +294,7 @@ class DockerBackend(Defaults):
         series = monitor.stop()
         if not self.follow_logs:
             pump.start()  # the whole log, now that the container has exited
-        pump.join(timeout=10 if self.follow_logs else 120)
+        log.wait_for(pump, LOG_STALL_S)
         log.close()
         oom = self.out_of_memory(container, exit_code, req)
         series.write_csv(req.resources_path)

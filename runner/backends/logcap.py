@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import select
 import threading
+import time
 from collections import deque
 from pathlib import Path
 from typing import BinaryIO
@@ -23,15 +24,23 @@ class CappedLog:
         self._tail: deque[bytes] = deque()
         self._tail_size = 0
         self.dropped = 0
+        self.received = 0  # every byte given to write(), kept or dropped: how a reader sees the stream still comes
         self.error: OSError | None = None
+        self.cut_short: str | None = None  # why the stream's end may be missing, said at its end by close()
+        self._closed = False
+        self._lock = threading.Lock()  # a pump given up on may still write while close() runs
 
     @property
     def truncated(self) -> bool:
         return self.dropped > 0
 
     def write(self, data: bytes) -> None:
-        if self.error is not None:
-            return  # keep draining the stream; the error is raised by close()
+        with self._lock:
+            self.received += len(data)
+            if self.error is None and not self._closed:  # else keep draining; an error is raised by close()
+                self._write(data)
+
+    def _write(self, data: bytes) -> None:
         if self._head_written < self.head_cap:
             take = data[: self.head_cap - self._head_written]
             try:
@@ -59,12 +68,21 @@ class CappedLog:
                 self.dropped += excess
 
     def close(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            self._close()
+
+    def _close(self) -> None:
         try:
             if self.error is None:
                 if self.dropped:
                     self._fh.write(f"\n[slamrun: log capped, {self.dropped} bytes dropped here]\n".encode())
                 for chunk in self._tail:
                     self._fh.write(chunk)
+                if self.cut_short:
+                    self._fh.write(f"\n[slamrun: {self.cut_short}]\n".encode())
         except OSError as exc:
             self.error = exc
         try:
@@ -73,6 +91,20 @@ class CappedLog:
             self.error = self.error or exc
         if self.error is not None:
             raise self.error
+
+    def wait_for(self, reader: threading.Thread, stall_s: float, clock=time.monotonic) -> bool:
+        """Wait until `reader`, the thread that writes a finished process's output into this log, reaches the end of
+        it, for as long as bytes keep coming (a loaded machine delivers a flooded log slowly). After `stall_s` without
+        a byte, give up, say so at the log's end, and return False."""
+        seen, since = self.received, clock()
+        while reader.is_alive():
+            reader.join(timeout=min(0.5, stall_s))
+            if self.received != seen:
+                seen, since = self.received, clock()
+            elif clock() - since >= stall_s and reader.is_alive():
+                self.cut_short = f"nothing came for {stall_s:g} s after the process ended; the rest is lost"
+                return False
+        return True
 
     def pump(self, stream: BinaryIO, stop: threading.Event | None = None) -> threading.Thread:
         """Copy a pipe into the log in a background thread until EOF, or until `stop` is set and nothing is
