@@ -206,6 +206,36 @@ def test_a_slowly_read_log_is_read_to_its_end(backend, image, tmp_path, view, mo
     assert text.count("x" * 994) == 100 and text.rstrip().endswith("END"), text[-300:]
 
 
+@pytest.mark.parametrize("stream", ["ends early", "hangs"])
+def test_a_log_stream_cut_short_is_completed_from_the_stored_log(backend, image, tmp_path, view, monkeypatch, stream):
+    """The engine's log stream can end before the last lines (Docker under load: CI's flood test read 42,521 of
+    200,000 lines) or hang after the exit (docker/docker-py#3084): the log is still whole, with no line twice."""
+    read = type(backend)._pump_logs
+    release = threading.Event()
+
+    class CutShort:
+        def __init__(self, sink):
+            self.sink, self.seen = sink, 0
+
+        def write(self, data: bytes) -> None:
+            if self.seen >= 5000:
+                if stream == "ends early":
+                    raise ConnectionError("the stream ended")  # _pump_logs ends as at the stream's end
+                release.wait()
+            self.sink.write(data)
+            self.seen += len(data)
+
+    monkeypatch.setattr(backend, "_pump_logs", lambda c, log, follow=True: read(c, CutShort(log), follow))
+    script = "for i in range(100): print('%05d' % i + 'x' * 994)\nprint('END')"
+    req = _request(tmp_path, view, ["python3", "-c", script])
+    try:
+        res = backend.execute(req, threading.Event())
+    finally:
+        release.set()
+    lines = req.log_path.read_text().splitlines()
+    assert res.exit_code == 0 and lines == [f"{i:05d}" + "x" * 994 for i in range(100)] + ["END"]
+
+
 def test_missing_image_is_infra(backend, tmp_path, view):
     with pytest.raises(InfraError, match="make images" if backend.name == "docker" else "podman load -i"):
         backend.check({"nonexistent": "slamrun/does-not-exist:latest"})

@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 from runner.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise
-from runner.backends.logcap import CappedLog
+from runner.backends.logcap import CappedLog, Tap
 from runner.backends.monitor import Gpu, ResourceSeries, Sample
 from runner.datasets.view import PreparedView
 from runner.errors import DaemonUnreachable, InfraError
@@ -25,9 +25,9 @@ WORK = Path("/work")
 CONTAINER_UID = 1000  # the non-root user our images create; a root host hands /work to it
 LABEL_CAMPAIGN = "slamrun.campaign"
 LABEL_RUN = "slamrun.run"
-# After a container exits, its log is read on while bytes still come (a loaded engine sends a flooded log slowly);
-# a stream that sends nothing for this long is given up on, and the log says so.
-LOG_STALL_S = 30.0
+# After a container exits, its log stream is read on while bytes still come (a loaded engine sends a flooded log
+# slowly); one that sends nothing for this long is cut off, and the rest is read from the engine's stored log.
+LOG_STALL_S = 5.0
 
 
 def docker_host() -> str:
@@ -258,7 +258,8 @@ class DockerBackend(Defaults):
             raise
         if on_start:
             on_start(0, 0.0)
-        pump = threading.Thread(target=self._pump_logs, args=(container, log, self.follow_logs), daemon=True)
+        tap = Tap(log)
+        pump = threading.Thread(target=self._pump_logs, args=(container, tap, self.follow_logs), daemon=True)
         if self.follow_logs:
             pump.start()
         monitor = ContainerMonitor(container, self.sample_interval_s, t0, self.gpu if req.needs_gpu else None)
@@ -294,7 +295,7 @@ class DockerBackend(Defaults):
         series = monitor.stop()
         if not self.follow_logs:
             pump.start()  # the whole log, now that the container has exited
-        log.wait_for(pump, LOG_STALL_S)
+        self._read_log_to_end(container, pump, tap, log)
         log.close()
         oom = self.out_of_memory(container, exit_code, req)
         series.write_csv(req.resources_path)
@@ -319,7 +320,26 @@ class DockerBackend(Defaults):
             return False
 
     @staticmethod
-    def _pump_logs(container, log: CappedLog, follow: bool = True) -> None:
+    def _read_log_to_end(container, pump: threading.Thread, tap: Tap, log: CappedLog) -> None:
+        """All of an exited container's output in `log`. The stream read so far is read on while bytes come, then cut
+        off; a followed stream can end before the last lines under load or hang after the exit (docker/docker-py#3084),
+        so the rest comes from the engine's stored log, past the bytes already had (podman's read after the exit can
+        break off too)."""
+        log.wait_for(pump, LOG_STALL_S)
+        tap.cut()
+        skip = log.received
+        try:
+            for chunk in container.logs(stream=True, follow=False, stdout=True, stderr=True):
+                if skip >= len(chunk):
+                    skip -= len(chunk)
+                    continue
+                log.write(chunk[skip:])
+                skip = 0
+        except Exception as exc:  # noqa: BLE001 - the engine went away: say so where the output ends
+            log.cut_short = f"the engine's stored log could not be read after the exit ({exc}): its end may be missing"
+
+    @staticmethod
+    def _pump_logs(container, log: CappedLog | Tap, follow: bool = True) -> None:
         try:
             for chunk in container.logs(stream=True, follow=follow, stdout=True, stderr=True):
                 log.write(chunk)

@@ -11,6 +11,24 @@ from pathlib import Path
 from typing import BinaryIO
 
 
+class Tap:
+    """What a reader writes into a log through: once cut, a reader that was given up on writes nothing more."""
+
+    def __init__(self, log: CappedLog):
+        self.log = log
+        self._open = True
+        self._lock = threading.Lock()
+
+    def write(self, data: bytes) -> None:
+        with self._lock:
+            if self._open:
+                self.log.write(data)
+
+    def cut(self) -> None:
+        with self._lock:
+            self._open = False
+
+
 class CappedLog:
     """Head and tail of a process's output. A write error (a full disk) never stops the pump, so the
     process is never blocked on a full pipe; `close()` raises it afterwards."""
@@ -94,15 +112,14 @@ class CappedLog:
 
     def wait_for(self, reader: threading.Thread, stall_s: float, clock=time.monotonic) -> bool:
         """Wait until `reader`, the thread that writes a finished process's output into this log, reaches the end of
-        it, for as long as bytes keep coming (a loaded machine delivers a flooded log slowly). After `stall_s` without
-        a byte, give up, say so at the log's end, and return False."""
+        it, for as long as bytes keep coming (a loaded machine delivers a flooded log slowly). False when nothing came
+        for `stall_s` and the reader still runs."""
         seen, since = self.received, clock()
         while reader.is_alive():
             reader.join(timeout=min(0.5, stall_s))
             if self.received != seen:
                 seen, since = self.received, clock()
             elif clock() - since >= stall_s and reader.is_alive():
-                self.cut_short = f"nothing came for {stall_s:g} s after the process ended; the rest is lost"
                 return False
         return True
 
