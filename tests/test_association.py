@@ -167,7 +167,7 @@ def _rpe_cases() -> list[tuple[str, float, str]]:
     (evo's RPE takes a second per 3,000 pairs)."""
     out = []
     for name, rows in ESTIMATES.items():
-        out += [(name, 10, "frames"), (name, 0.5, "m")] + ([(name, 1, "frames")] if len(rows) < 8000 else [])
+        out += [(name, 10, "evo-f"), (name, 0.5, "evo-m")] + ([(name, 1, "evo-f")] if len(rows) < 8000 else [])
     return out
 
 
@@ -176,7 +176,7 @@ def test_rpe_equals_evo_on_estimates_of_fr2_desk(evo, files, name, delta, unit):
     metrics = evo[0]
     ref, est = _evo_aligned(evo, files[name], "sim3")
     ours = rpe(read_tum(GT), read_tum(files[name]), delta, unit, "sim3", tolerance_s=TOL)
-    evo_unit = metrics.Unit.frames if unit == "frames" else metrics.Unit.meters
+    evo_unit = metrics.Unit.frames if unit == "evo-f" else metrics.Unit.meters
     for relation, mine in (
         (metrics.PoseRelation.translation_part, ours.translation),
         (metrics.PoseRelation.rotation_angle_deg, ours.rotation_deg),
@@ -191,7 +191,10 @@ def test_evaluate_command_gives_evos_figures(evo, files):
     metrics = evo[0]
     names = ["noise, every row", "subsampled, jittered times", "backward (a backward run's file)"]
     args = [sys.executable, "-m", "runner.cli", "evaluate", "--gt", str(GT), "--gt-format", "tum", "--json"]
-    for metric, extra in (("ate", ["--align", "se3"]), ("rpe", ["--align", "sim3", "--delta", "10"])):
+    for metric, extra in (
+        ("ate", ["--align", "se3"]),
+        ("rpe", ["--align", "sim3", "--delta", "10", "--delta-unit", "evo-f"]),
+    ):
         out = subprocess.run(
             [*args, "--metric", metric, *extra, "--jobs", "2", *(str(files[n]) for n in names)],
             capture_output=True,

@@ -32,7 +32,8 @@ LAYOUT_SEQUENCES = {
 # every figure a campaign writes into results.csv, whatever the metric (named here, not taken from the code)
 FIGURES = (
     *("e_t", "e_r", "e_s", "e_s_sym", "e_align", "e_start", "e_end", "e_rmse"),
-    *("ate_rmse", "ate_mean", "ate_median", "ate_max", "rpe_t_rmse", "rpe_r_rmse", "kitti_t_pct", "kitti_r_deg_m"),
+    *("ate_rmse", "ate_mean", "ate_median", "ate_max", "rpe_t_rmse", "rpe_r_rmse", "rpe_pairs"),
+    *("kitti_t_pct", "kitti_r_deg_m"),
 )
 
 
@@ -100,9 +101,43 @@ def test_a_campaigns_runs_reevaluated_from_their_sequence_folder_equal_results_c
                 compared += 1
             else:  # a figure the run does not have is not made up either
                 assert res.get(name) is None, (layout, row.direction, name)
-        assert compared >= (7 if layout == "tum-mono" else 6)  # TUM-Mono's or ATE's and RPE's, at least
+        if layout != "tum-mono" and pd.isna(row.rpe_t_rmse):  # a track shorter than RPE's 1 s: said, not made up
+            assert "no pose pair 1 s apart" in res["detail"]
+            compared += 3
+        assert compared >= 7  # TUM-Mono's, or ATE's and RPE's with its pairs
     if layout == "kitti":  # its default metrics include KITTI's segments: missing on a short path, and said
         assert all("kitti_t_pct" in r and "no segment" in r["detail"] for r in got)
+
+
+def test_a_run_of_another_sequence_is_refused_unless_asked(campaign):
+    """run.json beside a trajectory names its sequence: against another sequence's folder it is refused with both
+    named (once evaluated without a word); --any-sequence evaluates it anyway."""
+    data, df = campaign
+    run = df[(df.dataset == "euroc") & (df.direction == "forward")].iloc[0]
+    other = sequence_folder(data, "tum-vi")
+    traj = Path(run.run_dir) / "trajectory.txt"
+    out = slamrun("evaluate", "--gt", other, traj)
+    assert out.returncode == 1 and "Traceback" not in out.stderr
+    assert f"of sequence {LAYOUT_SEQUENCES['euroc']!r}, not of {other}" in out.stderr and "--any-sequence" in out.stderr
+    forced = slamrun("evaluate", "--gt", other, "--any-sequence", "--json", traj)
+    assert "of sequence" not in forced.stderr and len(json_rows(forced)) == 1
+    same = slamrun("evaluate", "--gt", sequence_folder(data, "euroc"), traj)
+    assert same.returncode == 0, same.stderr
+
+
+def test_kitti_file_form_and_folder_form_give_one_status(campaign):
+    """The synthetic drive is shorter than KITTI's 100 m segments: the folder form notes it and says ok; the poses
+    file with its times (the same data) once said failed, exit 1."""
+    data, df = campaign
+    run = df[(df.dataset == "kitti") & (df.direction == "forward")].iloc[0]
+    folder = sequence_folder(data, "kitti")
+    traj = Path(run.run_dir) / "trajectory.txt"
+    by_folder = slamrun("evaluate", "--gt", folder, "--json", traj)
+    poses = folder.parent.parent / "poses" / f"{folder.name}.txt"
+    by_file = slamrun("evaluate", "--gt", poses, "--times", folder / "times.txt", "--json", traj)
+    assert by_folder.returncode == by_file.returncode == 0, (by_folder.stderr, by_file.stderr)
+    (a,), (b,) = json_rows(by_folder), json_rows(by_file)
+    assert a["status"] == b["status"] == "ok" and "no segment" in a["detail"] and "no segment" in b["detail"]
 
 
 def test_euroc_raw_state_csv_says_its_frame_and_names_the_folder(campaign):
@@ -180,7 +215,7 @@ def test_euroc_v1_02_folder_form_equals_evo_on_the_camera_frame(v1_02, shared_da
     from evo.tools import file_interface
 
     folder, est_file = v1_02
-    out = slamrun("evaluate", "--gt", folder, "--json", est_file)
+    out = slamrun("evaluate", "--gt", folder, "--json", "--delta-unit", "evo-f", est_file)
     assert out.returncode == 0, out.stderr
     (ours,) = json_rows(out)
     ref = file_interface.read_euroc_csv_trajectory(str(folder / "mav0/state_groundtruth_estimate0/data.csv"))
@@ -342,7 +377,8 @@ def test_every_wrong_format_or_combination_is_one_line_naming_the_file(campaign,
         (["--gt", empty, "--metric", "ate"], f"{empty}: no finite pose"),
         (["--gt", empty], f"{empty}: no pose row"),
         (["--gt", gt, "--est-format", "kitti"], "give the sequence's times.txt with --times"),
-        (["--gt", euroc, "--delta", "2"], f"{euroc}: a sequence folder is evaluated as a campaign does"),
+        (["--gt", euroc, "--tolerance", "0.1"], f"{euroc}: a sequence folder is evaluated as a campaign does"),
+        (["--gt", gt, "--delta-unit", "frames"], "--delta-unit frames counts the sequence's frames"),
         (["--gt", euroc, "--times", gt], "--times"),
         (["--gt", tmp_path], f"{tmp_path}: no sequence of a layout slamrun reads"),
         (["--gt", tmp_path / "missing.txt"], "missing.txt: the ground truth"),

@@ -103,15 +103,15 @@ def test_ate_equals_evo_on_every_real_pair(evo, case, alignment):
     assert_stats(ours.translation, ape)
 
 
-@pytest.mark.parametrize("delta, unit", [(1, "frames"), (10, "frames"), (0.1, "m")])
+@pytest.mark.parametrize("delta, unit", [(1, "evo-f"), (10, "evo-f"), (0.1, "evo-m")])
 @pytest.mark.parametrize("case", range(len(TUM_PAIRS) + 1 + len(KITTI_ESTIMATES)))
 def test_rpe_equals_evo_on_every_real_pair(evo, case, delta, unit):
     metrics = evo[0]
     name, gt, est = pairs()[case]
-    if unit == "m" and name.startswith("KITTI"):
+    if unit == "evo-m" and name.startswith("KITTI"):
         delta = 50.0  # KITTI's frames are metres apart
     ref, e = evo_reference(evo, case, "sim3")
-    evo_unit = metrics.Unit.frames if unit == "frames" else metrics.Unit.meters
+    evo_unit = metrics.Unit.frames if unit == "evo-f" else metrics.Unit.meters
     ours = rpe(gt, est, delta=delta, unit=unit, alignment="sim3")
     for relation, mine in (
         (metrics.PoseRelation.translation_part, ours.translation),

@@ -136,7 +136,7 @@ def test_stats_text_prints_every_test_per_dataset(two_datasets):
         for test in ("Lilliefors", "Levene", "Kruskal-Wallis", "Wilcoxon"):
             assert section.count(test) == 3, (name, test)  # one per metric
         m = out["datasets"][name]["metrics"]["ate_rmse"]
-        assert f"Levene (median-centred) F {m['levene_F']:.4g}, p {m['levene_p']:.3g}" in section
+        assert f"Levene (median-centred): F {m['levene_F']:.4g}, p {m['levene_p']:.3g}" in section
         assert f"steady {m['lilliefors_p']['steady']:.3g}" in section
     assert "all datasets, pooled (euroc, kitti)" in text
 
@@ -253,7 +253,15 @@ def test_a_dataset_without_an_evaluated_run_gives_an_empty_block_not_an_error(tm
     p = slamrun("stats", tmp_path / "results.csv", "--json")
     assert p.returncode == 0, p.stderr
     block = strict_json(p.stdout)["datasets"]["b"]
-    assert block == {"mahalanobis": [], "cutoff": None, "n_outliers": 0, "metrics": {}}
+    assert block == {
+        "mahalanobis": [],
+        "cutoff": None,
+        "n_outliers": 0,
+        "outlier_note": None,
+        "counted": {},
+        "counting_note": None,
+        "metrics": {},
+    }
     assert "dataset b: 0 evaluated runs" in stats_out(tmp_path / "results.csv")
     p = slamrun("stats", tmp_path / "results.csv", "--metrics", "ate_rmse")
     assert (

@@ -236,9 +236,13 @@ def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Sect
     acc = [m for m in ("e_t", "e_r", "e_s_sym", "e_s") if m in metrics][:3]
     seg = [m for m in ("e_start", "e_end", "e_rmse") if m in metrics]
     trajectory = [m for m in TRAJECTORY_STATS_METRICS if m in metrics]
+    outliers = st.outlier_note or (
+        f"{st.n_outliers} multivariate outliers removed (squared Mahalanobis distance over {len(metrics)} metrics "
+        f"above {st.cutoff:.4f}, the chi-square {level} quantile)"
+    )
+    counting = f" Of these, {st.counting_note()}." if st.counting_note() else ""
     note = (
-        f"{len(ok)} evaluated runs{where}, {st.n_outliers} multivariate outliers removed (squared Mahalanobis "
-        f"distance over {len(metrics)} metrics above {st.cutoff:.4f}, the chi-square {level} quantile). "
+        f"{len(ok)} evaluated runs{where}; {outliers}.{counting} "
         f"Letters: pairwise Wilcoxon rank-sum tests, {adjust} adjustment, alpha {alpha}; methods that share a letter "
         "do not differ significantly."
     )
@@ -269,9 +273,16 @@ def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Sect
     # the same procedure per direction: motion bias can change the ranking
     chosen, name = (acc, "table3_drift") if acc else (trajectory, "trajectory_metrics")
     what_dir = "Drift" if acc else trajectory_title(trajectory)
+    skipped = []
     for direction in ("forward", "backward"):
         part = ok[ok.direction == direction] if "direction" in ok.columns else ok.iloc[0:0]
         if not chosen or part.method.nunique() < 2 or len(part) <= len(metrics) + 1:
+            why = (
+                "fewer than two methods with evaluated runs"
+                if part.method.nunique() < 2
+                else f"{len(part)} evaluated runs, the outlier test over {len(metrics)} metrics needs more"
+            )
+            skipped.append(f"{direction} runs only: {why}" if chosen else f"{direction} runs only: no metric")
             continue
         sd = study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha)
         (out / f"statistics_{direction}.json").write_text(jsonio.dumps(sd.to_json(), indent=1))
@@ -280,6 +291,9 @@ def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Sect
         html_dir = page.table(td, tab_dir, root, f"{name}_{direction}", title + where, what)
         html_dir += page.links({f"statistics, {direction} runs (JSON)": out / f"statistics_{direction}.json"}, root)
         parts.append(Section(title, html_dir))
+    if skipped:
+        text = "".join(f"<li>{page.esc(s)}</li>" for s in skipped)
+        parts.append(Section("Statistics per direction left out", f"<ul>{text}</ul>"))
     return Section("Statistics", html, parts)
 
 

@@ -1,5 +1,10 @@
 """The study's statistics, following R: Mahalanobis outliers, Lilliefors, Levene, Kruskal-Wallis, pairwise
-Wilcoxon rank-sum tests with p-value adjustment, and compact letter displays. Pure functions."""
+Wilcoxon rank-sum tests with p-value adjustment, and compact letter displays. Pure functions.
+
+Two guards keep a test from saying more than its data can: runs whose figures are copies of another run of the same
+method, sequence and direction (a deterministic method's trials) count once (`distinct_runs`), and a test whose
+input cannot support it (no spread within any group to rounding, every value tied, fewer runs than metrics) gives
+no figure but a reason (`MetricStats.notes`, `StudyStats.outlier_note`)."""
 
 from __future__ import annotations
 
@@ -10,6 +15,49 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 from scipy import stats
+
+ROUNDING = 1e-9  # a spread at most this, relative to the values' magnitude, is rounding: no spread
+
+
+def _no_spread(values: np.ndarray, scale: float) -> bool:
+    """Whether `values` differ from their median by rounding at most (relative to `scale`)."""
+    return len(values) == 0 or float(np.max(np.abs(values - np.median(values)))) <= ROUNDING * scale
+
+
+def _scale(groups) -> float:
+    """The magnitude of the values of `groups` (1 where all are 0)."""
+    peak = max((float(np.max(np.abs(v))) for v in groups if len(v)), default=0.0)
+    return peak if peak > 0 else 1.0
+
+
+# ---------------------------------------------------------------- copies
+
+
+def distinct_runs(
+    df: pd.DataFrame, metrics: list[str], group: str = "method", within: tuple[str, ...] = ("sequence", "direction")
+) -> tuple[pd.DataFrame, dict[str, dict]]:
+    """The runs of `df` with every run whose figures (all of `metrics`) equal those of an earlier run of the same
+    `group`, sequence and direction dropped: a copy adds no information, and counted as a sample it would shrink
+    every p-value (a deterministic method's identical trials). Per group: runs, distinct runs, and whether it is
+    deterministic (every sequence and direction with two runs or more gave one result). Without the `within`
+    columns (a table of plain observations) nothing is dropped."""
+    if df.empty or any(c not in df.columns for c in within):
+        return df, {}
+    keep = ~df.duplicated(subset=[group, *within, *metrics], keep="first")
+    out = df[keep]
+    counted = {}
+    for g, part in df.groupby(group, sort=True):
+        kept = out[out[group] == g]
+        cells = part.groupby(list(within)).size()
+        distinct = kept.groupby(list(within)).size()
+        repeated = cells[cells > 1].index
+        counted[str(g)] = {
+            "runs": len(part),
+            "distinct": len(kept),
+            "deterministic": bool(len(repeated)) and bool((distinct.reindex(repeated) == 1).all()),
+        }
+    return out, counted
+
 
 # ---------------------------------------------------------------- outliers
 
@@ -64,11 +112,33 @@ def lilliefors_p(x: np.ndarray) -> float:
 def levene(groups: list[np.ndarray]) -> tuple[float, float]:
     """Levene's test centred on the median (car::leveneTest's default, i.e. Brown-Forsythe): F and p.
 
-    Groups without spread (a deterministic method's identical trials) give NaN, as in R, without a warning.
+    Groups without spread (a deterministic method's identical trials) give NaN, as in R, without a warning; so do
+    groups whose spread is rounding alone (R would give F 1e34 from it: see `levene_problem`).
     """
+    if levene_problem(groups):
+        return math.nan, math.nan
     with np.errstate(divide="ignore", invalid="ignore"):
         res = stats.levene(*groups, center="median")
     return float(res.statistic), float(res.pvalue)
+
+
+def levene_problem(groups: list[np.ndarray]) -> str | None:
+    """Why Levene's test means nothing on `groups` (every group without spread, to rounding), or None."""
+    if len(groups) < 2:
+        return "fewer than two methods with two runs or more"
+    if all(_no_spread(np.asarray(v, float), _scale(groups)) for v in groups):
+        return "no spread within any method's runs (identical to rounding): variances cannot be compared"
+    return None
+
+
+def kruskal_problem(groups: list[np.ndarray]) -> str | None:
+    """Why a rank test means nothing on `groups` (fewer than two, or every value tied), or None."""
+    if len(groups) < 2:
+        return "fewer than two methods with runs"
+    values = np.concatenate([np.asarray(v, float) for v in groups])
+    if _no_spread(values, _scale(groups)):
+        return "every value is the same (to rounding): nothing to rank"
+    return None
 
 
 def kruskal(groups: list[np.ndarray]) -> tuple[float, int, float]:
@@ -82,8 +152,11 @@ def kruskal(groups: list[np.ndarray]) -> tuple[float, int, float]:
 
 def wilcoxon_rank_sum_p(x: np.ndarray, y: np.ndarray) -> float:
     """Two-sided Wilcoxon rank-sum p-value with R's defaults: exact when both samples have fewer than 50
-    values and there are no ties, otherwise the normal approximation with continuity correction."""
+    values and there are no ties, otherwise the normal approximation with continuity correction. NaN where every
+    value of both is the same (to rounding: nothing to rank)."""
     x, y = np.asarray(x, float), np.asarray(y, float)
+    if kruskal_problem([x, y]):
+        return math.nan
     ties = len(np.unique(np.concatenate([x, y]))) < len(x) + len(y)
     exact = len(x) < 50 and len(y) < 50 and not ties
     res = stats.mannwhitneyu(
@@ -93,8 +166,14 @@ def wilcoxon_rank_sum_p(x: np.ndarray, y: np.ndarray) -> float:
 
 
 def adjust_p(p: np.ndarray, method: str = "holm") -> np.ndarray:
-    """R's p.adjust for holm, bonferroni, BH (fdr) and none."""
+    """R's p.adjust for holm, bonferroni, BH (fdr) and none; NaN p-values (tests not made) stay NaN and are not
+    counted among the tests (R's p.adjust with its default n = the non-NA p-values)."""
     p = np.asarray(p, float)
+    known = np.isfinite(p)
+    if not known.all():
+        out = np.full(len(p), np.nan)
+        out[known] = adjust_p(p[known], method)
+        return out
     m = len(p)
     if method == "none" or m == 0:
         return p.copy()
@@ -181,6 +260,7 @@ class MetricStats:
     letters: dict[str, str]
     adjust: str = "holm"
     pairwise_adjusted: list[dict] = field(default_factory=list)
+    notes: dict[str, str] = field(default_factory=dict)  # test -> why it gave no figure
 
 
 @dataclass
@@ -190,9 +270,38 @@ class StudyStats:
     n_outliers: int
     metrics: dict[str, MetricStats]
     kept: pd.DataFrame
+    counted: dict[str, dict] = field(default_factory=dict)  # per method: runs, distinct runs, deterministic
+    outlier_note: str = ""  # why no outlier test was made
+
+    @property
+    def deterministic(self) -> list[str]:
+        """The methods every sequence and direction of which gave identical figures over its trials."""
+        return [g for g, c in self.counted.items() if c["deterministic"]]
+
+    def counting_note(self) -> str:
+        """How copies were counted, in one sentence (empty where no run was a copy of another)."""
+        copied = {g: c for g, c in self.counted.items() if c["distinct"] < c["runs"]}
+        if not copied:
+            return ""
+        parts = [
+            f"{g} {c['distinct']} of {c['runs']}" + (" (deterministic: identical trials)" if c["deterministic"] else "")
+            for g, c in copied.items()
+        ]
+        return (
+            "runs whose figures equal another run's of the same method, sequence and direction are counted once: "
+            + ", ".join(parts)
+        )
 
     def to_json(self) -> dict:
-        out = {"mahalanobis": self.mahalanobis, "cutoff": self.cutoff, "n_outliers": self.n_outliers, "metrics": {}}
+        out = {
+            "mahalanobis": self.mahalanobis,
+            "cutoff": self.cutoff,
+            "n_outliers": self.n_outliers,
+            "outlier_note": self.outlier_note or None,
+            "counted": self.counted,
+            "counting_note": self.counting_note() or None,
+            "metrics": {},
+        }
         for name, m in self.metrics.items():
             out["metrics"][name] = {
                 "medians": m.medians,
@@ -205,6 +314,7 @@ class StudyStats:
                 "pairwise_holm": m.pairwise_holm,
                 "pairwise_none": m.pairwise_none,
                 "letters": m.letters,
+                "notes": m.notes,
             }
             if m.adjust not in ("holm", "none"):
                 out["metrics"][name][f"pairwise_{m.adjust}"] = m.pairwise_adjusted
@@ -219,11 +329,22 @@ def study_statistics(
     adjust: str = "holm",
     alpha: float = 0.05,
 ) -> StudyStats:
-    """The study's procedure on evaluated runs (rows with every metric finite); no metric or no run gives no
-    figure (empty medians and tests), not an error."""
-    data = df.dropna(subset=metrics).reset_index(drop=True)
+    """The study's procedure on evaluated runs (rows with every metric finite), each distinct result of a method,
+    sequence and direction counted once (`distinct_runs`); no metric or no run gives no figure (empty medians and
+    tests), not an error, and a test its data cannot support gives none, with the reason."""
+    data, counted = distinct_runs(df.dropna(subset=metrics), metrics, group)
+    data = data.reset_index(drop=True)
     x = data[metrics].to_numpy(float)
-    d2 = mahalanobis_sq(x) if metrics and len(data) > len(metrics) else np.zeros(len(data))
+    outlier_note = ""
+    if metrics and len(data) > len(metrics):
+        d2 = mahalanobis_sq(x)
+    else:
+        d2 = np.zeros(len(data))
+        if metrics and len(data):
+            outlier_note = (
+                f"no outlier test: {len(data)} run(s) for {len(metrics)} metric(s); a covariance needs more runs than "
+                "metrics"
+            )
     cutoff = chi2_cutoff(level, len(metrics)) if metrics else math.nan
     kept = data[~(d2 > cutoff)].reset_index(drop=True)
     order = list(kept.groupby(group, sort=True).groups)
@@ -234,12 +355,23 @@ def study_statistics(
         medians = {g: float(np.median(v)) for g, v in usable.items()}
         lillie = {g: lilliefors_p(v) for g, v in usable.items()}
         multi = [v for v in usable.values() if len(v) > 1]
+        notes = {}
+        if why := levene_problem(multi):
+            notes["levene"] = why
         lev_f, lev_p = levene(multi) if len(multi) > 1 else (math.nan, math.nan)
-        kw = kruskal(list(usable.values())) if len(usable) > 1 else (math.nan, 0, math.nan)
+        if why := kruskal_problem(list(usable.values())):
+            notes["kruskal"] = notes["pairwise"] = why
+            kw = (math.nan, max(len(usable) - 1, 0), math.nan)
+        else:
+            kw = kruskal(list(usable.values()))
+        if any(v != v for v in lillie.values()):
+            notes["lilliefors"] = "a method with fewer than 5 runs, or without spread, has none"
         holm = pairwise_wilcoxon(usable, "holm")
         none = pairwise_wilcoxon(usable, "none")
         chosen = {"holm": holm, "none": none}.get(adjust) or pairwise_wilcoxon(usable, adjust)
-        pmap = {frozenset((r["a"], r["b"])): r["p"] for r in chosen}
+        pmap = {frozenset((r["a"], r["b"])): r["p"] for r in chosen if r["p"] == r["p"]}  # no test: no difference
+        if "pairwise" not in notes and len(pmap) < len(chosen):
+            notes["pairwise"] = "no test between two methods whose values are all the same (to rounding)"
         by_median = sorted(usable, key=lambda g: medians[g])
         letters = compact_letters(by_median, pmap, alpha)
         out[metric] = MetricStats(
@@ -255,5 +387,7 @@ def study_statistics(
             {g: letters[g] for g in usable},
             adjust,
             chosen,
+            notes,
         )
-    return StudyStats([float(v) for v in d2], cutoff, int(np.sum(d2 > cutoff)), out, kept)
+    d2_list = [float(v) for v in d2] if not outlier_note else []
+    return StudyStats(d2_list, cutoff, int(np.sum(d2 > cutoff)), out, kept, counted, outlier_note)

@@ -35,7 +35,7 @@ def _p(p: float) -> str:
 
 def tests_table(st: StudyStats) -> pd.DataFrame:
     """Per metric every test of the procedure with its statistic and p-value: Kruskal-Wallis, Levene, and
-    Lilliefors per method."""
+    Lilliefors per method; where a test gave none, why."""
     rows = []
     for metric, s in st.metrics.items():
         row = {
@@ -47,6 +47,7 @@ def tests_table(st: StudyStats) -> pd.DataFrame:
             "Levene p": s.levene_p,
         }
         row |= {f"Lilliefors p, {m}": p for m, p in s.lilliefors_p.items()}
+        row["no figure because"] = "; ".join(f"{test}: {why}" for test, why in s.notes.items()) or "-"
         rows.append(row)
     return pd.DataFrame(rows)
 

@@ -234,10 +234,16 @@ def _num(v: float, digits: int = 4) -> str:
 def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list[str]:
     """`slamrun stats`' text of one dataset: every test the procedure computed (outliers, Lilliefors, Levene,
     Kruskal-Wallis, pairwise Wilcoxon rank-sum tests adjusted and not), with the medians and letters."""
-    lines = [
-        f"dataset {dataset}: {len(st.mahalanobis)} evaluated runs, {len(st.kept)} kept, {st.n_outliers} multivariate "
-        f"outlier(s) (squared Mahalanobis distance over {len(st.metrics)} metrics above {_num(st.cutoff, 6)})"
-    ]
+    if st.outlier_note:
+        outliers = f"{len(st.kept)} evaluated runs, {st.outlier_note}"
+    else:
+        outliers = (
+            f"{len(st.mahalanobis)} evaluated runs, {len(st.kept)} kept, {st.n_outliers} multivariate outlier(s) "
+            f"(squared Mahalanobis distance over {len(st.metrics)} metrics above {_num(st.cutoff, 6)})"
+        )
+    lines = [f"dataset {dataset}: {outliers}"]
+    if note := st.counting_note():
+        lines.append(f"  {note}")
     if not st.metrics:
         lines.append("  no metric with values: no test")
     for name, m in st.metrics.items():
@@ -251,8 +257,12 @@ def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list
             + (", ".join(f"{g} {_num(m.lilliefors_p[g], 3)}" for g in order) or "-")
             + ("  (-: under 5 runs, or no spread)" if any(v != v for v in m.lilliefors_p.values()) else "")
         )
-        lines.append(f"    Levene (median-centred) F {_num(m.levene_F)}, p {_num(m.levene_p, 3)}")
-        lines.append(f"    Kruskal-Wallis chi2 {_num(m.kruskal_chi2)}, df {m.kruskal_df}, p {_num(m.kruskal_p, 3)}")
+        levene = f"F {_num(m.levene_F)}, p {_num(m.levene_p, 3)}" if "levene" not in m.notes else m.notes["levene"]
+        lines.append(f"    Levene (median-centred): {levene}")
+        kw = f"chi2 {_num(m.kruskal_chi2)}, df {m.kruskal_df}, p {_num(m.kruskal_p, 3)}"
+        lines.append(f"    Kruskal-Wallis: {m.notes.get('kruskal', kw)}")
+        if "pairwise" in m.notes:
+            lines.append(f"    pairwise Wilcoxon rank-sum: {m.notes['pairwise']}")
         raw = {frozenset((r["a"], r["b"])): r["p"] for r in m.pairwise_none}
         pairs = [
             f"{r['a']} vs {r['b']} {_num(r['p'], 3)}; {_num(raw[frozenset((r['a'], r['b']))], 3)}"

@@ -5,15 +5,18 @@ Exit 0 when every file was evaluated, 1 when any could not be (said on stderr wi
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from pathlib import Path
 
 from runner.core import jsonio
+from runner.core.inputs import regular_file_problem
 from runner.errors import SlamRunError
 
 GT_FORMATS = ("tum-mono", "tum", "euroc", "kitti")
 METRIC_CHOICES = ("tum-mono", "ate", "rpe", "kitti")
+RPE_UNITS = ("frames", "s", "m", "evo-f", "evo-m")  # runner.core.metrics.RPE_UNITS (not imported: a quick --help)
 
 
 def add_commands(sub) -> None:
@@ -46,14 +49,28 @@ def add_commands(sub) -> None:
         "and rpe, and kitti for KITTI), for a file its format's (tum-mono for a TUM file)",
     )
     e.add_argument("--align", help="sim3 (monocular, default), se3, none, first:N, se3:first:N")
-    e.add_argument("--delta", type=_positive_float, help="RPE: the step between the poses of a pair (default 1)")
-    e.add_argument("--delta-unit", choices=("frames", "m"), help="RPE: the step's unit (default frames)")
+    e.add_argument("--delta", type=_positive_float, help="RPE: the interval of a pose pair, in --delta-unit")
+    e.add_argument(
+        "--delta-unit",
+        choices=RPE_UNITS,
+        help="RPE: frames (the sequence's: with a folder or --times), s, m (along the ground truth), or evo's own "
+        "evo-f / evo-m (evo_rpe --delta_unit f / m: steps of the estimate's poses); default: the dataset's, 1 s "
+        "for every built-in layout (delta 1 when only the unit is given)",
+    )
     e.add_argument(
         "--tolerance", type=_tolerance, help="association: largest time difference in s (default 0.02; a folder: 1 ms)"
     )
     e.add_argument("--est-format", choices=("tum", "kitti"), default="tum", help="the estimates' format")
     e.add_argument(
-        "--times", type=Path, help="frame times (KITTI's times.txt) for KITTI poses with a ground-truth file"
+        "--times",
+        type=Path,
+        help="the sequence's frame times (KITTI's times.txt) with a ground-truth file: the rows of KITTI poses, "
+        "and the frames RPE in frames counts",
+    )
+    e.add_argument(
+        "--any-sequence",
+        action="store_true",
+        help="evaluate a run's trajectory even where its run.json names another sequence than --gt's folder",
     )
     e.add_argument("--json", action="store_true", help="one JSON object per line")
     e.add_argument("traj", type=Path, nargs="+", help="trajectory files")
@@ -97,11 +114,13 @@ def _positive_float(text: str) -> float:
 
 def cmd_evaluate(args) -> int:
     from runner.core.batch_eval import evaluate_files, keep_freed_memory
-    from runner.core.metrics import Alignment
+    from runner.core.metrics import Alignment, RpeInterval
     from runner.datasets.groundtruth import open_groundtruth
 
     keep_freed_memory()
-    Alignment.parse(args.align or "sim3")  # a bad --align is named before any file is read
+    Alignment.parse(args.align or "sim3")  # a bad --align or RPE interval is named before any file is read
+    if args.delta is not None or args.delta_unit is not None:
+        RpeInterval(args.delta or 1.0, args.delta_unit or "s")
     metrics = tuple(dict.fromkeys(args.metric)) if args.metric else None
     if args.gt.is_dir():
         _folder_form_only(args)
@@ -110,6 +129,8 @@ def cmd_evaluate(args) -> int:
     gt = open_groundtruth(args.gt, args.gt_format, metrics, args.times)
     for note in gt.notes:
         print(f"slamrun: note: {note}", file=sys.stderr)
+    if gt.is_folder and not args.any_sequence:
+        _same_sequence(args.gt, args.traj)
     opts = _options(args, gt, metrics or gt.default_metrics)
     failed = total = 0
     for d in evaluate_files(gt.trajectory, args.traj, args.jobs, opts):
@@ -122,6 +143,23 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def _same_sequence(folder: Path, trajectories: list[Path]) -> None:
+    """Refuse a campaign run's trajectory (run.json beside it) whose run names another sequence than `folder`."""
+    for traj in trajectories:
+        record = Path(traj).parent / "run.json"
+        try:
+            if regular_file_problem(record, "a run's record") or record.stat().st_size > 2**20:
+                continue
+            sequence = json.loads(record.read_text()).get("sequence")
+        except (OSError, ValueError, AttributeError):
+            continue  # not a run's folder, or not readable: evaluated as any file
+        if isinstance(sequence, str) and sequence != folder.resolve().name:
+            raise SlamRunError(
+                f"{traj}: its run ({record}) is of sequence {sequence!r}, not of {folder} ({folder.resolve().name!r}); "
+                "give that sequence's folder with --gt, or --any-sequence to evaluate it against this one anyway"
+            )
+
+
 def _folder_form_only(args) -> None:
     """A sequence folder is evaluated as the campaign does: options that would change that are refused."""
     given = [
@@ -129,16 +167,14 @@ def _folder_form_only(args) -> None:
         for name, value in (
             ("--gt-format", args.gt_format),
             ("--times", args.times),
-            ("--delta", args.delta),
-            ("--delta-unit", args.delta_unit),
             ("--tolerance", args.tolerance),
         )
         if value is not None
     ]
     if given:
         raise SlamRunError(
-            f"{args.gt}: a sequence folder is evaluated as a campaign does (its reader, its frame times, RPE one "
-            f"frame apart, association within 1 ms); {', '.join(given)}: for a ground-truth file as it is (give "
+            f"{args.gt}: a sequence folder is evaluated as a campaign does (its reader, its frame times, "
+            f"association within 1 ms); {', '.join(given)}: for a ground-truth file as it is (give "
             "the file itself, e.g. --gt FOLDER/groundtruth.txt, for other settings)"
         )
 
@@ -149,6 +185,17 @@ def _options(args, gt, metrics: tuple[str, ...]):
     from runner.core.metrics import DEFAULT_TOLERANCE_S
 
     times = tuple(gt.frame_times) if args.est_format == "kitti" else None
+    frames = tuple(gt.frame_times) if gt.frame_times is not None else None
+    if args.delta_unit == "frames" and frames is None:
+        raise SlamRunError(
+            f"{args.gt}: --delta-unit frames counts the sequence's frames: give its frame times with --times FILE, "
+            "or the sequence folder; or another unit (s, m, evo-f for evo's steps of the estimate's poses)"
+        )
+    default = gt.default_rpe
+    rpe = {
+        "delta": args.delta or (1.0 if args.delta_unit else default.delta),
+        "delta_unit": args.delta_unit or default.unit,
+    }
     if gt.is_folder:
         from runner.engine.execute import evaluate
 
@@ -158,16 +205,18 @@ def _options(args, gt, metrics: tuple[str, ...]):
             tolerance_s=ASSOCIATION_TOLERANCE_S,
             est_format=args.est_format,
             times=times,
+            frame_times=frames,
             campaign=evaluate,
+            **rpe,
         )
     return Options(
         metrics=metrics,
         alignment=args.align or "sim3",
-        delta=args.delta or 1.0,
-        delta_unit=args.delta_unit or "frames",
         tolerance_s=DEFAULT_TOLERANCE_S if args.tolerance is None else args.tolerance,
         est_format=args.est_format,
         times=times,
+        frame_times=frames,
+        **rpe,
     )
 
 

@@ -37,6 +37,7 @@ from runner.results.vocabulary import (
 )
 
 METRICS = ("tum-mono", "ate", "rpe", "kitti")
+NO_PAIRS = "no_pairs"  # a metric the path is too short for (RPE's interval, KITTI's 100 m): among others, only noted
 GROUP = 32  # TUM-Mono estimates evaluated together (their arrays stay in the CPU's cache)
 MAX_FILE_BYTES = 256 * 2**20  # a trajectory or ground-truth file: a million poses are about 100 MB
 # the figures a campaign records per metric (results.csv's columns)
@@ -47,24 +48,33 @@ CAMPAIGN_FIELDS = {
     "kitti": KITTI_COLUMNS,
 }
 
-# (ground truth, estimate, metrics, alignment) -> (figures with eval_status, why a metric is missing)
-CampaignEvaluation = Callable[[Trajectory, Trajectory, tuple[str, ...], str], tuple[dict, str]]
+# (ground truth, estimate, metrics, alignment, RPE interval, frame times) -> (figures with eval_status, why a
+# metric is missing)
+CampaignEvaluation = Callable[
+    [Trajectory, Trajectory, tuple[str, ...], str, metrics.RpeInterval, np.ndarray | None], tuple[dict, str]
+]
 
 
 @dataclass(frozen=True)
 class Options:
-    """Which metrics, and how: the alignment, RPE's step, the association tolerance; estimates as TUM files, or
-    as KITTI pose files whose rows are the frames at `times`. With `campaign`, each file is evaluated by that
-    function (a campaign's per-run evaluation: its metrics, alignment and association) instead."""
+    """Which metrics, and how: the alignment, RPE's interval, the association tolerance; estimates as TUM files, or
+    as KITTI pose files whose rows are the frames at `times`; `frame_times`, the sequence's frames (RPE in frames
+    counts them). With `campaign`, each file is evaluated by that function (a campaign's per-run evaluation: its
+    metrics, alignment and association) instead."""
 
     metrics: tuple[str, ...] = ("tum-mono",)
     alignment: str = "sim3"
     delta: float = 1.0
-    delta_unit: str = "frames"
+    delta_unit: str = "s"
     tolerance_s: float = DEFAULT_TOLERANCE_S
     est_format: str = "tum"
     times: tuple[float, ...] | None = None
+    frame_times: tuple[float, ...] | None = None
     campaign: CampaignEvaluation | None = None
+
+    @property
+    def frames(self) -> np.ndarray | None:
+        return None if self.frame_times is None else np.asarray(self.frame_times, float)
 
 
 def file_problem(path: str | Path, limit: int, what: str) -> str | None:
@@ -84,7 +94,8 @@ def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
         return _campaign_fields(gt, traj, opts)
     if len(opts.metrics) > 1:
         return _merged(gt, traj, opts)
-    return _single(gt, traj, opts.metrics[0], opts)
+    d = _single(gt, traj, opts.metrics[0], opts)
+    return d | {"status": "failed"} if d["status"] == NO_PAIRS else d
 
 
 def _single(gt: Trajectory, traj: Trajectory, metric: str, opts: Options) -> dict:
@@ -94,13 +105,14 @@ def _single(gt: Trajectory, traj: Trajectory, metric: str, opts: Options) -> dic
         if metric == "ate":
             res = metrics.ate(gt, traj, opts.alignment, opts.tolerance_s)
         elif metric == "rpe":
-            res = metrics.rpe(gt, traj, opts.delta, opts.delta_unit, opts.alignment, opts.tolerance_s)
+            res = metrics.rpe(gt, traj, opts.delta, opts.delta_unit, opts.alignment, opts.tolerance_s, opts.frames)
         elif metric == "kitti":
             res = metrics.kitti(gt, traj, opts.alignment, tolerance_s=opts.tolerance_s)
         else:
             raise MetricError(f"unknown metric {metric!r}; known: {', '.join(METRICS)}")
     except MetricError as exc:
-        return {"status": "failed", "n_poses": len(traj), "detail": str(exc)}
+        status = NO_PAIRS if isinstance(exc, metrics.NoPairs) else "failed"
+        return {"status": status, "n_poses": len(traj), "detail": str(exc)}
     return {"status": "ok", "n_poses": len(traj), **res.to_dict()}
 
 
@@ -108,7 +120,8 @@ def _campaign_fields(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     """The campaign's figures of one estimate: every field of the metrics asked for (null where missing). Its
     status is the campaign's eval_status, or failed where no figure at all came out."""
     assert opts.campaign is not None
-    figures, detail = opts.campaign(gt, traj, opts.metrics, opts.alignment)
+    interval = metrics.RpeInterval(opts.delta, opts.delta_unit)
+    figures, detail = opts.campaign(gt, traj, opts.metrics, opts.alignment, interval, opts.frames)
     fields = {k: figures.get(k) for m in opts.metrics for k in CAMPAIGN_FIELDS[m]}
     status = figures.get("eval_status", EvalStatus.ok.value)
     if status == EvalStatus.ok.value and all(v is None for v in fields.values()):
@@ -125,7 +138,8 @@ def _merged(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
         d = _single(gt, traj, metric, opts)
         status, detail = d.pop("status"), d.pop("detail", None)
         d.pop("metric", None)
-        if status != "ok" and out["status"] == "ok":
+        if status not in ("ok", NO_PAIRS) and out["status"] == "ok":  # too short for one metric: noted, as a
+            # campaign notes it
             out["status"] = status
         if detail:
             details.append(f"{metric}: {detail}")

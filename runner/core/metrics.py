@@ -26,6 +26,10 @@ KITTI_LENGTHS_M = (100, 200, 300, 400, 500, 600, 700, 800)
 KITTI_STEP_FRAMES = 10
 
 
+class NoPairs(MetricError):
+    """The trajectory is too short for the metric's interval: no RPE pair, no KITTI segment (the data's limit)."""
+
+
 # ----------------------------------------------------------------------------------------- association
 
 
@@ -252,16 +256,50 @@ def ate(
 
 # ------------------------------------------------------------------------------------------------- RPE
 
+SEQUENCE_UNITS = ("frames", "s", "m")  # an interval of the sequence, whatever the estimate's rate
+EVO_UNITS = ("evo-f", "evo-m")  # evo_rpe's --delta_unit f and m: steps of the estimate's own associated poses
+RPE_UNITS = SEQUENCE_UNITS + EVO_UNITS
+RPE_SLACK = 0.1  # s and m: a pair's interval within 10 % of delta (an estimate written every few frames finds one)
+
+
+@dataclass(frozen=True)
+class RpeInterval:
+    """How far apart RPE's pose pairs are. `frames`: the sequence's frames (pairs of estimate poses whose frames are
+    exactly `delta` frames apart, by the frames' times); `s`: seconds (TUM RGB-D's per-second drift); `m`: metres
+    travelled along the ground truth. `evo-f` and `evo-m` are evo's own (`--delta_unit f` / `m`): every `delta`-th
+    associated estimate pose, or each time the aligned estimate has travelled `delta` metres, so that an estimate
+    written every 5th frame gets an interval five times as long."""
+
+    delta: float = 1.0
+    unit: str = "s"
+
+    def __post_init__(self) -> None:
+        if self.unit not in RPE_UNITS:
+            raise MetricError(f"RPE delta unit {self.unit!r}: expected one of {', '.join(RPE_UNITS)}")
+        whole = self.unit in ("frames", "evo-f")
+        if not math.isfinite(self.delta) or self.delta <= 0 or (whole and float(self.delta) != int(self.delta)):
+            what = "whole number of frames" if whole else "seconds" if self.unit == "s" else "distance in metres"
+            raise MetricError(f"RPE delta {self.delta}: expected a positive {what}")
+
+    def __str__(self) -> str:
+        return f"{self.delta:g} {self.unit}"
+
 
 @dataclass(frozen=True)
 class RpeResult:
-    """Relative pose error over pose pairs `delta` frames or metres apart: translation (m), rotation (deg)."""
+    """Relative pose error over pose pairs `delta` `unit` apart: translation (m), rotation (deg), and the number
+    of pairs it was computed over."""
 
     translation: ErrorStats
     rotation_deg: ErrorStats
     delta: float
-    unit: str  # frames | m
+    unit: str  # one of RPE_UNITS
     alignment: str
+    pairs: int = 0
+
+    @property
+    def interval(self) -> str:
+        return str(RpeInterval(self.delta, self.unit))
 
     def to_dict(self) -> dict:
         return {
@@ -269,6 +307,7 @@ class RpeResult:
             "alignment": self.alignment,
             "delta": self.delta,
             "delta_unit": self.unit,
+            "rpe_pairs": self.pairs,
             **_flat("rpe_t", self.translation),
             **_flat("rpe_r", self.rotation_deg),
         }
@@ -278,32 +317,85 @@ def rpe(
     gt: Trajectory,
     est: Trajectory,
     delta: float = 1,
-    unit: str = "frames",
+    unit: str = "s",
     alignment: Alignment | str = "sim3",
     tolerance_s: float = DEFAULT_TOLERANCE_S,
+    frame_times: np.ndarray | None = None,
 ) -> RpeResult:
-    """RPE as evo computes it: associate, align the estimate, then consecutive pairs (i, j) chosen on the
-    (aligned) estimate every `delta` frames, or each time its travelled path reaches `delta` metres; the error
-    pose E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j) gives |t(E)| and the angle of R(E)."""
-    if unit not in ("frames", "m"):
-        raise MetricError(f"RPE delta unit {unit!r}: expected frames or m")
-    if delta <= 0 or (unit == "frames" and float(delta) != int(delta)):
-        what = "whole number of frames" if unit == "frames" else "distance in metres"
-        raise MetricError(f"RPE delta {delta}: expected a positive {what}")
+    """RPE of `est` against `gt`: align the estimate (over every pose paired with the ground truth), choose pose
+    pairs (i, j) `delta` `unit` apart (see RpeInterval; `frames` needs the sequence's `frame_times`), and take the
+    error pose E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j): |t(E)| and the angle of R(E).
+
+    With a sequence unit every pose starts a pair where a partner lies at its interval (pairs overlap, as TUM RGB-D's
+    evaluate_rpe.py with a fixed delta); the estimate's poses are taken in time order, one per timestamp. With an evo
+    unit the pairs are evo's: consecutive, on the associated rows as the files hold them."""
+    interval = RpeInterval(float(delta), unit)
     alignment = Alignment.parse(alignment) if isinstance(alignment, str) else alignment
-    pairs = associate(gt, est, tolerance_s)
-    sim = alignment.fit(pairs.est.positions, pairs.gt.positions)
-    p = aligned(pairs.est, sim)
-    q = matrices(pairs.gt)
-    i, j = _pairs_by_index(len(p), int(delta)) if unit == "frames" else _pairs_by_path(p[:, :3, 3], float(delta))
+    if unit in EVO_UNITS:
+        pairs = associate(gt, est, tolerance_s)
+        est_p, gt_p = pairs.est, pairs.gt
+    else:
+        if unit == "frames" and frame_times is None:
+            raise MetricError("RPE in frames counts the sequence's frames: give the frame times (--times FILE)")
+        at = poses_at(gt, est.timestamps, tolerance_s)
+        keep = np.flatnonzero(np.isfinite(at.positions).all(axis=1) & np.isfinite(at.quaternions).all(axis=1))
+        if not len(keep):
+            raise MetricError(f"none of the estimate's {len(est)} poses has a ground-truth pose within {tolerance_s} s")
+        est_p, gt_p = _take(est, keep), _take(at, keep)
+    sim = alignment.fit(est_p.positions, gt_p.positions)
+    p = aligned(est_p, sim)
+    q = matrices(gt_p)
+    if unit == "evo-f":
+        i, j = _pairs_by_index(len(p), int(delta))
+    elif unit == "evo-m":
+        i, j = _pairs_by_path(p[:, :3, 3], float(delta))
+    elif unit == "frames":
+        i, j = _pairs_by_frames(est_p.timestamps, np.asarray(frame_times, float), int(delta), tolerance_s)
+    elif unit == "s":
+        i, j = _pairs_by_axis(est_p.timestamps, float(delta))
+    else:
+        i, j = _pairs_by_axis(_path_along(_finite(gt), est_p.timestamps), float(delta))
     if not len(i):
-        raise MetricError(f"no pose pair {delta} {unit} apart among {len(p)} associated poses")
+        raise NoPairs(f"no pose pair {interval} apart among {len(p)} poses paired with the ground truth")
     q_rel = np.linalg.inv(q[i]) @ q[j]
     p_rel = np.linalg.inv(p[i]) @ p[j]
     err = np.linalg.inv(q_rel) @ p_rel
     trans = np.linalg.norm(err[:, :3, 3], axis=1)
     rot = np.array([_angle_deg(r) for r in err[:, :3, :3]])
-    return RpeResult(ErrorStats.of(trans), ErrorStats.of(rot), float(delta), unit, str(alignment))
+    return RpeResult(ErrorStats.of(trans), ErrorStats.of(rot), float(delta), unit, str(alignment), len(i))
+
+
+def _pairs_by_frames(
+    times: np.ndarray, frame_times: np.ndarray, delta: int, tolerance_s: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs of poses (times increasing) whose frames of the sequence (the frame within `tolerance_s` of each) are
+    exactly `delta` frames apart."""
+    order = np.argsort(frame_times, kind="stable")
+    ids, best = matching_time_indices(times, frame_times[order], tolerance_s)
+    frame = best  # the frame's rank in time, for each pose of `ids` (increasing with the pose's time)
+    at = np.searchsorted(frame, frame + delta)
+    ok = at < len(frame)
+    ok[ok] = frame[at[ok]] == frame[ok] + delta
+    return ids[ok], ids[at[ok]]
+
+
+def _pairs_by_axis(axis: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pairs (i, j) of poses along a non-decreasing `axis` (time, or distance travelled): for each i the j nearest
+    to axis[i] + delta, where within RPE_SLACK x delta of it."""
+    target = axis + delta
+    hi = np.minimum(np.searchsorted(axis, target), len(axis) - 1)
+    lo = np.maximum(hi - 1, 0)
+    j = np.where(np.abs(axis[lo] - target) <= np.abs(axis[hi] - target), lo, hi)
+    ok = (np.abs(axis[j] - target) <= RPE_SLACK * delta) & (j > np.arange(len(axis)))
+    return np.flatnonzero(ok), j[ok]
+
+
+def _path_along(gt: Trajectory, times: np.ndarray) -> np.ndarray:
+    """The distance travelled along the ground truth's path (its rows in time order) up to each of `times`."""
+    if len(gt) < 2:
+        return np.zeros(len(times))
+    travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(gt.positions, axis=0), axis=1))])
+    return np.interp(times, gt.timestamps, travelled)
 
 
 def _pairs_by_index(n: int, delta: int) -> tuple[np.ndarray, np.ndarray]:
@@ -379,7 +471,7 @@ def kitti(
                 lasts.append(last)
                 lens.append(length)
     if not firsts:
-        raise MetricError(f"the ground truth's path ({dist[-1]:.1f} m) is shorter than {min(lengths)} m: no segment")
+        raise NoPairs(f"the ground truth's path ({dist[-1]:.1f} m) is shorter than {min(lengths)} m: no segment")
     f, la, ln = np.array(firsts), np.array(lasts), np.array(lens, float)
     delta_gt = np.linalg.inv(q[f]) @ q[la]
     delta_est = np.linalg.inv(p[f]) @ p[la]

@@ -18,9 +18,18 @@ import numpy as np
 
 from runner.core.batch_eval import MAX_FILE_BYTES, file_problem
 from runner.core.inputs import read_text_bounded
+from runner.core.metrics import RpeInterval
 from runner.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_times, read_tum
 from runner.datasets.euroc import EUROC_GT, asl_file_note, asl_folder
-from runner.datasets.layouts import BUILT_IN, DEFAULT_METRICS, GROUNDTRUTH_FILES, detect, names, open_sequence
+from runner.datasets.layouts import (
+    BUILT_IN,
+    DEFAULT_METRICS,
+    DEFAULT_RPE,
+    GROUNDTRUTH_FILES,
+    detect,
+    names,
+    open_sequence,
+)
 from runner.datasets.tum_vi import TUMVI_GT
 from runner.errors import DatasetError
 
@@ -51,6 +60,7 @@ class GroundTruth:
     default_metrics: tuple[str, ...]
     frame_times: np.ndarray | None = None
     notes: tuple[str, ...] = ()
+    default_rpe: RpeInterval = RpeInterval()  # its dataset's RPE interval
 
     @property
     def is_folder(self) -> bool:
@@ -103,7 +113,7 @@ def sequence_groundtruth(root: Path) -> GroundTruth:
     gt = seq.groundtruth()
     if gt is None:
         raise DatasetError(f"{root}: a {layout} sequence without its ground truth ({GROUNDTRUTH_FILES[layout]})")
-    return GroundTruth(gt, root, layout, DEFAULT_METRICS[layout], seq.timestamps, seq.notes)
+    return GroundTruth(gt, root, layout, DEFAULT_METRICS[layout], seq.timestamps, seq.notes, DEFAULT_RPE[layout])
 
 
 def sniff_format(path: Path, metrics: tuple[str, ...] | None) -> str:

@@ -26,6 +26,7 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import replace
 from pathlib import Path
 
+from runner.core.metrics import RpeInterval
 from runner.datasets import euroc, icl_nuim, kitti, tartanair, tum_mono, tum_rgbd, tum_vi
 from runner.datasets.protocol import METRICS, Layout
 from runner.datasets.sequence import Sequence, folder_identity
@@ -201,6 +202,7 @@ class _ByLayout(Mapping):
 
 DEFAULT_METRICS: Mapping[str, tuple[str, ...]] = _ByLayout("default_metrics")
 GROUNDTRUTH_FILES: Mapping[str, str] = _ByLayout("groundtruth_file")
+DEFAULT_RPE: Mapping[str, RpeInterval] = _ByLayout("rpe")
 FRAME_LISTS: Mapping[str, str] = _ByLayout("frame_list")
 
 

@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from runner.core.metrics import RpeInterval
+
 if TYPE_CHECKING:  # the synthetic writers import the renderer (scipy) only when a sequence is generated
     from runner.datasets.sequence import Sequence
     from runner.datasets.synth import Synth
@@ -70,6 +72,7 @@ class Layout:
     read: Callable[[Path], Sequence]
     groundtruth_file: str  # where the ground truth lies, as messages name it
     default_metrics: tuple[str, ...] = ("ate", "rpe")
+    rpe: RpeInterval = RpeInterval(1.0, "s")  # RPE's interval by default: one second of the sequence
     synth: Callable[[Path, Synth], Placed] | None = None
     synth_outside: Callable[[Path], tuple[Path, ...]] = _nothing_outside
     synth_name_problem: Callable[[str], str | None] | None = None  # a sequence name the writer cannot use

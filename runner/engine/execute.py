@@ -178,7 +178,9 @@ def finish_attempt(
             values["n_poses"] = len(traj)
             values["coverage"] = metrics.coverage(traj, view.original_timestamps())
             if groundtruth is not None:
-                figures, detail = evaluate(groundtruth, traj, run.metrics, run.alignment)
+                figures, detail = evaluate(
+                    groundtruth, traj, run.metrics, run.alignment, run.rpe, view.original_timestamps()
+                )
                 values.update(figures)
                 if detail and not values["message"]:
                     values["message"] = detail
@@ -265,10 +267,18 @@ def config_path_problem(rel) -> str | None:
     return None
 
 
-def evaluate(gt: Trajectory, traj: Trajectory, wanted: tuple[str, ...], alignment: str) -> tuple[dict, str]:
-    """A finished run's metrics (the dataset's `metrics:`) and eval_status, and why a metric is missing. TUM-Mono's
-    figures or ATE/RPE that cannot be computed make the evaluation incomplete; KITTI's segments on a path shorter
-    than 100 m are the dataset's limit, only noted."""
+def evaluate(
+    gt: Trajectory,
+    traj: Trajectory,
+    wanted: tuple[str, ...],
+    alignment: str,
+    rpe: metrics.RpeInterval = metrics.RpeInterval(),
+    frame_times: np.ndarray | None = None,
+) -> tuple[dict, str]:
+    """A finished run's metrics (the dataset's `metrics:`, RPE at the interval `rpe` of the sequence whose frames
+    are at `frame_times`) and eval_status, and why a metric is missing. TUM-Mono's figures or ATE/RPE that cannot
+    be computed make the evaluation incomplete; a path shorter than RPE's interval or KITTI's 100 m is the data's
+    limit, only noted (coverage says how much of the sequence was tracked)."""
     values: dict = {}
     status, notes = EvalStatus.ok, []
     if "tum-mono" in wanted:
@@ -284,14 +294,15 @@ def evaluate(gt: Trajectory, traj: Trajectory, wanted: tuple[str, ...], alignmen
                 a = metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).translation
                 values.update(ate_rmse=a.rmse, ate_mean=a.mean, ate_median=a.median, ate_max=a.max)
             elif name == "rpe":
-                r = metrics.rpe(gt, traj, 1, "frames", alignment, ASSOCIATION_TOLERANCE_S)
-                values.update(rpe_t_rmse=r.translation.rmse, rpe_r_rmse=r.rotation_deg.rmse)
+                values["rpe_interval"] = str(rpe)
+                r = metrics.rpe(gt, traj, rpe.delta, rpe.unit, alignment, ASSOCIATION_TOLERANCE_S, frame_times)
+                values.update(rpe_t_rmse=r.translation.rmse, rpe_r_rmse=r.rotation_deg.rmse, rpe_pairs=r.pairs)
             elif name == "kitti":
                 k = metrics.kitti(gt, traj, alignment, tolerance_s=ASSOCIATION_TOLERANCE_S)
                 values.update(kitti_t_pct=k.t_pct, kitti_r_deg_m=k.r_deg_per_m)
         except MetricError as exc:
             notes.append(f"{name}: {exc}")
-            if name != "kitti" and status is EvalStatus.ok:
+            if name != "kitti" and not isinstance(exc, metrics.NoPairs) and status is EvalStatus.ok:
                 status = EvalStatus.incomplete
     values["eval_status"] = status.value
     return values, "; ".join(notes)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 
 from runner.engine.ledger import Ledger
-from runner.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS
+from runner.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, TEXT_METRIC_COLUMNS
 
 COLUMNS = (
     "method",
@@ -40,7 +40,7 @@ def results_frame(ledger: Ledger) -> pd.DataFrame:
     for col in COLUMNS:  # a ledger read read-only from an earlier version lacks the newer columns
         if col not in df.columns:
             df[col] = None
-    for col in METRIC_COLUMNS + RESOURCE_COLUMNS:
+    for col in (c for c in METRIC_COLUMNS + RESOURCE_COLUMNS if c not in TEXT_METRIC_COLUMNS):
         df[col] = pd.to_numeric(df[col], errors="coerce")
     return df[list(COLUMNS)]
 

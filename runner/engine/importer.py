@@ -442,7 +442,7 @@ def _record(key: RunKey, source: str, sha256: str, ds, seq, gt, traj: Trajectory
         if traj.report.n_nonfinite_dropped:
             values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the file dropped"
         if gt is not None:
-            figures, detail = evaluate(gt, traj, tuple(ds.metrics), ds.alignment)
+            figures, detail = evaluate(gt, traj, tuple(ds.metrics), ds.alignment, ds.rpe_interval, seq.timestamps)
             values.update(figures)
             if detail and not values["message"]:
                 values["message"] = detail

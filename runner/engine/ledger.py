@@ -44,6 +44,8 @@ _TYPES = {
     "pid": "INTEGER",
     "n_poses": "INTEGER",
     "n_frames": "INTEGER",
+    "rpe_pairs": "INTEGER",
+    "rpe_interval": "TEXT",
 }
 _REAL = set(METRIC_COLUMNS + RESOURCE_COLUMNS + ("started_at", "ended_at", "pid_start")) - set(_TYPES)
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import methods
+from runner.core.metrics import RpeInterval
 from runner.datasets.layouts import sequence_identity
 from runner.datasets.view import Direction, Profile
 from runner.engine.spec import CampaignSpec, MethodSpec
@@ -52,6 +53,7 @@ class PlannedRun:
     timeout_s: float
     metrics: tuple[str, ...] = ("tum-mono",)  # the dataset's metrics
     alignment: str = "sim3"
+    rpe: RpeInterval = RpeInterval()  # the dataset's RPE interval
 
 
 def settings_hash(m: MethodSpec) -> str:
@@ -92,6 +94,7 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
                             m.timeout_s or spec.timeout_s,
                             tuple(ds.metrics),
                             ds.alignment,
+                            ds.rpe_interval,
                         )
                         runs.append(((trial, mi, seq, direction.value), run))
     runs.sort(key=lambda r: r[0])

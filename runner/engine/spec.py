@@ -55,6 +55,28 @@ class SynthSpec(Strict):
         return int(w), int(h)
 
 
+class RpeSpec(Strict):
+    """How far apart RPE's pose pairs are (see README, Metrics)."""
+
+    delta: float = Field(gt=0, description="The interval, in `unit`.")
+    unit: Literal["frames", "s", "m", "evo-f", "evo-m"] = Field(
+        description="frames: the sequence's frames (pairs exactly delta frames apart); s: seconds (TUM RGB-D's "
+        "per-second drift); m: metres along the ground truth; evo-f / evo-m: evo_rpe's --delta_unit f / m (steps of "
+        "the estimate's own poses: an estimate written every 5th frame gets five times the interval)."
+    )
+
+    @model_validator(mode="after")
+    def _valid(self):
+        from runner.core.metrics import RpeInterval
+        from runner.errors import MetricError
+
+        try:
+            RpeInterval(self.delta, self.unit)
+        except MetricError as exc:
+            raise ValueError(str(exc)) from None
+        return self
+
+
 class DatasetSpec(Strict):
     name: str = Field(description="Dataset name, e.g. tum-mono.")
     path: Path = Field(description="Folder holding one folder per sequence.")
@@ -79,7 +101,7 @@ class DatasetSpec(Strict):
     metrics: list[Literal["tum-mono", "ate", "rpe", "kitti"]] | None = Field(
         None,
         min_length=1,
-        description="Metrics of each run against the ground truth: TUM-Mono's six, ATE, RPE (one frame apart), "
+        description="Metrics of each run against the ground truth: TUM-Mono's six, ATE, RPE (at `rpe:`), "
         "KITTI's segment errors. Default by layout: tum-mono for TUM-Mono; ate and rpe (and kitti for KITTI) for the "
         "others.",
     )
@@ -90,7 +112,26 @@ class DatasetSpec(Strict):
             from runner.datasets.layouts import DEFAULT_METRICS
 
             self.metrics = list(DEFAULT_METRICS[self.layout])
+        if self.rpe is None:
+            from runner.datasets.layouts import DEFAULT_RPE
+
+            default = DEFAULT_RPE[self.layout]
+            self.rpe = RpeSpec(delta=default.delta, unit=default.unit)
         return self
+
+    rpe: RpeSpec | None = Field(
+        None,
+        description="RPE's interval, e.g. {delta: 1, unit: s}. Default by layout: one second of the sequence "
+        "(slamrun list-datasets).",
+    )
+
+    @property
+    def rpe_interval(self):
+        """`rpe` as the metric takes it."""
+        from runner.core.metrics import RpeInterval
+
+        assert self.rpe is not None
+        return RpeInterval(self.rpe.delta, self.rpe.unit)
 
     alignment: str = Field(
         "sim3", description="Alignment before ATE, RPE and KITTI's metric: sim3 (monocular), se3, first:N, ..."

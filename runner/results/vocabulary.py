@@ -53,7 +53,8 @@ class EvalStatus(StrEnum):
 TUM_MONO_METRICS = ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse")
 # ATE, RPE and KITTI's segment errors as a campaign records them
 ATE_COLUMNS = ("ate_rmse", "ate_mean", "ate_median", "ate_max")
-RPE_COLUMNS = ("rpe_t_rmse", "rpe_r_rmse")
+RPE_COLUMNS = ("rpe_t_rmse", "rpe_r_rmse", "rpe_pairs", "rpe_interval")  # the interval as text: "1 s"
+TEXT_METRIC_COLUMNS = ("rpe_interval",)
 KITTI_COLUMNS = ("kitti_t_pct", "kitti_r_deg_m")
 
 METRIC_COLUMNS = (
@@ -101,6 +102,8 @@ LABELS = {
     "ate_max": "ATE max (m)",
     "rpe_t_rmse": "RPE translation RMSE (m)",
     "rpe_r_rmse": "RPE rotation RMSE (deg)",
+    "rpe_pairs": "RPE pose pairs",
+    "rpe_interval": "RPE interval",
     "kitti_t_pct": "KITTI translation error (%)",
     "kitti_r_deg_m": "KITTI rotation error (deg/m)",
     "coverage": "frames with a pose",
