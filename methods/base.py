@@ -40,6 +40,8 @@ class Method(ABC):
     gpu_capable: ClassVar[bool] = False  # can use a GPU when asked (params.gpu); runs on the CPU otherwise
     loop_closure_switch: ClassVar[str | None] = None  # how the image turns loop closure off, if it has one
     native: ClassVar[bool] = False  # runs as a local process without an image
+    # the Python modules whose versions decide its results when it runs natively (recorded with each run)
+    modules: ClassVar[tuple[str, ...]] = ()
     Params: ClassVar[type[BaseModel]] = NoParams
     output_file: ClassVar[str] = "trajectory.txt"
     # Log lines that tell why a run produced nothing usable (case-insensitive regular expressions).

@@ -32,6 +32,7 @@ class Colmap(PythonProcess, Method):
     image = None
     profile = Profile.rectified
     native = True
+    modules = ("pycolmap", "numpy", "scipy")
     Params = ColmapParams
     not_initialized_pattern = r"^NOT INITIALIZED"
 

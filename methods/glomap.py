@@ -35,6 +35,7 @@ class Glomap(PythonProcess, Method):
     image = None
     profile = Profile.rectified
     native = True
+    modules = ("pycolmap", "numpy", "scipy")
     Params = GlomapParams
     not_initialized_pattern = r"^NOT INITIALIZED"
 

@@ -67,6 +67,7 @@ class NativeGpuMethod(PythonProcess, Method):
 
     needs_gpu = True
     native = True
+    modules = ("torch", "numpy", "cv2")
     image_build: str  # where the image holds the build (its network in weights/)
     weights_name: str  # the network's file name (dpvo.pth, droid.pth)
     recipe: Path  # the image's Dockerfile

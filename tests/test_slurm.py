@@ -3,6 +3,7 @@ cancelled mid-run, the checks before any run, and jobs that never start."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -166,6 +167,8 @@ def test_a_campaign_runs_on_slurm_jobs_and_a_cancelled_job_costs_no_run(tmp_path
     assert len(pids) >= 8 and not alive, f"processes of runs outlived the campaign: {alive}"  # the cancelled one too
     finished = sorted(res.results.glob("runs/*/*/*/*/run.json"))
     assert len(finished) == 8, finished  # one folder per run: none written twice, no half-written one left
+    machines = [json.loads(f.read_text())["machine"] for f in finished]  # each run names the node Slurm gave it
+    assert all(m["slurm_node"] and m["slurm_job"] and m["name"] for m in machines), machines
     assert our_jobs(slurm, results) == []  # the campaign cancelled its jobs at the end
 
 

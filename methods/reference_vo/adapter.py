@@ -24,6 +24,7 @@ class ReferenceVO(PythonProcess, Method):
     image = "slamrun/reference_vo:latest"
     profile = Profile.rectified
     native = True
+    modules = ("numpy", "scipy", "cv2")
     Params = ReferenceVOParams
     not_initialized_pattern = r"^NOT INITIALIZED"
     lost_pattern = r"^LOST"

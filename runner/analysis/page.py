@@ -128,6 +128,9 @@ def provenance_html(p: Provenance, root: Path, results: Path) -> str:
         *((esc(k), esc(v)) for k, v in p.runs.items()),
     ]
     out = '<dl class="prov">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
+    if p.packages:
+        out += "<h3>Python packages of the native runs</h3>" + '<dl class="prov">'
+        out += "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in p.packages.items()) + "</dl>"
     out += "<h3>Images</h3>" + (_images(p.images) if p.images else f"<p>{esc(p.images_note)}</p>")
     out += links({"images.json": results / "images.json"}, root)
     out += "<h3>The spec as run</h3>"

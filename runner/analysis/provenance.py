@@ -38,6 +38,7 @@ class Provenance:
     runs_host: str  # where the runs ran, as far as is known
     dates: dict[str, str]
     runs: dict[str, str]
+    packages: dict[str, str] = field(default_factory=dict)  # run label -> the Python packages its runs ran on
     notes: list[str] = field(default_factory=list)
 
 
@@ -60,7 +61,8 @@ def provenance(results: Path, df: pd.DataFrame) -> Provenance:
         images=images,
         images_note=images_note,
         host=host_description(),
-        runs_host=_runs_host(meta.get("session"), spec),
+        runs_host=_runs_host(meta.get("session"), spec, df),
+        packages=_packages(df),
         dates=_dates(meta),
         runs=_runs(df, meta.get("session")),
     )
@@ -213,15 +215,32 @@ def _gpus() -> str:
     return "; ".join(lines) if p.returncode == 0 and lines else "none found"
 
 
-def _runs_host(session: dict | None, spec: dict | None) -> str:
-    """Where the runs ran: this machine when the campaign's own process writes the report and the runs ran on it
-    (backend local, docker or podman, not distributed); otherwise what is known."""
+def _runs_host(session: dict | None, spec: dict | None, df: pd.DataFrame | None = None) -> str:
+    """Where the runs ran: the hosts each run recorded (run.json has their CPU, GPUs and Slurm node), else this
+    machine when the campaign's own process writes the report and the runs ran on it (backend local, docker or
+    podman, not distributed); otherwise what is known."""
+    if df is not None and "host" in df.columns and df["host"].notna().any():
+        counts = df["host"].dropna().value_counts()
+        missing = int(df["host"].isna().sum())
+        text = ", ".join(f"{host} ({n} run{'s' if n != 1 else ''})" for host, n in counts.items())
+        return text + (f"; {missing} run(s) without a record (imported, or not started)" if missing else "")
     local = spec is not None and not spec.get("distributed")
     if session and session.get("pid") == os.getpid() and local:
         return "this machine (the campaign's own process wrote this report)"
     if spec is not None and spec.get("distributed"):
         return "the distributed engine's workers (their hosts are not recorded)"
     return "not recorded in the results; this report was written later, on the machine below"
+
+
+def _packages(df: pd.DataFrame) -> dict[str, str]:
+    """Per method label, the package versions its native runs recorded (each set, where they differ)."""
+    if "packages" not in df.columns or "method" not in df.columns:
+        return {}
+    out = {}
+    for label, part in df.dropna(subset=["packages"]).groupby("method", sort=True):
+        sets = part["packages"].value_counts()
+        out[str(label)] = " | ".join(f"{s} ({n} runs)" if len(sets) > 1 else s for s, n in sets.items())
+    return out
 
 
 def _when(t) -> str:

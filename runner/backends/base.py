@@ -32,6 +32,7 @@ class ExecRequest:
     labels: dict[str, str] = field(default_factory=dict)
     env: dict[str, str] = field(default_factory=dict)
     token: str = ""  # marks every process of the run (RunPaths.token); a backend may make its own
+    modules: tuple[str, ...] = ()  # the method's Python modules, whose versions a remote worker reports
     max_output_bytes: int | None = None  # the run's work folder may not grow past this (spec max_output_mb)
 
 
@@ -45,6 +46,8 @@ class ExecResult:
     log_truncated: bool = False
     resources: dict = field(default_factory=dict)
     output_exceeded: str | None = None  # why the run was stopped for its output (too large, or it filled the disk)
+    machine: dict | None = None  # the host that ran it, where not this one (a Dask worker's)
+    packages: dict | None = None  # there, the versions of the request's `modules`
 
 
 class Backend(Protocol):

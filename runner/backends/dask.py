@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from runner.backends.base import Defaults, ExecRequest, ExecResult
+from runner.backends.machine import machine, package_versions
 from runner.errors import InfraError, SchedulerUnreachable
 
 if TYPE_CHECKING:
@@ -57,7 +58,9 @@ def _execute_on_worker(backend_name: str, req: ExecRequest, flag: str) -> ExecRe
 
     backend = make_local_backend(backend_name)
     try:
-        return backend.execute(req, _RemoteCancel(Path(flag)), started)  # type: ignore[arg-type]
+        result = backend.execute(req, _RemoteCancel(Path(flag)), started)  # type: ignore[arg-type]
+        packages = package_versions(req.modules) if backend_name == "local" and req.modules else None
+        return dataclasses.replace(result, machine=machine(), packages=packages)  # this worker's, not the campaign's
     finally:
         backend.close()  # podman's API service ends with the run
 

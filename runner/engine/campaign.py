@@ -197,7 +197,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         if scheduler_hook:
             scheduler_hook(sched)
         ledger.set_meta("eta", {"pending": len(pending), "lanes": spec.lanes})
-        session = session_record(spec)
+        session, previous = session_record(spec), ledger.meta("session")
         ledger.set_meta("session", session)
         try:
             sched.run(runs)
@@ -205,10 +205,17 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
             views.close()
             backend.close()
             try:
-                ledger.set_meta(
-                    "session",
-                    {**session, "ended_at": time.time(), "runs_from": sched.started_at, "runs_to": sched.ended_at},
-                )
+                if not pending and isinstance(previous, dict) and previous.get("runs_from"):
+                    # nothing ran: the last session that ran something keeps its span (status, serve, the report)
+                    ended = {**previous, "ended_at": previous.get("ended_at") or previous.get("runs_to")}
+                else:
+                    ended = {
+                        **session,
+                        "ended_at": time.time(),
+                        "runs_from": sched.started_at,
+                        "runs_to": sched.ended_at,
+                    }
+                ledger.set_meta("session", ended)
             except Exception:  # noqa: BLE001 - a lost ledger or a full disk: status then sees the process gone
                 pass
         remove_damaged(spec.cache)  # no run in flight any more

@@ -21,6 +21,7 @@ import methods
 from methods.base import Method
 from runner.backends.base import Backend, ExecRequest, ExecResult, disk_reserve_bytes, folder_bytes
 from runner.backends.logcap import tail
+from runner.backends.machine import machine, package_versions, packages_text
 from runner.core import jsonio, metrics
 from runner.core.evaluation import ASSOCIATION_TOLERANCE_S, tum_mono
 from runner.core.trajectory import Trajectory, write_tum
@@ -110,6 +111,7 @@ def launch_run(
             max_output_bytes=max_output_bytes,
             image=method.image,
             needs_gpu=method.needs_gpu,
+            modules=method.modules,
             env=env,
             labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id, "slamrun.attempt": str(attempt)},
             token=paths.token(attempt),
@@ -126,6 +128,10 @@ def launch_run(
             return RunOutcome("cancelled", {})
         extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
         extra["engine"] = backend.engine
+        extra["machine"] = result.machine or machine()  # a Dask worker's own, else this one
+        if backend.name == "local" and method.modules:  # in an image, the image's labels say what it holds
+            versions = result.packages if result.packages is not None else package_versions(method.modules)
+            extra["package_versions"] = versions
         if method.image and (image := backend.describe_image(method.image)) is not None:
             extra["image"] = image  # its sources, vocabulary, weights
         return Launched(result, started, extra)
@@ -171,6 +177,8 @@ def finish_attempt(
                 shutil.rmtree(stage, ignore_errors=True)
                 raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
         values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
+        values["host"] = (extra.get("machine") or {}).get("name")
+        values["packages"] = packages_text(extra.get("package_versions") or {})
         if traj is None or not len(traj):
             values["fps"] = None  # frames per second of processing: nothing was processed to a pose
         if traj is not None and len(traj):

@@ -26,6 +26,8 @@ COLUMNS = (
     "attempts",
     "exit_code",
     "message",
+    "host",
+    "packages",
     "run_dir",
     "key",
 )

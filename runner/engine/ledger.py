@@ -33,6 +33,8 @@ STATE_COLUMNS = (
     "pid",
     "pid_start",
     "run_dir",
+    "host",  # the machine that ran it (its run.json: CPU, GPUs, Slurm node)
+    "packages",  # a native method's Python packages and versions
 )
 ALL_COLUMNS = KEY_COLUMNS + STATE_COLUMNS + METRIC_COLUMNS + RESOURCE_COLUMNS
 

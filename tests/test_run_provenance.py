@@ -1,0 +1,65 @@
+"""Every figure traceable to what produced it: each run records the machine that ran it (name, CPU, GPUs, Slurm's
+node) and, for a native method, the Python packages it ran on; the report's provenance shows both; and a resume
+with nothing left to run keeps the campaign's span (status and the report once said 0 s)."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+from importlib.metadata import version
+
+import pandas as pd
+import pytest
+
+from runner.datasets.synth import generate
+from runner.engine.campaign import run_campaign
+from runner.engine.spec import load_spec
+from tests.conftest import write_spec
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory):
+    root = tmp_path_factory.mktemp("provenance")
+    data = root / "data"
+    generate(data / "seq_a", frames=80, seed=3, size=(320, 240), layout="euroc")
+    ds = [{"name": "e", "path": str(data), "sequences": ["seq_a"], "layout": "euroc"}]
+    spec = write_spec(root, data, [{"name": "reference_vo"}], datasets=ds, directions=["forward", "backward"])
+    res = run_campaign(load_spec(spec), log=lambda *a: None)
+    return spec, res
+
+
+def test_each_run_records_its_machine_and_packages(campaign):
+    _, res = campaign
+    df = pd.read_csv(res.results_csv)
+    assert (df.status == "done").all() and (df.host == platform.node()).all()
+    expected = f"numpy {version('numpy')}"
+    assert df.packages.str.contains(expected, regex=False).all() and df.packages.str.contains("scipy").all()
+    for run_dir in df.run_dir:
+        record = json.loads((res.results / run_dir / "run.json").read_text())
+        m = record["machine"]
+        assert m["name"] == platform.node() and m["cores"] == os.cpu_count() and m["cpu"]
+        assert isinstance(m["gpus"], list) and m["slurm_node"] is None
+        assert record["package_versions"]["numpy"] == version("numpy")
+        assert any(k.startswith("opencv") for k in record["package_versions"])  # cv2's distribution, by name
+
+
+def test_the_reports_provenance_names_hosts_and_packages(campaign):
+    from runner.analysis.provenance import provenance
+
+    _, res = campaign
+    p = provenance(res.results, pd.read_csv(res.results_csv))
+    assert p.runs_host == f"{platform.node()} (2 runs)"
+    assert f"numpy {version('numpy')}" in p.packages["reference_vo"]
+
+
+def test_a_resume_with_nothing_to_run_keeps_the_span(campaign):
+    from runner.engine.session import read_figures
+
+    spec, res = campaign
+    before = read_figures(res.results)
+    assert before.elapsed_s and before.elapsed_s > 1
+    again = run_campaign(load_spec(spec), log=lambda *a: None)
+    assert again.results == res.results
+    after = read_figures(res.results)
+    assert after.elapsed_s == pytest.approx(before.elapsed_s) and not after.active
