@@ -75,10 +75,20 @@ def links(files: dict[str, Path], root: Path) -> str:
     return f'<p class="files">{" ".join(items)}</p>' if items else ""
 
 
-def table(df: pd.DataFrame, folder: Path, root: Path, name: str, title: str, caption: str, show: bool = True) -> str:
+def table(
+    df: pd.DataFrame,
+    folder: Path,
+    root: Path,
+    name: str,
+    title: str,
+    caption: str,
+    show: bool = True,
+    lower_is_better: tuple[str, ...] = (),
+) -> str:
     """Write a table's CSV, Markdown and LaTeX files, and return its HTML: what its values are, the table in a box
-    that scrolls sideways where it is wider than the page, the links to its files (only the links where not `show`)."""
-    tables.write_all(df, folder, name, title, caption)
+    that scrolls sideways where it is wider than the page, the links to its files (only the links where not `show`).
+    The LaTeX file sets the best value of each column of `lower_is_better` in bold."""
+    tables.write_all(df, folder, name, title, caption, lower_is_better)
     files = {f"{name}.{ext} ({kind})": folder / f"{name}.{ext}" for ext, kind in _FORMATS}
     if not show:
         return f"<p>{esc(title)}:</p>" + links(files, root)

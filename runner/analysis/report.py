@@ -249,8 +249,10 @@ def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Sect
     html = f"<p>{page.esc(note)}</p>" + page.links({"statistics (JSON)": out / "statistics.json"}, root)
     parts = []
     what = (
-        "Each cell: the median of the metric over the method's evaluated runs (outliers removed), then its letter "
-        "group. Last rows: Kruskal-Wallis chi-square, its degrees of freedom and p-value."
+        "Per method: the runs counted (outliers removed, copies once), their median coverage (share of the "
+        "sequence's frames with a pose), and per metric the median over those runs and its letter groups (LaTeX: "
+        "superscripts; the best median in bold). Last rows: Kruskal-Wallis chi-square, its degrees of freedom and "
+        "p-value."
     )
     for chosen, name, title in (
         (acc, "table3_drift", "Drift: medians with letter groups (Table 3 layout)"),
@@ -259,7 +261,8 @@ def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Sect
     ):
         if chosen:
             table = tables.medians_with_letters(st, chosen)
-            parts.append(Section(title, page.table(table, tab_dir, root, name, title + where, what)))
+            html_table = page.table(table, tab_dir, root, name, title + where, what, lower_is_better=tuple(chosen))
+            parts.append(Section(title, html_table))
     title = "Tests of each metric"
     caption = (
         "Kruskal-Wallis rank-sum test across the methods (chi-square, df, p); Levene's test of equal variances "
@@ -288,7 +291,9 @@ def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Sect
         (out / f"statistics_{direction}.json").write_text(jsonio.dumps(sd.to_json(), indent=1))
         td = tables.medians_with_letters(sd, chosen)
         title = f"{what_dir}: medians with letter groups, {direction} runs only"
-        html_dir = page.table(td, tab_dir, root, f"{name}_{direction}", title + where, what)
+        html_dir = page.table(
+            td, tab_dir, root, f"{name}_{direction}", title + where, what, lower_is_better=tuple(chosen)
+        )
         html_dir += page.links({f"statistics, {direction} runs (JSON)": out / f"statistics_{direction}.json"}, root)
         parts.append(Section(title, html_dir))
     if skipped:
