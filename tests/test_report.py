@@ -100,7 +100,12 @@ def test_stats_cli_json(tmp_path, shared_data, capsys):
     assert list(out["datasets"]) == ["all"]  # a table without a dataset column: one block
     out = out["datasets"]["all"]
     ref = json.loads((shared_data / "stats_golden" / "r_reference.json").read_text())
-    assert set(out) == set(ref) | {"outlier_note", "counted", "counting_note"}  # R's figures, and how runs were counted
+    assert set(out) == set(ref) | {
+        "outlier_note",
+        "counted",
+        "counting_note",
+        "coverage",
+    }  # R's figures, and how runs were counted
     assert set(out["metrics"]) == set(ref["metrics"]) and out["counted"] == {} and out["outlier_note"] is None
     assert out["n_outliers"] == ref["n_outliers"]
     assert set(out["metrics"]["e_t"]) >= set(ref["metrics"]["e_t"])

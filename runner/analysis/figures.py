@@ -246,7 +246,12 @@ def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "", adjust: 
     lo, hi = float(np.nanmin(ends)), float(np.nanmax(ends))
     span = hi - lo or abs(hi) or 1.0
     ax.set_xlim(lo - 0.05 * span, hi + 0.16 * span + 0.02 * span * max(len(v) for v in s.letters.values() or [""]))
-    ax.set_yticks(positions, [f"{m} (n={len(v)})" for m, v in zip(methods, data, strict=True)])
+
+    def tick(m: str, values: np.ndarray) -> str:
+        cov = st.coverage.get(m)
+        return f"{m} (n={len(values)}" + (f", coverage {100 * cov:.0f} %)" if cov is not None and cov == cov else ")")
+
+    ax.set_yticks(positions, [tick(m, v) for m, v in zip(methods, data, strict=True)])
     for pos, m in zip(positions, methods, strict=True):
         ax.annotate(
             s.letters.get(m, ""),

@@ -18,7 +18,7 @@ from runner.analysis.provenance import provenance
 from runner.analysis.stats import study_statistics
 from runner.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
 from runner.core import jsonio
-from runner.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS
+from runner.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS, UNDER_MIN_COVERAGE
 
 RUNS_COLUMNS = {
     "runs": "runs",
@@ -185,7 +185,8 @@ def dataset_report(
 
     fails = runs_table(df)
     title = "Runs and failures per method"
-    sections.append(Section(title, page.table(fails, tab_dir, root, "failures", title + where, RUNS_CAPTION)))
+    html_fails = page.table(fails, tab_dir, root, "failures", title + where, RUNS_CAPTION)
+    sections.append(Section(title, html_fails + f"<p>{page.esc(coverage_note(df))}</p>"))
 
     st = None
     if ok.method.nunique() >= 2 and len(ok) > len(metrics) + 1:
@@ -227,6 +228,23 @@ def dataset_report(
     if traj is not None:
         sections.append(traj)
     return sections
+
+
+def coverage_note(df: pd.DataFrame) -> str:
+    """What the dataset's coverage threshold did, in one sentence: the runs lost under `min_coverage`, or that there
+    was none (coverage then stands beside every figure)."""
+    messages = df["message"].fillna("").astype(str) if "message" in df.columns else pd.Series(dtype=str)
+    under = messages[messages.str.contains(UNDER_MIN_COVERAGE, regex=False)]
+    if under.empty:
+        return (
+            "No coverage threshold (min_coverage) excluded a run: every done run's figures are tested, and each "
+            "table and box plot gives the methods' median coverage (the share of the sequence's frames with a pose)."
+        )
+    least = sorted({m.rsplit(" ", 1)[-1] for m in under})
+    return (
+        f"{len(under)} run(s) gave poses for fewer than min_coverage {', '.join(least)} of the sequence's frames: "
+        "counted as lost (a tracking failure), their figures left out of the statistics."
+    )
 
 
 def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Section:

@@ -272,6 +272,7 @@ class StudyStats:
     kept: pd.DataFrame
     counted: dict[str, dict] = field(default_factory=dict)  # per method: runs, distinct runs, deterministic
     outlier_note: str = ""  # why no outlier test was made
+    coverage: dict[str, float] = field(default_factory=dict)  # per method: the median coverage of its kept runs
 
     @property
     def deterministic(self) -> list[str]:
@@ -300,6 +301,7 @@ class StudyStats:
             "outlier_note": self.outlier_note or None,
             "counted": self.counted,
             "counting_note": self.counting_note() or None,
+            "coverage": self.coverage,
             "metrics": {},
         }
         for name, m in self.metrics.items():
@@ -390,4 +392,7 @@ def study_statistics(
             notes,
         )
     d2_list = [float(v) for v in d2] if not outlier_note else []
-    return StudyStats(d2_list, cutoff, int(np.sum(d2 > cutoff)), out, kept, counted, outlier_note)
+    coverage = {}
+    if "coverage" in kept.columns:
+        coverage = {str(g): float(v) for g, v in kept.groupby(group, sort=True)["coverage"].median().items()}
+    return StudyStats(d2_list, cutoff, int(np.sum(d2 > cutoff)), out, kept, counted, outlier_note, coverage)

@@ -38,7 +38,7 @@ from runner.errors import (
     TrajectoryFormatError,
     storage_problem,
 )
-from runner.results.vocabulary import TUM_MONO_METRICS, EvalStatus
+from runner.results.vocabulary import TUM_MONO_METRICS, UNDER_MIN_COVERAGE, EvalStatus
 
 METHOD_ERROR = "method_error"  # in Launched.extra: (kind, message) of a method that failed before its process started
 
@@ -199,6 +199,11 @@ def finish_attempt(
             recovered = values.get("eval_status") == EvalStatus.ok.value
             failure = None if recovered else "lost"
             values["failure"] = failure
+        share = values.get("coverage")
+        if failure is None and run.min_coverage and share is not None and share < run.min_coverage:
+            failure = "lost"  # it tracked too little of the sequence for its accuracy to be compared
+            message = f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {run.min_coverage:g}"
+            values.update(failure=failure, message=message)
         if traj is not None and traj.report.n_nonfinite_dropped and not values["message"]:
             values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the output dropped"
         state = "failed" if failure else "done"

@@ -51,7 +51,7 @@ from runner.engine.paths import RunPaths
 from runner.engine.plan import RunKey
 from runner.engine.spec import CampaignSpec, load_spec
 from runner.errors import SlamRunError, TrajectoryFormatError
-from runner.results.vocabulary import IMPORTED
+from runner.results.vocabulary import IMPORTED, UNDER_MIN_COVERAGE
 
 STUDY_PATTERN = r"(?:^|/)[a-z0-9-]+_(?P<direction>fw|bw)(?:__|/)sequence_(?P<sequence>\d+)_(?P<trial>\d+)\.txt$"
 DIRECTIONS = {
@@ -446,6 +446,11 @@ def _record(key: RunKey, source: str, sha256: str, ds, seq, gt, traj: Trajectory
             values.update(figures)
             if detail and not values["message"]:
                 values["message"] = detail
+        share, least = values["coverage"], getattr(ds, "min_coverage", None)
+        if least and share == share and share < least:  # as a campaign's own run: too little tracked to compare
+            values.update(
+                failure="lost", message=f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {least:g}"
+            )
     return {
         "key": key.id,
         "label": key.label,

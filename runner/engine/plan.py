@@ -54,6 +54,7 @@ class PlannedRun:
     metrics: tuple[str, ...] = ("tum-mono",)  # the dataset's metrics
     alignment: str = "sim3"
     rpe: RpeInterval = RpeInterval()  # the dataset's RPE interval
+    min_coverage: float | None = None  # under it, a run is lost
 
 
 def settings_hash(m: MethodSpec) -> str:
@@ -95,6 +96,7 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
                             tuple(ds.metrics),
                             ds.alignment,
                             ds.rpe_interval,
+                            ds.min_coverage,
                         )
                         runs.append(((trial, mi, seq, direction.value), run))
     runs.sort(key=lambda r: r[0])

@@ -119,6 +119,15 @@ class DatasetSpec(Strict):
             self.rpe = RpeSpec(delta=default.delta, unit=default.unit)
         return self
 
+    min_coverage: float | None = Field(
+        None,
+        gt=0,
+        le=1,
+        description="A run that gives poses for fewer than this share of the sequence's frames (e.g. 0.75, as some "
+        "groups publish) is a tracking failure (lost), its figures kept out of the statistics; default: no threshold "
+        "(coverage is shown beside every figure).",
+    )
+
     rpe: RpeSpec | None = Field(
         None,
         description="RPE's interval, e.g. {delta: 1, unit: s}. Default by layout: one second of the sequence "

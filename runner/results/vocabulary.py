@@ -23,6 +23,7 @@ METHOD_FAILURES = (
     "output_limit",  # wrote more than max_output_mb, or filled the disk
 )
 INFRA = "infra"  # the machine's fault: retried, never counted in a rate
+UNDER_MIN_COVERAGE = "under the dataset's min_coverage"  # in the message of a run lost for its coverage
 FAILURES = (*METHOD_FAILURES, INFRA)
 
 

@@ -57,7 +57,7 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         progress = Tracker(ledger.progress_rows(), session, campaign).figures(now)
         running = ledger.rows(state="running", columns=RUN_COLUMNS)
         failed = ledger.rows(state="failed", columns=(*RUN_COLUMNS, "failure", "message"))
-        done = ledger.rows(state="done", columns=("label", "dataset", *SUMMARY_METRICS))
+        done = ledger.rows(state="done", columns=("label", "dataset", "coverage", *SUMMARY_METRICS))
     finally:
         ledger.close()
     return {
@@ -98,14 +98,15 @@ def _failed(rows: list[dict]) -> dict:
 
 def medians(done: list[dict]) -> dict:
     """Per dataset (never pooled: metres of one dataset are not a population with another's), per method: the
-    runs done, the median of each summary metric that has values, and up to MAX_VALUES values of the dataset's
+    runs done, their median coverage (the share of the sequence's frames with a pose: an ATE over 31 poses is not
+    one over 150), the median of each summary metric that has values, and up to MAX_VALUES values of the dataset's
     main metric (e_align where the runs have it, else ATE RMSE) for the live box plot."""
     out: dict[str, dict] = {}
     by_dataset: dict[str, list[dict]] = {}
     for r in done:
         by_dataset.setdefault(r.get("dataset") or "", []).append(r)
     for dataset, rows in sorted(by_dataset.items()):
-        metrics = [m for m in SUMMARY_METRICS if any(_finite(r.get(m)) for r in rows)]
+        metrics = [m for m in ("coverage", *SUMMARY_METRICS) if any(_finite(r.get(m)) for r in rows)]
         main = next((m for m in ("e_align", "ate_rmse") if m in metrics), None)
         methods = []
         values = {}

@@ -103,7 +103,7 @@ function failures(s) {
   );
 }
 
-const LABELS = { e_t: "e_t", e_r: "e_r (deg)", e_s_sym: "e_s'", e_align: "e_align", e_rmse: "e_rmse", ate_rmse: "ATE RMSE", rpe_t_rmse: "RPE-t RMSE" };
+const LABELS = { coverage: "coverage (median)", e_t: "e_t", e_r: "e_r (deg)", e_s_sym: "e_s'", e_align: "e_align", e_rmse: "e_rmse", ate_rmse: "ATE RMSE", rpe_t_rmse: "RPE-t RMSE" };
 
 function medians(s) {
   const out = [];
