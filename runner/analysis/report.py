@@ -186,7 +186,8 @@ def dataset_report(
     fails = runs_table(df)
     title = "Runs and failures per method"
     html_fails = page.table(fails, tab_dir, root, "failures", title + where, RUNS_CAPTION)
-    sections.append(Section(title, html_fails + f"<p>{page.esc(coverage_note(df))}</p>"))
+    notes = [coverage_note(df), *missing_metric_notes(df)]
+    sections.append(Section(title, html_fails + "".join(f"<p>{page.esc(n)}</p>" for n in notes)))
 
     st = None
     if ok.method.nunique() >= 2 and len(ok) > len(metrics) + 1:
@@ -228,6 +229,28 @@ def dataset_report(
     if traj is not None:
         sections.append(traj)
     return sections
+
+
+METRIC_NAMES = {"kitti": ("kitti_t_pct", "KITTI's segment errors"), "rpe": ("rpe_t_rmse", "RPE")}
+
+
+def missing_metric_notes(df: pd.DataFrame) -> list[str]:
+    """For each metric the dataset asked for that no run has a value of (its runs' messages say why), one line
+    with the reason: a column a report leaves out is never left out without a word."""
+    if "message" not in df.columns or "status" not in df.columns:
+        return []
+    done = df[df.status == "done"]
+    out = []
+    for name, (column, title) in METRIC_NAMES.items():
+        if column in df.columns and df[column].notna().any():
+            continue
+        reasons = done["message"].dropna().astype(str)
+        reasons = reasons[reasons.str.contains(f"{name}: ", regex=False)]
+        if reasons.empty:
+            continue
+        why = reasons.iloc[0].split(f"{name}: ", 1)[1].split("; ")[0]
+        out.append(f"{title}: no value in this dataset's {len(done)} done run(s), so no column or figure of it: {why}.")
+    return out
 
 
 def coverage_note(df: pd.DataFrame) -> str:

@@ -211,7 +211,10 @@ def header(column: str) -> str:
     """A column's name in words, with its unit where it has one (LABELS)."""
     from runner.results.vocabulary import LABELS
 
-    return {"coverage": "coverage"}.get(column) or LABELS.get(column, column)
+    if column in LABELS:
+        return "coverage" if column == "coverage" else LABELS[column]
+    words = str(column).split(" ")  # "median ate_rmse forward": the metric's words inside
+    return " ".join(LABELS.get(w, w) if w != "coverage" else w for w in words)
 
 
 _TEX = {
