@@ -12,6 +12,7 @@ import time
 from collections.abc import Iterable
 from pathlib import Path
 from typing import TYPE_CHECKING
+from urllib.parse import quote
 
 from runner.errors import LedgerLockedError, LedgerLostError, SlamRunError
 from runner.results.vocabulary import IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
@@ -141,7 +142,8 @@ class Ledger:
             # and -wal files a read-only open of a WAL database would otherwise leave behind.
             writer = Path(f"{self.path}-wal").exists()
             mode = "mode=ro" if writer else "mode=ro&immutable=1"
-            self._db = sqlite3.connect(f"file:{self.path}?{mode}", uri=True, check_same_thread=False, timeout=30)
+            uri = f"file:{quote(str(self.path.absolute()))}?{mode}"  # '#', '?' and '%' in a folder's name encoded
+            self._db = sqlite3.connect(uri, uri=True, check_same_thread=False, timeout=30)
             self._db.row_factory = sqlite3.Row
             self._check_whole()
             self._inode = os.stat(self.path).st_ino
