@@ -388,3 +388,25 @@ def test_podmans_api_service_ends_with_a_runner_killed_by_sigkill():
         time.sleep(0.1)
     state = Path(f"/proc/{service}/stat").read_text().split()[2] if Path(f"/proc/{service}").exists() else "gone"
     assert state in ("gone", "Z"), f"podman system service {service} still runs ({state})"
+
+
+def test_leftovers_are_this_results_folders_only(backend, image):
+    """The same campaign started with another --results once removed the first one's running container (found by
+    the campaign's label alone): leftovers are the containers of this campaign *and* results folder, and those of
+    the campaign that carry no results label (left by a slamrun before the label)."""
+    made = {}
+    for name, labels in (
+        ("ours", {"slamrun.campaign": "pytest-docker", "slamrun.results": "aaaa"}),
+        ("theirs", {"slamrun.campaign": "pytest-docker", "slamrun.results": "bbbb"}),
+        ("older", {"slamrun.campaign": "pytest-docker"}),
+        ("other campaign", {"slamrun.campaign": "t", "slamrun.results": "aaaa"}),
+    ):
+        made[name] = backend.client.containers.create(image, ["sleep", "60"], labels=labels, network_mode="none")
+    try:
+        found = {c.id for c in backend.leftovers("pytest-docker", "aaaa")}
+        assert found == {made["ours"].id, made["older"].id}
+        found = {c.id for c in backend.leftovers("pytest-docker", "bbbb")}
+        assert found == {made["theirs"].id, made["older"].id}
+    finally:
+        for c in made.values():
+            c.remove(force=True)

@@ -73,8 +73,9 @@ class Backend(Protocol):
         """The image a run used (id, sources, vocabulary, weights), for run.json; None when the backend does not
         know it (no image runs here)."""
 
-    def leftovers(self, campaign: str) -> list:
-        """Runs of this campaign that a killed runner or a lost daemon left behind, for `collect` (containers)."""
+    def leftovers(self, campaign: str, results_id: str = "") -> list:
+        """Runs of this campaign and results folder that a killed runner or a lost daemon left behind, for `collect`
+        (containers)."""
 
     def collect(self, leftover, log_path: Path, log_cap_bytes: int, n_frames: int) -> ExecResult | None:
         """The result of a leftover that ended by itself; None while it runs or when it never started."""
@@ -91,7 +92,7 @@ class Defaults:
     def describe_image(self, tag: str) -> dict | None:
         return None
 
-    def leftovers(self, campaign: str) -> list:
+    def leftovers(self, campaign: str, results_id: str = "") -> list:
         return []
 
     def collect(self, leftover, log_path: Path, log_cap_bytes: int, n_frames: int) -> ExecResult | None:

@@ -24,6 +24,7 @@ DATA = Path("/data")
 WORK = Path("/work")
 CONTAINER_UID = 1000  # the non-root user our images create; a root host hands /work to it
 LABEL_CAMPAIGN = "slamrun.campaign"
+LABEL_RESULTS = "slamrun.results"  # the results folder's identity (its ledger's results_id)
 LABEL_RUN = "slamrun.run"
 # After a container exits, its log stream is read on while bytes still come (a loaded engine sends a flooded log
 # slowly); one that sends nothing for this long is cut off, and the rest is read from the engine's stored log.
@@ -149,9 +150,12 @@ class DockerBackend(Defaults):
             }
         return cache[tag]
 
-    def leftovers(self, campaign: str) -> list:
-        """Containers of this campaign that a killed runner or a lost daemon left behind."""
-        return self.client.containers.list(all=True, filters={"label": f"{LABEL_CAMPAIGN}={campaign}"})
+    def leftovers(self, campaign: str, results_id: str = "") -> list:
+        """Containers of this campaign and results folder that a killed runner or a lost daemon left behind (also
+        those of the campaign without a results label, started before containers carried one); never those of the
+        same campaign run into another results folder."""
+        found = self.client.containers.list(all=True, filters={"label": f"{LABEL_CAMPAIGN}={campaign}"})
+        return [c for c in found if (c.labels or {}).get(LABEL_RESULTS, results_id) == results_id]
 
     @staticmethod
     def collect(container, log_path: Path, log_cap_bytes: int, n_frames: int) -> ExecResult | None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import fcntl
 import json
 import time
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -160,6 +161,8 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         claim_output_folder(spec.cache, CACHE)
         ledger = Ledger(results / "ledger.sqlite")
         ledger.set_meta("campaign", spec.name)
+        if not ledger.meta("results_id"):  # this results folder's identity, on its containers (moves with it)
+            ledger.set_meta("results_id", uuid.uuid4().hex)
         ledger.set_meta("spec", spec.model_dump(mode="json"))
         (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
         docker_here = spec.backend in ("docker", "podman") and spec.distributed is None
@@ -189,7 +192,15 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
         # containers left by a killed runner or a lost daemon
         n = collect_leftovers(
-            backend, spec.name, ledger, runs, sched.methods, views.get, gts, results, int(spec.log_cap_mb * 2**20)
+            backend,
+            (spec.name, ledger.meta("results_id")),
+            ledger,
+            runs,
+            sched.methods,
+            views.get,
+            gts,
+            results,
+            int(spec.log_cap_mb * 2**20),
         )
         if n:
             log(f"collected {n} run(s) whose container finished while the runner or the daemon was away")

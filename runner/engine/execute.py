@@ -72,6 +72,7 @@ def launch_run(
     max_output_bytes: int | None = None,
     campaign: str = "",
     on_start=None,
+    results_id: str = "",
 ) -> Launched | RunOutcome:
     """Configure the run and run its process to its end (a RunOutcome only when cancelled). A full disk
     anywhere is a StorageError and any other OSError an InfraError (the machine's fault, not the method's);
@@ -113,7 +114,12 @@ def launch_run(
             needs_gpu=method.needs_gpu,
             modules=method.modules,
             env=env,
-            labels={"slamrun.campaign": campaign, "slamrun.run": run.key.id, "slamrun.attempt": str(attempt)},
+            labels={
+                "slamrun.campaign": campaign,
+                "slamrun.results": results_id,  # which results folder: another folder's run of the campaign is not ours
+                "slamrun.run": run.key.id,
+                "slamrun.attempt": str(attempt),
+            },
             token=paths.token(attempt),
         )
         try:

@@ -65,7 +65,7 @@ def recover(ledger: Ledger, results: Path, keep_attempts: bool = False) -> dict[
 
 def collect_leftovers(
     backend,
-    campaign: str,
+    owner: tuple[str, str],
     ledger: Ledger,
     runs: list[PlannedRun],
     methods_by_index: dict[int, Method],
@@ -74,13 +74,14 @@ def collect_leftovers(
     results: Path,
     log_cap_bytes: int,
 ) -> int:
-    """Containers this campaign left behind (its runner killed, or the Docker daemon lost mid-run): one that
-    exited by itself with a complete, accepted output is recorded as its run's attempt; every other one is
-    removed and its run stays pending. `view_of(key)` gives a run's prepared view. Returns how many were
-    collected."""
+    """Containers this campaign left behind in this results folder (`owner`: the campaign's name and the folder's
+    results_id; its runner killed, or the Docker daemon lost mid-run): one that exited by itself with a complete,
+    accepted output is recorded as its run's attempt; every other one is removed and its run stays pending. The
+    same campaign's containers of another results folder are left alone. `view_of(key)` gives a run's prepared
+    view. Returns how many were collected."""
     by_key = {r.key.id: r for r in runs}
     collected = 0
-    for container in backend.leftovers(campaign):
+    for container in backend.leftovers(*owner):
         labels = container.labels or {}
         run = by_key.get(labels.get("slamrun.run", ""))
         row = ledger.get(run.key.id) if run else None

@@ -81,6 +81,7 @@ class Scheduler:
         self.started_at = self.ended_at = None
         self.fatal_error: SlamRunError | None = None  # the error that stopped it (full disk, ledger lost)
         self.methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
+        self.results_id = str(ledger.meta("results_id") or "")  # on each container, beside the campaign's name
 
     def run(self, runs: list[PlannedRun]) -> None:
         pending = set(self.ledger.pending_keys())
@@ -200,6 +201,7 @@ class Scheduler:
                     log_cap_bytes=int(self.spec.log_cap_mb * 2**20),
                     max_output_bytes=int(self.spec.max_output_mb * 2**20),
                     campaign=self.spec.name,
+                    results_id=self.results_id,
                     on_start=lambda pid, t0: self.ledger.set_process(run.key.id, pid, t0),
                 )
             except StorageError:
