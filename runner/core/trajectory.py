@@ -484,6 +484,26 @@ def _normalise_batch(columns: list[np.ndarray], rows: np.ndarray) -> list[Trajec
     return out
 
 
+def _line_of_time(source: str, stamp: float) -> int | None:
+    """The number of the first line of the file `source` whose first number is `stamp`, or None (no such file, or
+    one too large to scan)."""
+    try:
+        path = Path(source)
+        if not path.is_file() or path.stat().st_size > 64 << 20:
+            return None
+        with open(path, errors="replace") as fh:
+            for n, line in enumerate(fh, start=1):
+                cells = line.split("#", 1)[0].replace(",", " ").split()
+                try:
+                    if cells and float(cells[0]) == stamp:
+                        return n
+                except ValueError:
+                    continue
+    except OSError:
+        return None
+    return None
+
+
 def _normalise(data: np.ndarray, source: str, keep_as_read: bool = False) -> Trajectory:
     """Rows of `t x y z qx qy qz qw` into a Trajectory: rows with a NaN or infinity dropped, quaternions normalised,
     sorted by time with one row per timestamp (the first); with `keep_as_read` (a file's rows), the finite rows
@@ -500,7 +520,10 @@ def _normalise(data: np.ndarray, source: str, keep_as_read: bool = False) -> Tra
     norm = _quat_norms(*data[:, 4:8].T)
     if (norm < 1e-12).any():
         bad = int(np.flatnonzero(norm < 1e-12)[0])
-        raise TrajectoryFormatError(f"{source}: zero quaternion at timestamp {data[bad, 0]!r}")
+        stamp = float(data[bad, 0])
+        line = _line_of_time(source, stamp)
+        where = f"{source}:{line}" if line else source
+        raise TrajectoryFormatError(f"{where}: a zero quaternion (no rotation) at timestamp {stamp:.9g}")
     step = np.diff(data[:, 0])
     was_unsorted = bool(np.any(step < 0))
     n_dup = 0

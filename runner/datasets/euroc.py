@@ -29,6 +29,7 @@ from runner.datasets.sequence import (
     camera_problem,
     check_positions,
     check_regular,
+    finite_groundtruth,
     folder_sequence,
     interpolate_poses,
     read_text,
@@ -97,7 +98,7 @@ def open_asl(
         if problem := check_regular([gt_path], {gt_path}):
             raise DatasetError(problem[0])
         try:
-            body = read_euroc_csv(gt_path)
+            body = finite_groundtruth(read_euroc_csv(gt_path), gt_path)
         except TrajectoryFormatError as exc:
             raise DatasetError(str(exc)) from None
         check_positions(body, gt_path)

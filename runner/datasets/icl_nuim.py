@@ -33,6 +33,7 @@ from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
     Sequence,
     check_regular,
+    finite_groundtruth,
     folder_sequence,
     read_text,
     time_problem,
@@ -98,7 +99,7 @@ def open_icl_nuim(root: str | Path) -> Sequence:
 
     def groundtruth() -> Trajectory:
         try:
-            gt = read_tum(gt_path)
+            gt = finite_groundtruth(read_tum(gt_path), gt_path)
         except TrajectoryFormatError as exc:
             raise DatasetError(str(exc)) from None
         in_seconds = Trajectory(gt.timestamps / FPS, gt.positions, gt.quaternions)

@@ -87,6 +87,13 @@ class Sequence:
         gt = self.groundtruth_reader()
         assert self.groundtruth_path is not None
         check_positions(gt, self.groundtruth_path)
+        if len(gt) and not np.isfinite(gt.positions).all(axis=1).any():  # the dataset's fault, never a method's
+            t = self.timestamps
+            raise DatasetError(
+                f"{self.groundtruth_path}: no ground-truth pose at any of the {len(t)} frames' times "
+                f"({float(t[0]):.6f}..{float(t[-1]):.6f} s): the ground truth of another sequence, or another time "
+                "base?"
+            )
         return gt
 
     def where(self, name: str) -> str:
@@ -221,6 +228,36 @@ def camera_problem(calibration: Path, camera: CameraFile) -> str | None:
     rectification_problem), named with the file; None when it can."""
     problem = rectification_problem(camera)
     return None if problem is None else f"{calibration}: {problem}"
+
+
+def finite_groundtruth(traj: Trajectory, path: Path) -> Trajectory:
+    """`traj` as read from the ground-truth file `path`; DatasetError naming the file and the first line where a row
+    holds NaN or an infinity (a reader drops such rows: the runs would be evaluated on the frames left)."""
+    n = traj.report.n_nonfinite_dropped
+    if n:
+        line = nonfinite_line(path)
+        where = f"{path}:{line}" if line else str(path)
+        raise DatasetError(
+            f"{where}: {n} row(s) hold NaN or an infinite value; ground truth must be finite (leave out the row of a "
+            "time without a pose)"
+        )
+    return traj
+
+
+def nonfinite_line(path: Path) -> int | None:
+    """The number of the first line of `path` holding a NaN or an infinite number, or None."""
+    try:
+        text = read_text(path)
+    except DatasetError:
+        return None
+    for n, line in enumerate(text.splitlines(), start=1):
+        for cell in line.split("#", 1)[0].replace(",", " ").split():
+            try:
+                if not math.isfinite(float(cell)):
+                    return n
+            except ValueError:
+                continue
+    return None
 
 
 def check_positions(traj: Trajectory, path: Path, columns: tuple[int, ...] = (1, 2, 3)) -> None:

@@ -23,6 +23,7 @@ from runner.datasets.sequence import (
     IMAGE_SUFFIXES,
     Sequence,
     check_regular,
+    finite_groundtruth,
     folder_sequence,
     read_text,
     time_problem,
@@ -86,7 +87,7 @@ def open_tum_rgbd(root: str | Path) -> Sequence:
 
     def groundtruth() -> Trajectory:
         try:
-            gt = read_tum(gt_path)
+            gt = finite_groundtruth(read_tum(gt_path), gt_path)
         except TrajectoryFormatError as exc:
             raise DatasetError(str(exc)) from None
         return poses_at(gt, times, ASSOCIATION_S)  # evo's association: a repeated time's rows kept
