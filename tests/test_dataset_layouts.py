@@ -20,6 +20,7 @@ from runner.core import metrics
 from runner.core.trajectory import read_euroc_csv, read_kitti, read_times, read_tum, write_tum
 from runner.datasets.cache import prepare
 from runner.datasets.euroc import read_sensor_yaml
+from runner.datasets.kitti import drive
 from runner.datasets.layouts import detect, open_sequence, sequence_identity
 from runner.datasets.synth import EUROC_T_BS, Synth, camera_path, generate
 from runner.datasets.view import Direction, Profile
@@ -42,7 +43,9 @@ def layouts(tmp_path_factory) -> dict[str, Path]:
 
 def true_poses(layout: str) -> np.ndarray:
     """The synthetic camera-to-world poses at the frames (KITTI: relative to the first camera)."""
-    rots, pos = camera_path(Synth(FRAMES, 3, (640, 480), "indoor", NAMES[layout]).scene, FRAMES)
+    synth = Synth(FRAMES, 3, (640, 480), "indoor", NAMES[layout])
+    synth = drive(synth) if layout == "kitti" else synth  # KITTI: a drive, outdoors
+    rots, pos = camera_path(synth.scene, FRAMES, synth.laps)
     t = np.tile(np.eye(4), (FRAMES, 1, 1))
     t[:, :3, :3], t[:, :3, 3] = rots, pos
     return np.linalg.inv(t[0]) @ t if layout == "kitti" else t

@@ -76,9 +76,15 @@ def make_texture(rng: np.random.Generator, size: int = 2048) -> np.ndarray:
     return np.clip(tex, 10, 245).astype(np.float32)
 
 
-def camera_path(scene: Scene, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Camera-to-world rotations (n, 3, 3) and positions (n, 3): one smooth loop around the boxes."""
-    return camera_path_at(scene, 2 * np.pi * np.arange(n) / max(n - 1, 1))
+def camera_path(scene: Scene, n: int, laps: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """Camera-to-world rotations (n, 3, 3) and positions (n, 3): `laps` smooth loops around the boxes."""
+    return camera_path_at(scene, 2 * np.pi * laps * np.arange(n) / max(n - 1, 1))
+
+
+def lap_length(scene: Scene, samples: int = 2000) -> float:
+    """The length of one loop of the scene's path (m)."""
+    _, pos = camera_path_at(scene, np.linspace(0, 2 * np.pi, samples + 1))
+    return float(np.linalg.norm(np.diff(pos, axis=0), axis=1).sum())
 
 
 def camera_path_at(scene: Scene, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -327,6 +333,7 @@ class Synth:
     size: tuple[int, int]
     scene_kind: str
     name: str
+    laps: int = 1  # loops over the sequence (KITTI's drive: long enough for its 100 m segments)
 
     @property
     def scene(self) -> Scene:
@@ -338,8 +345,8 @@ class Synth:
         return scene, Renderer(scene, make_texture(rng), camera_rays(cam), (cam.height, cam.width))
 
     def poses_at(self, scene: Scene, fraction: np.ndarray) -> np.ndarray:
-        """Camera-to-world 4x4 poses at `fraction` of the loop (0: first frame, 1: last)."""
-        rots, positions = camera_path_at(scene, 2 * np.pi * np.asarray(fraction, float))
+        """Camera-to-world 4x4 poses at `fraction` of the sequence's path (0: first frame, 1: last)."""
+        rots, positions = camera_path_at(scene, 2 * np.pi * self.laps * np.asarray(fraction, float))
         t = np.tile(np.eye(4), (len(rots), 1, 1))
         t[:, :3, :3], t[:, :3, 3] = rots, positions
         return t
@@ -348,7 +355,7 @@ class Synth:
         """(index, 8-bit frame) for every frame: rendered, then through the response curve when `exposure` is
         given (TUM-Mono's photometric model), else linear."""
         scene, renderer = self.renderer(cam)
-        rots, positions = camera_path(scene, self.frames)
+        rots, positions = camera_path(scene, self.frames, self.laps)
         for i in range(self.frames):
             irr = renderer.render(rots[i], positions[i])
             if exposure is None:

@@ -1,0 +1,49 @@
+"""KITTI's synthetic drive: at the default frame count long enough for KITTI's 100 m segments (its default metric
+once never had a value on synthetic data: a 66 m loop whatever the frame count), and a report whose default metric
+has no value says why."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from runner.datasets.kitti import drive
+from runner.datasets.synth import Synth, generate, lap_length
+
+
+def test_the_drive_grows_with_the_frames_and_never_faster_than_a_lap_per_100_frames():
+    for frames, laps in ((60, 1), (150, 1), (200, 2), (300, 2), (1000, 2)):
+        s = drive(Synth(frames, 0, (160, 120), "indoor", "00"))
+        assert (s.scene_kind, s.laps) == ("outdoor", laps), frames
+        assert lap_length(s.scene) == pytest.approx(66.4, abs=0.5)
+
+
+def test_kittis_synthetic_drive_has_segments_at_the_default_frame_count(tmp_path):
+    """300 frames (SynthSpec's default): two laps of the courtyard, some 132 m, so KITTI's default metric gets a
+    finite value through a real campaign; 60 frames drive one lap (66 m): no segment, and the report says so in one
+    line instead of dropping the column silently."""
+    from runner.analysis.report import write_report
+    from runner.engine.campaign import run_campaign
+    from runner.engine.spec import load_spec
+    from tests.conftest import fake_method, write_spec
+
+    data = tmp_path / "dataset" / "sequences"
+    generate(data / "00", frames=300, seed=0, size=(160, 120), layout="kitti")
+    generate(data / "01", frames=60, seed=1, size=(160, 120), layout="kitti")
+    poses = np.loadtxt(tmp_path / "dataset" / "poses" / "00.txt")
+    travelled = np.linalg.norm(np.diff(poses[:, [3, 7, 11]], axis=0), axis=1).sum()
+    assert 125 < travelled < 135
+    datasets = [
+        {"name": "long", "path": str(data), "sequences": ["00"], "layout": "kitti"},
+        {"name": "short", "path": str(data), "sequences": ["01"], "layout": "kitti"},
+    ]
+    spec = write_spec(tmp_path, data, [fake_method(extra=["--noise", "0.05"])], datasets=datasets)
+    res = run_campaign(load_spec(spec), log=lambda *a: None)
+    df = pd.read_csv(res.results_csv)
+    long, short = df[df.dataset == "long"], df[df.dataset == "short"]
+    assert (long.status == "done").all() and np.isfinite(long.kitti_t_pct).all() and (long.kitti_t_pct > 0).all()
+    assert (short.status == "done").all() and short.kitti_t_pct.isna().all()
+    html = write_report(res.results).read_text()
+    assert "KITTI&#x27;s segment errors: no value in this dataset&#x27;s 2 done run(s)" in html
+    assert "shorter than 100 m: no segment" in html
