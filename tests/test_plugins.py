@@ -102,3 +102,31 @@ def test_new_method_never_writes_over_a_folder(tmp_path):
     assert out.returncode == 1 and "not empty" in out.stderr
     out = run(str(BIN / "slamrun"), "new-method", "dso", "--dest", str(tmp_path / "d"), check=False)
     assert out.returncode == 1 and "already" in out.stderr and not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize(
+    "args, said",
+    [
+        (["new-method", "a" * 300], "a method name of 300 characters; at most 64"),
+        (["new-method", "profile"], "would name the adapter's class Profile"),
+        (["new-method", "direction"], "would name the adapter's class Direction"),
+        (["new-method", "prepared_view"], "would name the adapter's class PreparedView"),
+        (["new-method", "foo", "--dest", "dangling"], "dangling is a symbolic link"),
+        (["new-method", "foo", "--dest", "afile/sub"], "afile is a file, not a folder"),
+        (["new-dataset", "my-lab", "--dest", "afile/sub"], "afile is a file, not a folder"),
+        (["new-dataset", "a" * 300], "a layout name of 300 characters"),
+    ],
+)
+def test_new_package_doors_say_one_line_not_a_traceback(tmp_path, args, said):
+    """A 300-character name, a dangling --dest link, a --dest under a file were tracebacks; profile, direction and
+    prepared_view wrote packages whose own tests failed (the class shadowed an imported name)."""
+    import subprocess
+    import sys
+
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere" / "x")
+    (tmp_path / "afile").write_text("mine\n")
+    out = subprocess.run([sys.executable, "-m", "runner.cli", *args], capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode != 0 and "Traceback" not in out.stderr, out.stderr
+    assert said in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "dangling"]  # nothing written
+    assert (tmp_path / "afile").read_text() == "mine\n"

@@ -118,17 +118,53 @@ def test_output_is_read_at_the_original_times(tmp_path):
 '''
 
 
+MAX_NAME = 64  # a package's folder, module and test file are named by it: well inside a file name's 255 bytes
+# names the generated adapter and test import: a class of the same name would shadow one of them
+IMPORTED = {"Path", "BaseModel", "ConfigDict", "Field", "Method", "PreparedView", "Profile", "Direction"}
+
+
+def destination_problem(dest: Path) -> str | None:
+    """Why a new package cannot be written at `dest` (a link, a path under a file, a folder that holds files), or
+    None."""
+    if dest.is_symlink():
+        return f"{dest} is a symbolic link (to {dest.readlink()}); give a new folder (--dest)"
+    for parent in dest.parents:
+        if parent.exists() and not parent.is_dir():
+            return f"{dest}: {parent} is a file, not a folder; give a new folder (--dest)"
+    if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
+        return f"{dest} exists and is not empty; choose a new folder (--dest)"
+    return None
+
+
+def write_files(files: dict[Path, str]) -> list[Path]:
+    """Write a new package's files; an OS error (no space, no permission) names the file."""
+    for path, text in files.items():
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(text)
+        except OSError as exc:
+            raise SlamRunError(f"{path}: cannot be written ({exc.strerror or exc})") from None
+    return list(files)
+
+
 def new_method(name: str, dest: Path) -> list[Path]:
     """Write the package of method `name` into `dest` (which must not exist or be empty); returns the files."""
     if not re.fullmatch(r"[a-z][a-z0-9_]*", name):
         raise SlamRunError(f"{name!r}: a method name is lower-case letters, digits and _ (a Python identifier)")
+    if len(name) > MAX_NAME:
+        raise SlamRunError(f"{name[:20]}...: a method name of {len(name)} characters; at most {MAX_NAME}")
     import methods
 
     if name in methods.REGISTRY:
         raise SlamRunError(f"{name!r} is a method slamrun has already; choose another name")
-    if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
-        raise SlamRunError(f"{dest} exists and is not empty; choose a new folder (--dest)")
     cls = "".join(part.capitalize() for part in name.split("_"))
+    if cls in IMPORTED:
+        raise SlamRunError(
+            f"{name!r} would name the adapter's class {cls}, which its own code imports from slamrun (the class would "
+            "shadow it and the package's tests fail); choose another name"
+        )
+    if problem := destination_problem(dest):
+        raise SlamRunError(problem)
     fill = {"name": name, "module": name, "cls": cls}
     files = {
         dest / "pyproject.toml": PYPROJECT.format(**fill),
@@ -137,7 +173,4 @@ def new_method(name: str, dest: Path) -> list[Path]:
         dest / "docker" / "Dockerfile": DOCKERFILE.format(**fill),
         dest / "tests" / f"test_{name}.py": TEST.format(**fill),
     }
-    for path, text in files.items():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
-    return list(files)
+    return write_files(files)

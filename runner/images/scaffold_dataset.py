@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 from runner.errors import SlamRunError
+from runner.images.scaffold import MAX_NAME, destination_problem, write_files
 
 PYPROJECT = """[build-system]
 requires = ["setuptools>=61"]
@@ -242,8 +243,10 @@ def new_dataset(name: str, dest: Path) -> list[Path]:
 
     if name in LAYOUTS:
         raise SlamRunError(f"{name!r} is a layout slamrun reads already; choose another name")
-    if dest.exists() and (not dest.is_dir() or any(dest.iterdir())):
-        raise SlamRunError(f"{dest} exists and is not empty; choose a new folder (--dest)")
+    if len(name) > MAX_NAME:
+        raise SlamRunError(f"{name[:20]}...: a layout name of {len(name)} characters; at most {MAX_NAME}")
+    if problem := destination_problem(dest):
+        raise SlamRunError(problem)
     module = name.replace("-", "_")
     package = dest / f"slamrun_dataset_{module}"
     files = {
@@ -252,7 +255,6 @@ def new_dataset(name: str, dest: Path) -> list[Path]:
         package / "layout.py": LAYOUT,
         dest / "tests" / f"test_{module}.py": TEST,
     }
-    for path, text in files.items():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text.replace("__NAME__", name).replace("__MODULE__", module))
-    return list(files)
+    return write_files(
+        {path: text.replace("__NAME__", name).replace("__MODULE__", module) for path, text in files.items()}
+    )
