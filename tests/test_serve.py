@@ -356,3 +356,61 @@ def test_a_ledger_damaged_while_served_is_one_line_not_a_crash(finished, tmp_pat
         status, body, _ = get(base, "/c/results/api/state")
         assert status == 503 and b"ledger" in body and b"Traceback" not in body, body
         assert get(base, "/c/results/files/report/index.html")[0] == 200  # the server goes on
+
+
+def _printed_address(*args: str) -> tuple[subprocess.Popen, str]:
+    """`slamrun serve ARGS` as a process, and the address it printed (stdout's first line)."""
+    proc = subprocess.Popen(
+        [*SLAMRUN, "serve", *args, "--port", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stdout, selectors.EVENT_READ)
+    assert sel.select(timeout=60), "no address printed within 60 s"
+    match = re.search(r"(http://\S+)", proc.stdout.readline())
+    assert match, proc.stderr.read() if proc.poll() is not None else "no address"
+    return proc, match.group(1)
+
+
+def _follow(url: str) -> int:
+    """The status the printed address ends at, following redirects with the cookies they set (as a browser)."""
+    import http.cookiejar
+    import urllib.error
+    import urllib.request
+
+    opener = urllib.request.build_opener(urllib.request.HTTPCookieProcessor(http.cookiejar.CookieJar()))
+    try:
+        with opener.open(url, timeout=30) as response:
+            return response.status
+    except urllib.error.HTTPError as exc:
+        return exc.code
+
+
+@pytest.mark.parametrize("host", ["127.0.0.2", "127.0.0.3"])
+def test_the_printed_address_opens_the_page(finished, host):
+    """Another loopback address than 127.0.0.1: the address printed opens the page (it answered 403: only
+    127.0.0.1, localhost and [::1] were accepted as the Host)."""
+    proc, url = _printed_address(str(finished), "--host", host)
+    try:
+        assert url.startswith(f"http://{host}:")
+        assert _follow(url) == 200
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def test_a_token_mode_redirect_keeps_the_token(finished):
+    """The one-campaign folder's / redirects to /c/NAME/: with the token in the query, the redirect sets the cookie
+    (the next page is answered), as the page itself does."""
+    from aiohttp.test_utils import TestClient, TestServer
+
+    from runner.serve.app import make_app
+
+    token = "r" * 24
+
+    async def check() -> None:
+        async with TestClient(TestServer(make_app(finished, token=token), host="127.0.0.1")) as client:
+            first = await client.get(f"/?token={token}", allow_redirects=False)
+            assert first.status == 302 and "slamrun_token" in first.cookies
+            assert (await client.get(first.headers["Location"])).status == 200
+
+    asyncio.run(check())

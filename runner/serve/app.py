@@ -117,11 +117,13 @@ class Hub:
         return figure
 
 
-def make_app(root: Path, token: str | None = None, port: int | None = None, interval_s: float = 1.0) -> web.Application:
+def make_app(
+    root: Path, token: str | None = None, port: int | None = None, interval_s: float = 1.0, host: str | None = None
+) -> web.Application:
     """The server's application for the folder `root`; `token` (when serving beyond loopback) is asked of every
     request; `port` (when bound to loopback) limits the Host header to loopback names (no DNS rebinding)."""
     hub = Hub(Path(root), interval_s)
-    app = web.Application(middlewares=[_guard(token, port)], client_max_size=1024)
+    app = web.Application(middlewares=[_guard(token, port, host)], client_max_size=1024)
     app["hub"] = hub
     app["streams"] = 0
     app["closing"] = asyncio.Event()  # set at shutdown: every event stream ends at once
@@ -143,10 +145,12 @@ def make_app(root: Path, token: str | None = None, port: int | None = None, inte
     return app
 
 
-def _guard(token: str | None, port: int | None):
+def _guard(token: str | None, port: int | None, host: str | None = None):
     """GET and HEAD only; no encoded separator, backslash or NUL in the raw path; on loopback, a loopback Host
-    header; beyond it, the token (query `token=` once, then a cookie); headers that keep the page to itself."""
-    hosts = {f"{h}:{port}" for h in ("127.0.0.1", "localhost", "[::1]")} if port is not None else None
+    header (127.0.0.1, localhost, [::1], or the loopback address it listens on); beyond it, the token (query
+    `token=` once, then a cookie, set on a redirect too); headers that keep the page to itself."""
+    named = ("127.0.0.1", "localhost", "[::1]", *([f"[{host}]" if ":" in host else host] if host else []))
+    hosts = {f"{h}:{port}" for h in named} if port is not None else None
 
     @web.middleware
     async def guard(request: web.Request, handler):
@@ -162,7 +166,12 @@ def _guard(token: str | None, port: int | None):
             if not hmac.compare_digest(given.encode(), token.encode()):
                 raise web.HTTPUnauthorized(text="a token is needed: open the address `slamrun serve` printed\n")
             set_cookie = "token" in request.query
-        response = await handler(request)
+        try:
+            response = await handler(request)
+        except web.HTTPRedirection as exc:  # the one-campaign folder's / leads on: the token goes with it
+            if set_cookie:
+                exc.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="Strict")
+            raise
         if set_cookie and isinstance(response, web.Response):
             response.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="Strict")
         if not response.prepared:

@@ -56,7 +56,7 @@ async def _serve(root: Path, host: str, port: int, token: str | None, interval_s
 
     sock = _listen(host, port)
     bound = sock.getsockname()[1]
-    app = make_app(root, token=token, port=bound if loopback else None, interval_s=interval_s)
+    app = make_app(root, token=token, port=bound if loopback else None, interval_s=interval_s, host=host)
     runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
     await runner.setup()
     await web.SockSite(runner, sock).start()
