@@ -16,7 +16,8 @@ def load_results(path: Path) -> pd.DataFrame:
     """results.csv or results.parquet, or a results directory: its ledger when it has one (the truth, also while
     a campaign runs and before its first export), else the table it holds."""
     path = Path(path)
-    if path.is_dir() and (path / "ledger.sqlite").is_file():
+    ledger_path = path / "ledger.sqlite"
+    if path.is_dir() and (ledger_path.exists() or ledger_path.is_symlink()):  # a folder or a FIFO: one line, below
         from runner.engine.export import results_frame
         from runner.engine.ledger import Ledger
 

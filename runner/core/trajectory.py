@@ -345,6 +345,8 @@ def _read_bytes(path: str | Path) -> bytes:
         raise TrajectoryFormatError(f"{path}: no such trajectory file") from None
     except IsADirectoryError:
         raise TrajectoryFormatError(f"{path}: a folder, expected a trajectory file") from None
+    except OSError as exc:  # a regular file whose read fails: /proc/self/mem (EIO), no permission, a lost mount
+        raise TrajectoryFormatError(f"{path}: cannot be read ({exc.strerror or exc})") from None
 
 
 def _read_text(path: str | Path, data: bytes | None = None) -> str:
