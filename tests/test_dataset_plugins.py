@@ -147,3 +147,40 @@ def test_new_dataset_never_writes_over_a_folder_or_takes_a_built_in_name(tmp_pat
     assert out.returncode == 1 and "already" in out.stderr and not (tmp_path / "d").exists()
     out = slamrun("new-dataset", "My_Lab", "--dest", tmp_path / "e", check=False)
     assert out.returncode == 1 and "lower-case" in out.stderr and not (tmp_path / "e").exists()
+
+
+def test_a_plugins_unsorted_times_are_refused_by_validate_before_any_run(installed, tmp_path):
+    """The plug-in as installed, its reader changed to give its frames' times reversed (a lab's reader with a
+    bug): `slamrun validate` and `slamrun campaign` stop with one line naming the plug-in, its package and the
+    folder; no run starts (they were charged `bad_timestamps` to the method)."""
+    import shutil
+
+    site = tmp_path / "site"
+    shutil.copytree(Path(installed["env"]["PYTHONPATH"]), site)
+    layout_py = site / "slamrun_dataset_mylab" / "layout.py"
+    layout_py.write_text(
+        layout_py.read_text()
+        + "\n\nimport dataclasses as _dc\n_read = read\n\n\ndef _reversed(root):\n"
+        + "    seq = _read(root)\n    return _dc.replace(seq, timestamps=seq.timestamps[::-1].copy())\n\n\n"
+        + "LAYOUT = _dc.replace(LAYOUT, read=_reversed)\n"
+    )
+    env = {"PYTHONPATH": str(site)}
+    slamrun("synth", tmp_path / "data" / "lab1", "--layout", "mylab", "--frames", 20, "--size", "160x120", env=env)
+    spec = {
+        "name": "lab",
+        "results": str(tmp_path / "results"),
+        "cache": str(tmp_path / "cache"),
+        "datasets": [{"name": "lab", "layout": "mylab", "path": str(tmp_path / "data"), "sequences": ["lab1"]}],
+        "methods": [{"name": "reference_vo"}],
+        "trials": 1,
+        "report": False,
+    }
+    (tmp_path / "spec.yaml").write_text(yaml.safe_dump(spec))
+    who = "plug-in layout mylab (slamrun-dataset-mylab 0.1.0)"
+    for command in ("validate", "campaign"):
+        out = slamrun(command, tmp_path / "spec.yaml", env=env, check=False)
+        assert out.returncode != 0 and "Traceback" not in out.stderr, out.stderr
+        text = " ".join(out.stderr.split())
+        assert f"{who}: the sequence it read from {tmp_path / 'data' / 'lab1'} cannot be run" in text, text
+        assert "frame times must increase: frame 1" in text
+    assert not (tmp_path / "results" / "runs").exists() or not any((tmp_path / "results" / "runs").iterdir())

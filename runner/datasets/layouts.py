@@ -28,6 +28,7 @@ from pathlib import Path
 
 from runner.core.metrics import RpeInterval
 from runner.datasets import euroc, icl_nuim, kitti, tartanair, tum_mono, tum_rgbd, tum_vi
+from runner.datasets.plugin_checks import TIME_LIMITS_S, bounded, checked_reader
 from runner.datasets.protocol import METRICS, Layout
 from runner.datasets.sequence import Sequence, folder_identity
 from runner.errors import DatasetError, SlamRunError
@@ -73,29 +74,25 @@ def _guard(fn: Callable | None, who: str, what: str) -> Callable | None:
     return guarded
 
 
-def _checked_reader(read: Callable, who: str) -> Callable[[Path], Sequence]:
-    def reader(root: Path) -> Sequence:
-        seq = read(root)
-        if not isinstance(seq, Sequence):
-            raise DatasetError(f"{who}: its reader gave {type(seq).__name__} for {root}, not a Sequence")
-        return seq
-
-    return reader
-
-
 def _adopt(layout: Layout, provider: str) -> Layout:
-    """A plug-in's layout with its provider recorded and every function of it guarded."""
+    """A plug-in's layout with its provider recorded and every function of it guarded (its exceptions named) and
+    bounded in time; what its reader gives is checked as built-in readers check their files (plugin_checks)."""
     who = f"plug-in layout {layout.name} ({provider})"
+
+    def wrap(fn: Callable | None, what: str, limit: str = "other") -> Callable | None:
+        guarded = _guard(fn, who, what)
+        return None if guarded is None else bounded(guarded, TIME_LIMITS_S[limit], who, what)
+
     return replace(
         layout,
         provider=provider,
-        recognise=_guard(layout.recognise, who, "recognising a folder"),
-        read=_checked_reader(_guard(layout.read, who, "reading the sequence"), who),
-        synth=_guard(layout.synth, who, "writing a synthetic sequence"),
-        synth_outside=_guard(layout.synth_outside, who, "naming its files beside the sequence"),
-        synth_name_problem=_guard(layout.synth_name_problem, who, "checking a sequence name"),
-        identity=_guard(layout.identity, who, "the sequence's identity"),
-        file_note=_guard(layout.file_note, who, "a note on a ground-truth file"),
+        recognise=wrap(layout.recognise, "recognising a folder", "recognise"),
+        read=checked_reader(_guard(layout.read, who, "reading the sequence"), who),
+        synth=wrap(layout.synth, "writing a synthetic sequence", "synth"),
+        synth_outside=wrap(layout.synth_outside, "naming its files beside the sequence"),
+        synth_name_problem=wrap(layout.synth_name_problem, "checking a sequence name"),
+        identity=wrap(layout.identity, "the sequence's identity", "read"),
+        file_note=wrap(layout.file_note, "a note on a ground-truth file"),
     )
 
 
@@ -216,8 +213,11 @@ def detect_layout(root: Path) -> Layout | None:
         if layout.recognise(root):
             return layout
     for layout in _plugins()[0].values():
-        if layout.recognise(root):
-            return layout
+        try:
+            if layout.recognise(root):
+                return layout
+        except DatasetError:  # a plug-in that cannot look at a folder never decides another's: skipped here,
+            continue  # named where its own layout is asked for (open_sequence with layout:)
     return None
 
 
