@@ -333,3 +333,29 @@ def test_sections_say_what_they_hold(report):
     assert f"Kruskal-Wallis p - - {p:.4g}" in text  # the p-value on the page, not only in the CLI
     assert "their median coverage" in text and "median ate_rmse forward" in text
     assert "Levene" in text and "Lilliefors" in text and "p (holm)" in text
+
+
+def test_the_views_draw_through_slamrun_serve(report, tmp_path):
+    """The report served by `slamrun serve` (its security policy allows no inline script but the report's own two,
+    by their hashes): the views draw as from the file, and no script the policy blocked is reported."""
+    from tests.test_serve import serving
+
+    with serving(report.results) as base:
+        url = f"{base}/c/{report.results.name}/files/report/index.html"
+        with chromium_page(url, tmp_path / "profile") as served:
+            served.call("Runtime.enable")
+            served.until("document.querySelectorAll('details.view[open] .js-plotly-plot').length === 2")
+            served.evaluate(
+                "window.blocked = []; document.addEventListener('securitypolicyviolation', "
+                "e => blocked.push(e.violatedDirective + ' ' + e.blockedURI))"
+            )
+            served.evaluate("document.querySelectorAll('details.view')[1].open = true")  # a closed view opened
+            served.until("(document.querySelectorAll('details.view')[1].querySelector('.js-plotly-plot') || {}).data")
+            assert (
+                served.evaluate(
+                    "document.querySelectorAll('details.view')[1].querySelector('.js-plotly-plot').data.length"
+                )
+                > 1
+            )  # the ground truth and the runs' paths
+            assert served.evaluate("window.blocked") == []
+            assert served.evaluate("document.body.dataset.imagesLoaded.split('/')[0] > 0")

@@ -34,15 +34,24 @@ def slamrun(*args, timeout: float = 600) -> subprocess.CompletedProcess:
 
 
 @contextlib.contextmanager
-def serving(folder: Path, *extra: str):
+def serving(folder: Path, *extra: str, stderr: Path | None = None, nofile: int | None = None):
     """`slamrun serve FOLDER --port 0` as a process; yields its base URL (http://127.0.0.1:PORT); ended by SIGTERM,
-    which must end it cleanly (exit 0)."""
+    which must end it cleanly (exit 0). `stderr`: a file for its stderr (else a pipe); `nofile`: its limit of open
+    files (ulimit -n)."""
+
+    def limit_files() -> None:
+        import resource
+
+        resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, resource.getrlimit(resource.RLIMIT_NOFILE)[1]))
+
+    err = open(stderr, "w") if stderr is not None else subprocess.PIPE  # noqa: SIM115 - closed below
     proc = subprocess.Popen(
         [*SLAMRUN, "serve", str(folder), "--port", "0", "--interval", "0.3", *extra],
         stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
+        stderr=err,
         text=True,
         start_new_session=True,
+        preexec_fn=limit_files if nofile else None,
     )
     try:
         sel = selectors.DefaultSelector()
@@ -61,7 +70,9 @@ def serving(folder: Path, *extra: str):
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
             pytest.fail("slamrun serve did not end within 30 s of SIGTERM")
-        assert code == 0, f"slamrun serve ended with {code}: {proc.stderr.read()}"
+        if stderr is not None:
+            err.close()
+        assert code == 0, f"slamrun serve ended with {code}: {proc.stderr.read() if stderr is None else ''}"
 
 
 def get(base: str, path: str, headers: dict | None = None, method: str = "GET") -> tuple[int, bytes, dict]:
@@ -282,6 +293,123 @@ def test_paths_out_of_the_folder_are_refused(planted, path):
         assert status in (400, 403, 404), (status, body[:200])
         assert SECRET.encode() not in body and b"root:" not in body
         assert get(base, "/c/results/files/report/index.html")[0] == 200  # the same server serves what it should
+
+
+SWAPPER = """
+import ctypes, os, sys, time
+libc = ctypes.CDLL(None, use_errno=True)
+a, b, until = sys.argv[1].encode(), sys.argv[2].encode(), time.monotonic() + float(sys.argv[3])
+n = 0
+while time.monotonic() < until:
+    if libc.renameat2(-100, a, -100, b, 2) != 0:  # AT_FDCWD, RENAME_EXCHANGE: one atomic swap
+        sys.exit("renameat2: errno %d" % ctypes.get_errno())
+    n += 1
+print(n)
+"""
+
+
+def test_a_folder_swapped_for_a_link_while_served_never_serves_what_is_outside(finished, tmp_path):
+    """Another process swaps a run's folder for a link out of the results folder and back, atomically, as fast as it
+    can (renameat2 RENAME_EXCHANGE) while files of that folder are asked for: the old check-then-open served the
+    file outside in 15-20 % of requests. Now each part is opened without following a link: the run's own file, or a
+    404, never the other."""
+    copy = tmp_path / "results"
+    shutil.copytree(finished, copy, symlinks=True)
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "trajectory.txt").write_text(SECRET)
+    run = next(p.parent for p in sorted((copy / "runs").rglob("trajectory.txt")))
+    (run.parent / "swap").symlink_to(outside)
+    served = f"/c/results/files/{run.relative_to(copy)}/trajectory.txt"
+    own = (run / "trajectory.txt").read_bytes()
+    with serving(copy) as base:
+        swapper = subprocess.Popen(
+            [sys.executable, "-c", SWAPPER, str(run), str(run.parent / "swap"), "20"],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        try:
+            answers = [get(base, served) for _ in range(300)]
+        finally:
+            swapper.kill()
+            out, err = swapper.communicate(timeout=30)
+        assert not err, err
+    statuses = [status for status, _, _ in answers]
+    assert all(SECRET.encode() not in body for _, body, _ in answers), statuses.count(200)
+    assert set(statuses) <= {200, 404}
+    assert any(body == own for status, body, _ in answers if status == 200)  # the folder was served in between
+
+
+def test_a_runs_files_are_text_or_downloads_never_pages(finished, tmp_path):
+    """A method's `raw/notes.html` ran as a page in the server's origin; now a run's files are plain text (its
+    trajectory, log, run.json) or downloads, each under a sandbox; the report's own pages stay pages."""
+    copy = tmp_path / "results"
+    shutil.copytree(finished, copy, symlinks=True)
+    run = next(p.parent for p in sorted((copy / "runs").rglob("trajectory.txt")))
+    raw = run / "raw"
+    raw.mkdir(exist_ok=True)
+    (raw / "notes.html").write_text("<script>fetch('/c/results/api/state')</script>")
+    (raw / "map.bin").write_bytes(b"\x00\x01")
+    (raw / "ledger-link").symlink_to(copy / "ledger.sqlite")
+    (raw / ".hidden.txt").write_text("hidden")
+    rel = run.relative_to(copy)
+    with serving(copy) as base:
+        status, body, headers = get(base, f"/c/results/files/{rel}/raw/notes.html")
+        assert status == 200 and headers["Content-Type"].startswith("text/plain")
+        assert "sandbox" in headers["Content-Security-Policy"] and headers["X-Content-Type-Options"] == "nosniff"
+        status, body, headers = get(base, f"/c/results/files/{rel}/raw/map.bin")
+        assert status == 200 and body == b"\x00\x01" and headers["Content-Type"] == "application/octet-stream"
+        assert headers["Content-Disposition"].startswith("attachment;")
+        status, _, headers = get(base, f"/c/results/files/{rel}/trajectory.txt", method="HEAD")
+        assert status == 200 and headers["Content-Type"].startswith("text/plain")
+        assert int(headers["Content-Length"]) == (run / "trajectory.txt").stat().st_size
+        for refused in ("raw/ledger-link", "raw/.hidden.txt"):  # a link to the ledger, a hidden file
+            assert get(base, f"/c/results/files/{rel}/{refused}")[0] == 404
+        status, body, headers = get(base, "/c/results/files/report/index.html")
+        assert status == 200 and headers["Content-Type"].startswith("text/html") and b"<html" in body.lower()
+        assert "sandbox" not in headers["Content-Security-Policy"]
+
+
+def test_slow_and_idle_connections_are_closed_and_never_starve_the_server(finished, tmp_path):
+    """600 connections that send half a request line and stop, at `ulimit -n 256`: once nothing was answered for
+    45 s, none closed, and stderr grew by 116 MB of EMFILE tracebacks. Now connections past the cap (64 here: a
+    quarter of the file limit) are closed as they arrive, those without a whole request within 10 s are closed, the
+    server answers again within seconds, and stderr holds a few lines."""
+    log = tmp_path / "serve.err"
+    with serving(finished, stderr=log, nofile=256) as base:
+        host, port = base.removeprefix("http://").split(":")
+        slow = []
+        for _ in range(600):
+            with contextlib.suppress(OSError):
+                s = socket.create_connection((host, int(port)), timeout=5)
+                s.sendall(b"GET /c/results/api/state HTTP/1.1\r\nHost: 127")
+                slow.append(s)
+        start = time.monotonic()
+        answered = None
+        while time.monotonic() - start < 30:
+            with contextlib.suppress(OSError, http.client.HTTPException):
+                if get(base, "/c/results/api/state")[0] == 200:
+                    answered = time.monotonic() - start
+                    break
+            time.sleep(0.5)
+        assert answered is not None and answered < 20, answered
+        hanging = 0
+        for s in slow:  # every slow connection is closed by the server (or was refused): none hangs
+            s.settimeout(max(1.0, 25 - (time.monotonic() - start)))
+            try:
+                hanging += s.recv(1024) != b""
+            except (ConnectionResetError, BrokenPipeError):
+                pass  # refused at the cap
+            except TimeoutError:
+                hanging += 1
+            s.close()
+        assert hanging == 0, f"{hanging} of {len(slow)} slow connections still open"
+        assert get(base, "/c/results/files/report/index.html")[0] == 200
+    text = log.read_text()
+    assert "Traceback" not in text and len(text.splitlines()) <= 12, text[:3000]
+    assert "refused connections over the cap of 64 open at once" in text
+    assert "closed connections idle or without a whole request for 10 s" in text
 
 
 def test_only_loopback_names_and_reads(finished):

@@ -57,6 +57,8 @@ IMAGES_CHECK = (
     "document.body.dataset.imagesLoaded=i.filter(x=>x.complete&&x.naturalWidth>0).length+'/'+i.length;});"
 )
 
+INLINE_SCRIPTS = (LOADER, IMAGES_CHECK)  # the page's only inline scripts: `slamrun serve` allows them by hash
+
 
 def esc(text: str) -> str:
     return html.escape(str(text))

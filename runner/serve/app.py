@@ -13,12 +13,17 @@ the clock-driven figures: elapsed, ETA)."""
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
+import hashlib
 import hmac
 import html
 import json
+import mimetypes
+import os
 import re
 import time
+import urllib.parse
 from collections import OrderedDict
 from dataclasses import dataclass, field
 from importlib import resources
@@ -26,10 +31,12 @@ from pathlib import Path
 
 from aiohttp import web
 
+from runner.analysis.page import INLINE_SCRIPTS
 from runner.core import jsonio
 from runner.errors import SlamRunError
 from runner.serve import runview
-from runner.serve.folders import campaigns, served_file
+from runner.serve.connections import Watch
+from runner.serve.folders import campaigns, open_served
 from runner.serve.snapshot import Signature, snapshot
 
 REFRESH_S = 5.0  # a running campaign's snapshot is read again at least this often (elapsed, ETA, lanes' times)
@@ -37,6 +44,7 @@ HEARTBEAT_S = 15.0
 MAX_STREAMS = 64  # viewers streaming at once; one more is told to come back later
 MAX_PATHS = 32  # path figures kept in memory
 MAX_RUNS_LISTED = 2000
+CHUNK_BYTES = 256 * 1024  # a served file is read and sent in pieces of this size
 SERVED_TOP = ("report", "runs", "results.csv", "results.parquet", "spec.resolved.yaml")
 STATIC = {"page.js": "application/javascript", "page.css": "text/css"}
 _BAD_RAW = re.compile(r"%(2f|5c|00|2e)|\\|\x00", re.IGNORECASE)
@@ -118,12 +126,19 @@ class Hub:
 
 
 def make_app(
-    root: Path, token: str | None = None, port: int | None = None, interval_s: float = 1.0, host: str | None = None
+    root: Path,
+    token: str | None = None,
+    port: int | None = None,
+    interval_s: float = 1.0,
+    host: str | None = None,
+    watch: Watch | None = None,
 ) -> web.Application:
     """The server's application for the folder `root`; `token` (when serving beyond loopback) is asked of every
-    request; `port` (when bound to loopback) limits the Host header to loopback names (no DNS rebinding)."""
+    request; `port` (when bound to loopback) limits the Host header to loopback names (no DNS rebinding); `watch`
+    (the server's connections) learns which connection is answering a request."""
     hub = Hub(Path(root), interval_s)
-    app = web.Application(middlewares=[_guard(token, port, host)], client_max_size=1024)
+    middlewares = [_guard(token, port, host)] + ([_answering(watch)] if watch is not None else [])
+    app = web.Application(middlewares=middlewares, client_max_size=1024)
     app["hub"] = hub
     app["streams"] = 0
     app["closing"] = asyncio.Event()  # set at shutdown: every event stream ends at once
@@ -132,6 +147,7 @@ def make_app(
         app["closing"].set()
 
     app.on_shutdown.append(closing)
+    app.on_response_prepare.append(_secure)
     app.router.add_get("/", index)
     app.router.add_get("/api/campaigns", list_campaigns)
     app.router.add_get("/static/{name}", static)
@@ -172,21 +188,51 @@ def _guard(token: str | None, port: int | None, host: str | None = None):
             if set_cookie:
                 exc.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="Strict")
             raise
-        if set_cookie and isinstance(response, web.Response):
+        if set_cookie and not response.prepared:
             response.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="Strict")
-        if not response.prepared:
-            response.headers.update(
-                {
-                    "X-Content-Type-Options": "nosniff",
-                    "X-Frame-Options": "DENY",
-                    "Referrer-Policy": "no-referrer",
-                    "Content-Security-Policy": "default-src 'self'; img-src 'self' data:; "
-                    "style-src 'self' 'unsafe-inline'; connect-src 'self'; object-src 'none'; base-uri 'none'",
-                }
-            )
         return response
 
     return guard
+
+
+def _answering(watch: Watch):
+    """Tells `watch` that a request's connection is busy while its handler runs (an event stream: all along)."""
+
+    @web.middleware
+    async def answering(request: web.Request, handler):
+        watch.begin(request.protocol)
+        try:
+            return await handler(request)
+        finally:
+            watch.end(request.protocol)
+
+    return answering
+
+
+SECURITY_HEADERS = {
+    "X-Content-Type-Options": "nosniff",
+    "X-Frame-Options": "DENY",
+    "Referrer-Policy": "no-referrer",
+    "Content-Security-Policy": "default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; "
+    "connect-src 'self'; object-src 'none'; base-uri 'none'",
+}
+
+# The report's pages run its two inline scripts (allowed by their SHA-256, nothing else inline) and plotly.js and the
+# views' scripts from the report's folder
+REPORT_CSP = (
+    SECURITY_HEADERS["Content-Security-Policy"]
+    + "; script-src 'self' "
+    + " ".join(
+        f"'sha256-{base64.b64encode(hashlib.sha256(script.encode()).digest()).decode()}'" for script in INLINE_SCRIPTS
+    )
+)
+
+
+async def _secure(request: web.Request, response: web.StreamResponse) -> None:
+    """Every response's headers that keep the page to itself, set as it is sent (streamed ones too); a handler's
+    own stricter policy (a method's file: a sandbox) stays."""
+    for name, value in SECURITY_HEADERS.items():
+        response.headers.setdefault(name, value)
 
 
 def _html(title: str, body_attrs: str) -> str:
@@ -346,12 +392,49 @@ async def log(request: web.Request) -> web.Response:
     return web.Response(text=text, content_type="text/plain")
 
 
-async def files(request: web.Request) -> web.FileResponse:
+async def files(request: web.Request) -> web.StreamResponse:
+    """A file of the campaign's folder, opened without a check-then-open gap (folders.open_served). What slamrun
+    wrote (report/, results, the resolved spec) is served with its type; what a method wrote (anything under
+    runs/) as plain text when it is text and as a download otherwise, never as a page of this server's origin."""
     folder = request.app["hub"].folder(request.match_info["name"])
     tail = request.match_info["tail"]
     if tail.split("/", 1)[0] not in SERVED_TOP:
         raise web.HTTPNotFound(text="no such file here\n")
-    target = served_file(folder, tail)
-    if target is None:
+    f = await asyncio.to_thread(open_served, folder, tail)
+    if f is None:
         raise web.HTTPNotFound(text="no such file here\n")
-    return web.FileResponse(target, headers={"Cache-Control": "no-cache"})
+    try:
+        size = os.fstat(f.fileno()).st_size
+        name = tail.rsplit("/", 1)[-1]
+        headers = {"Cache-Control": "no-cache", "Content-Length": str(size)}
+        if tail.startswith("runs/"):
+            headers |= _method_file_headers(name)
+        else:
+            headers["Content-Type"] = mimetypes.guess_type(name)[0] or "application/octet-stream"
+            if tail.startswith("report/") and headers["Content-Type"] == "text/html":
+                headers["Content-Security-Policy"] = REPORT_CSP
+        response = web.StreamResponse(headers=headers)
+        await response.prepare(request)
+        if request.method != "HEAD":
+            while chunk := await asyncio.to_thread(f.read, CHUNK_BYTES):
+                await response.write(chunk)
+        await response.write_eof()
+        return response
+    finally:
+        f.close()
+
+
+def _method_file_headers(name: str) -> dict[str, str]:
+    """A run's file as plain text (what a browser shows, never runs: its trajectory, log, run.json) or, for any
+    other kind, a download; a sandbox in either case, so nothing it holds acts in this server's origin."""
+    kind = mimetypes.guess_type(name)[0] or ""
+    text = kind.startswith("text/") or kind in ("application/json", "application/x-yaml") or "." not in name
+    shown = (
+        {"Content-Type": "text/plain; charset=utf-8"}
+        if text
+        else {
+            "Content-Type": "application/octet-stream",
+            "Content-Disposition": f"attachment; filename*=UTF-8''{urllib.parse.quote(name)}",
+        }
+    )
+    return shown | {"Content-Security-Policy": "sandbox; default-src 'none'"}

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import os
 import re
+import stat
 from pathlib import Path
+from typing import BinaryIO
 
 from runner.errors import SlamRunError
 
@@ -33,21 +35,43 @@ def campaigns(root: Path) -> dict[str, Path]:
     return dict(sorted(found.items()))
 
 
-def served_file(root: Path, relative: str) -> Path | None:
-    """The regular file `relative` names inside `root`, or None when it names anything else: an absolute path,
-    a `..` or empty part, a backslash, a NUL, an encoded separator left in the path (`%2f`, `%5c`, `%2e%2e`
-    decoded once already by the server), a hidden part (`.cache`, the ledger's `-wal`), or a file a symbolic
-    link takes outside `root`. The caller opens the returned path; `root` must exist."""
+def _parts(relative: str) -> list[str] | None:
+    """The path's parts, or None when it is no plain relative path: absolute, a `..`, `.` or empty part, a
+    backslash, a NUL, a `%` (an encoded separator left after the server decoded it once), a hidden part (`.cache`,
+    the ledger's `-wal`), or over 1024 characters."""
     if not relative or len(relative) > 1024 or "\\" in relative or "\x00" in relative or "%" in relative:
         return None
     parts = relative.split("/")
     if any(p in ("", ".", "..") or p.startswith(".") for p in parts):
         return None
-    base = Path(root).resolve()
+    return parts
+
+
+def open_served(root: Path, relative: str) -> BinaryIO | None:
+    """The regular file `relative` names inside `root`, opened for reading, or None when it names anything else
+    (`_parts`), or when any part of it is a symbolic link, or the file is not a regular file. Each part is opened
+    relative to the folder opened before it, without following a link (O_NOFOLLOW): no part can be swapped for a
+    link between a check and the open, whatever another process does in the folder."""
+    parts = _parts(relative)
+    if parts is None:
+        return None
+    flags = os.O_RDONLY | os.O_CLOEXEC
     try:
-        target = (base / relative).resolve(strict=True)
-    except (OSError, RuntimeError):  # missing, a loop of links
+        fd = os.open(root, flags | os.O_DIRECTORY)
+    except OSError:
         return None
-    if not target.is_relative_to(base) or not target.is_file():
+    try:
+        for part in parts[:-1]:
+            nxt = os.open(part, flags | os.O_DIRECTORY | os.O_NOFOLLOW, dir_fd=fd)
+            os.close(fd)
+            fd = nxt
+        nxt = os.open(parts[-1], flags | os.O_NOFOLLOW | os.O_NONBLOCK, dir_fd=fd)  # a FIFO never blocks the open
+        os.close(fd)
+        fd = nxt
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            os.close(fd)
+            return None
+    except OSError:  # missing, a link (ELOOP), not a folder: none of these is served
+        os.close(fd)
         return None
-    return target
+    return os.fdopen(fd, "rb")

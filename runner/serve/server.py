@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 from runner.errors import SlamRunError
+from runner.serve import connections
 from runner.serve.folders import LEDGER, campaigns
 
 MIN_TOKEN = 16
@@ -56,10 +57,16 @@ async def _serve(root: Path, host: str, port: int, token: str | None, interval_s
 
     sock = _listen(host, port)
     bound = sock.getsockname()[1]
-    app = make_app(root, token=token, port=bound if loopback else None, interval_s=interval_s, host=host)
-    runner = web.AppRunner(app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
+    watch = connections.Watch()
+    app = make_app(root, token=token, port=bound if loopback else None, interval_s=interval_s, host=host, watch=watch)
+    runner = web.AppRunner(
+        app, access_log=None, handle_signals=False, shutdown_timeout=1.0, keepalive_timeout=2 * connections.IDLE_S
+    )
     await runner.setup()
-    await web.SockSite(runner, sock).start()
+    loop = asyncio.get_running_loop()
+    loop.set_exception_handler(lambda _loop, context: watch.refusals.note(_loop_error(context)))
+    listening = await loop.create_server(watch.factory(runner.server), sock=sock)
+    sweeper = asyncio.create_task(watch.sweeping())
     shown = f"[{host}]" if ":" in host else host
     url = f"http://{shown}:{bound}/" + (f"?token={token}" if token else "")
     if not loopback:
@@ -70,14 +77,23 @@ async def _serve(root: Path, host: str, port: int, token: str | None, interval_s
         )
     print(f"slamrun serve: {root} at {url} (Ctrl-C to stop)", flush=True)
     stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     try:
         await stop.wait()
     finally:
+        sweeper.cancel()
+        listening.close()
         await runner.cleanup()
     return 0
+
+
+def _loop_error(context: dict) -> str:
+    """What went wrong in the event loop (accept() out of file descriptors, a protocol's error), as one line's
+    kind: printed once per LOG_EVERY_S with its count, never a traceback per connection."""
+    exc = context.get("exception")
+    what = context.get("message", "an error in the server's event loop")
+    return f"{what}: {type(exc).__name__}: {exc}"[:300] if exc is not None else what[:300]
 
 
 def _listen(host: str, port: int) -> socket.socket:
