@@ -27,6 +27,7 @@ from runner.datasets.view import Direction, Profile
 from runner.errors import DatasetError
 
 FRAMES = 90
+SEED = 4  # a loop every layout's reference_vo and colmap (every 3rd frame) track in 90 frames
 NAMES = {"euroc": "V1_synth", "kitti": "00", "tum-rgbd": "rgbd_dataset_freiburg1_synth", "tum-vi": "room_synth"}
 
 
@@ -37,13 +38,13 @@ def layouts(tmp_path_factory) -> dict[str, Path]:
     out = {}
     for layout, name in NAMES.items():
         parent = root / layout / ("sequences" if layout == "kitti" else "")
-        out[layout] = generate(parent / name, frames=FRAMES, seed=3, layout=layout)
+        out[layout] = generate(parent / name, frames=FRAMES, seed=SEED, layout=layout)
     return out
 
 
 def true_poses(layout: str) -> np.ndarray:
     """The synthetic camera-to-world poses at the frames (KITTI: relative to the first camera)."""
-    synth = Synth(FRAMES, 3, (640, 480), "indoor", NAMES[layout])
+    synth = Synth(FRAMES, SEED, (640, 480), "indoor", NAMES[layout])
     synth = drive(synth) if layout == "kitti" else synth  # KITTI: a drive, outdoors
     rots, pos = camera_path(synth.scene, FRAMES, synth.laps)
     t = np.tile(np.eye(4), (FRAMES, 1, 1))
@@ -117,7 +118,7 @@ def test_each_layout_end_to_end_equals_the_same_sequence_in_tum_mono_layout(layo
     datasets = []
     for layout, seq_dir in layouts.items():
         copy = tum_mono_copy(seq_dir, tmp_path / "copy-cache", tmp_path / "tum-mono" / f"{layout}_{seq_dir.name}")
-        half_s = {"delta": 0.5, "unit": "s"}  # RPE: colmap's every 5th frame at 10, 20 and 30 Hz has pairs
+        half_s = {"delta": 0.5, "unit": "s"}  # RPE: colmap's every 3rd frame at 10, 20 and 30 Hz has pairs
         datasets.append(
             {"name": layout, "path": str(seq_dir.parent), "sequences": [seq_dir.name], "layout": layout, "rpe": half_s}
         )
@@ -132,7 +133,7 @@ def test_each_layout_end_to_end_equals_the_same_sequence_in_tum_mono_layout(layo
         )
     methods = [
         {"name": "reference_vo"},
-        {"name": "colmap", "params": {"stride": 5, "max_features": 600, "overlap": 4, "max_image_size": 480}},
+        {"name": "colmap", "params": {"stride": 3, "max_features": 600, "overlap": 4, "max_image_size": 480}},
     ]
     spec = write_spec(tmp_path, tmp_path, methods, datasets=datasets, trials=1, timeout_s=300)
     res = run_campaign(load_spec(spec), on_event=None)
@@ -148,10 +149,14 @@ def test_each_layout_end_to_end_equals_the_same_sequence_in_tum_mono_layout(layo
             for direction in ("forward", "backward"):
                 a = by_run.loc[(method, layout, direction)]
                 b = by_run.loc[(method, f"{layout}-as-tum-mono", direction)]
-                assert a.ate_rmse == pytest.approx(b.ate_rmse, rel=1e-9, abs=1e-12), (method, layout, direction)
-                assert a.rpe_t_rmse == pytest.approx(b.rpe_t_rmse, rel=1e-9, abs=1e-12), (method, layout, direction)
-    vo = df[df.method == "reference_vo"]
-    assert (vo.ate_rmse < 0.01 * 2 * 2.3 * np.pi).all(), vo  # under 1 % of the loop's length
+                # colmap's bundle adjustment sums on threads (Ceres), in an order that varies: equal to 1e-6
+                rel = 1e-9 if method == "reference_vo" else 1e-6
+                assert a.ate_rmse == pytest.approx(b.ate_rmse, rel=rel, abs=1e-12), (method, layout, direction)
+                assert a.rpe_t_rmse == pytest.approx(b.rpe_t_rmse, rel=rel, abs=1e-12), (method, layout, direction)
+    for layout in layouts:  # reference_vo within 1 % of the path's length (KITTI's: the courtyard's, 5 times longer)
+        length = np.linalg.norm(np.diff(true_poses(layout)[:, :3, 3], axis=0), axis=1).sum()
+        vo = df[(df.method == "reference_vo") & df.dataset.str.startswith(layout)]
+        assert (vo.ate_rmse < 0.01 * length).all(), (layout, length, vo.ate_rmse.tolist())
 
 
 # ---------------------------------------------------------------- the real ground-truth files of evo_test_data

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from runner.backends.machine import cpu_model
 from runner.core.inputs import load_yaml_file, read_text_bounded
 from runner.errors import SlamRunError
 
@@ -186,33 +187,17 @@ def host_description() -> dict[str, str]:
     return {
         "name": platform.node() or "unknown",
         "system": f"{platform.system()} {platform.release()} ({platform.machine()})",
-        "CPU": f"{_cpu_model()}, {os.cpu_count()} logical cores",
+        "CPU": f"{cpu_model()}, {os.cpu_count()} logical cores",
         "memory": f"{psutil.virtual_memory().total / 2**30:.1f} GiB",
         "GPU": _gpus(),
     }
 
 
-def _cpu_model() -> str:
-    try:
-        for line in read_text_bounded("/proc/cpuinfo", 4 << 20, "CPU information").splitlines():
-            if line.lower().startswith(("model name", "hardware", "cpu model")):
-                return line.split(":", 1)[1].strip()
-    except SlamRunError:
-        pass
-    return platform.processor() or "unknown model"
-
-
 def _gpus() -> str:
-    """The NVIDIA GPUs the driver lists (nvidia-smi -L), else none found."""
-    smi = shutil.which("nvidia-smi")
-    if smi is None:
-        return "none found (no nvidia-smi)"
-    try:
-        p = subprocess.run([smi, "-L"], capture_output=True, text=True, timeout=10)
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        return f"not known ({exc})"
-    lines = [line.split(" (UUID")[0] for line in p.stdout.splitlines() if line.strip()]
-    return "; ".join(lines) if p.returncode == 0 and lines else "none found"
+    """The GPUs this host's driver lists (NVML, else nvidia-smi -L), else none found."""
+    from runner.backends.monitor import host_gpus
+
+    return "; ".join(host_gpus()) or "none found"
 
 
 def _runs_host(session: dict | None, spec: dict | None, df: pd.DataFrame | None = None) -> str:

@@ -223,7 +223,8 @@ FRAMES_PER_LAP = 100  # at least: a lap never goes faster than the plain loop ov
 def drive(s):
     """KITTI's synthetic drive: in the courtyard (outdoor scale, whatever `scene` says: KITTI is a drive), as many
     laps as make it KITTI_MIN_DRIVE_M long where the frames allow one lap per FRAMES_PER_LAP (the default 300 frames
-    drive two laps, 132 m; 60 frames drive one, 66 m, and the report says that KITTI's segments need more)."""
+    drive two or three laps of 57-80 m, by seed; 60 frames drive one, and the report says that KITTI's segments
+    need more)."""
     from dataclasses import replace
 
     from runner.datasets.synth import lap_length

@@ -1,8 +1,10 @@
 """Synthetic sequences in a dataset's layout, with known camera-to-world poses.
 
 The scene is a textured room (or courtyard) with boxes in the middle; the camera circles them once,
-looking at them, so the path closes a loop and start and end see the same place. Frames are ray-cast
-through each layout's camera; each layout's module writes them with its files and quirks (its `synth`:
+looking at them, so the path closes a loop and start and end see the same place. The loop follows the seed too
+(`PathShape`: size, aspect, turning sense, where it starts, height, speed profile, gaze): two sequences are two
+motions, each within the plain loop's speed and rotation rate, so what tracks the plain loop tracks them. Frames
+are ray-cast through each layout's camera; each layout's module writes them with its files and quirks (its `synth`:
 TUM-Mono's vignette, response curve and exposures, EuRoC's nanosecond names and body frame, ...).
 Deterministic for a seed.
 """
@@ -28,19 +30,103 @@ FPS = 30.0
 GT_FRACTION = 0.2  # first and last 20 % of the frames carry ground truth
 
 
+PATH_STREAM = 0x9A7  # the path's random stream: a seed's boxes and texture stay what they were before paths varied
+SCALES = {"indoor": 1.0, "outdoor": 5.0}
+MOTION_SLACK = 1.1  # a seed's loop moves and turns at most 10 % faster than the plain loop at its fastest
+
+
+@dataclass(frozen=True)
+class PathShape:
+    """The camera's loop around the boxes, in metres and radians; `PathShape.plain(scale)` is the loop every
+    sequence had before paths followed their seed."""
+
+    radii: tuple[float, float]  # semi-axes along x and y
+    height: float  # the camera's mean height
+    bob: tuple[int, float]  # vertical wobble: cycles per loop, amplitude
+    turn: int  # +1 anticlockwise seen from above, -1 clockwise
+    start: float  # where on the loop the first frame is
+    surge: float  # speed profile: the phase advances as 2 pi u + surge sin(2 pi u), |surge| < 1
+    gaze: tuple[float, float, float]  # phase offsets of the look-at point's wander (x, y, z)
+    scale: float = 1.0  # the scene's (1 indoor, 5 outdoor)
+
+    @classmethod
+    def plain(cls, scale: float = 1.0) -> PathShape:
+        return cls((2.3 * scale, 1.9 * scale), 1.3 * scale, (3, 0.1 * scale), 1, 0.0, 0.0, (0.0, 0.0, 0.0), scale)
+
+
+def path_shape(kind: str, seed: int) -> PathShape:
+    """The loop of a sequence of seed `seed`: size (0.92-1.1 of the plain loop's), aspect (either axis the long one,
+    up to the plain loop's 1.21), turning sense, start, height, vertical wobble, speed profile and gaze drawn from
+    the seed, then drawn back towards the plain loop until its fastest translation and rotation per step are within
+    MOTION_SLACK of the plain loop's (`path_motion`): the boxes are never nearer, the motion about as fast."""
+    scale = SCALES[kind]
+    rng = np.random.default_rng([seed, PATH_STREAM])
+    size = rng.uniform(0.92, 1.1)
+    aspect = rng.uniform(1.0, 2.3 / 1.9)
+    long_side = 2.3 * size * scale
+    radii = (long_side, long_side / aspect) if rng.random() < 0.5 else (long_side / aspect, long_side)
+    radii = (max(radii[0], 1.9 * scale), max(radii[1], 1.9 * scale))  # never nearer the boxes than the plain loop
+    cycles = int(rng.integers(2, 5))
+    drawn = PathShape(
+        radii=radii,
+        height=scale * rng.uniform(1.15, 1.45),
+        bob=(cycles, scale * rng.uniform(0.5, 1.0) * 0.3 / cycles),
+        turn=1 if rng.random() < 0.5 else -1,
+        start=rng.uniform(0, 2 * np.pi),
+        surge=rng.uniform(-0.2, 0.2),
+        gaze=tuple(rng.uniform(-np.pi, np.pi, 3)),
+        scale=scale,
+    )
+    plain = PathShape.plain(scale)
+    limit = path_motion(plain)
+    for weight in np.linspace(1.0, 0.0, 11):
+        shape = _toward(plain, drawn, weight)
+        speed, turning = path_motion(shape)
+        if speed <= limit[0] * MOTION_SLACK and turning <= limit[1] * MOTION_SLACK:
+            return shape
+    return plain
+
+
+def _toward(plain: PathShape, drawn: PathShape, w: float) -> PathShape:
+    """`drawn`'s sense, start and wobble cycles, its sizes and rates `w` of the way from the plain loop's."""
+
+    def mix(a, b):
+        return (1 - w) * a + w * b
+
+    return PathShape(
+        radii=(mix(plain.radii[0], drawn.radii[0]), mix(plain.radii[1], drawn.radii[1])),
+        height=mix(plain.height, drawn.height),
+        bob=(drawn.bob[0], mix(plain.bob[1] * plain.bob[0], drawn.bob[1] * drawn.bob[0]) / drawn.bob[0]),
+        turn=drawn.turn,
+        start=drawn.start,
+        surge=mix(plain.surge, drawn.surge),
+        gaze=tuple(mix(p, d) for p, d in zip(plain.gaze, drawn.gaze, strict=True)),
+        scale=drawn.scale,
+    )
+
+
+def path_motion(shape: PathShape, samples: int = 3600) -> tuple[float, float]:
+    """The loop's fastest translation (m) and rotation (rad) between two of `samples` equally spaced frames."""
+    rots, pos = loop_poses(shape, np.arange(samples + 1) / samples)
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=1)
+    rel = np.einsum("nji,njk->nik", rots[:-1], rots[1:])
+    angle = np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0))
+    return float(step.max()), float(angle.max())
+
+
 @dataclass(frozen=True)
 class Scene:
     room_lo: np.ndarray
     room_hi: np.ndarray
     boxes: tuple[tuple[np.ndarray, np.ndarray], ...]
     texels_per_m: float
-    path_radii: tuple[float, float]
-    cam_height: float
+    path: PathShape
     look_at: np.ndarray
 
 
-def make_scene(kind: str, rng: np.random.Generator) -> Scene:
-    scale = {"indoor": 1.0, "outdoor": 5.0}[kind]
+def make_scene(kind: str, rng: np.random.Generator, path: PathShape | None = None) -> Scene:
+    """The room (or courtyard) and its boxes from `rng`; the camera's loop is `path` (the plain loop if None)."""
+    scale = SCALES[kind]
     boxes = []
     for _ in range(6):
         c = rng.uniform(-0.8, 0.8, size=2)
@@ -52,8 +138,7 @@ def make_scene(kind: str, rng: np.random.Generator) -> Scene:
         room_hi=np.array([4.0, 3.5, 3.0]) * scale,
         boxes=tuple(boxes),
         texels_per_m=300.0 / scale,
-        path_radii=(2.3 * scale, 1.9 * scale),
-        cam_height=1.3 * scale,
+        path=path or PathShape.plain(scale),
         look_at=np.array([0.0, 0.0, 0.7]) * scale,
     )
 
@@ -78,27 +163,39 @@ def make_texture(rng: np.random.Generator, size: int = 2048) -> np.ndarray:
 
 def camera_path(scene: Scene, n: int, laps: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """Camera-to-world rotations (n, 3, 3) and positions (n, 3): `laps` smooth loops around the boxes."""
-    return camera_path_at(scene, 2 * np.pi * laps * np.arange(n) / max(n - 1, 1))
+    return camera_path_at(scene, laps * np.arange(n) / max(n - 1, 1))
 
 
 def lap_length(scene: Scene, samples: int = 2000) -> float:
     """The length of one loop of the scene's path (m)."""
-    _, pos = camera_path_at(scene, np.linspace(0, 2 * np.pi, samples + 1))
+    _, pos = camera_path_at(scene, np.linspace(0, 1, samples + 1))
     return float(np.linalg.norm(np.diff(pos, axis=0), axis=1).sum())
 
 
-def camera_path_at(scene: Scene, phase: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The loop's camera-to-world rotations and positions at `phase` (0 at the first frame, 2 pi at the last)."""
-    a, b = scene.path_radii
-    pos = np.column_stack([a * np.cos(phase), b * np.sin(phase), scene.cam_height + 0.1 * a / 2.3 * np.sin(3 * phase)])
-    target = scene.look_at + np.column_stack([0.3 * np.sin(2 * phase), 0.3 * np.cos(phase), 0.2 * np.sin(phase)])
-    fwd = target - pos
+def camera_path_at(scene: Scene, loops: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The scene's camera-to-world rotations and positions `loops` loops after the first frame (1: one loop on)."""
+    return loop_poses(scene.path, loops, scene.look_at)
+
+
+def loop_poses(shape: PathShape, loops: np.ndarray, look_at: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Rotations and positions of `shape`'s loop, looking at the boxes' middle (`look_at`), `loops` loops on."""
+    loops = np.asarray(loops, float)
+    if look_at is None:
+        look_at = np.array([0.0, 0.0, 0.7]) * shape.scale
+    u = 2 * np.pi * loops
+    phase = shape.start + shape.turn * (u + shape.surge * np.sin(u))
+    a, b = shape.radii
+    cycles, amplitude = shape.bob
+    pos = np.column_stack([a * np.cos(phase), b * np.sin(phase), shape.height + amplitude * np.sin(cycles * u)])
+    gx, gy, gz = shape.gaze
+    wander = 0.3 * np.column_stack([np.sin(2 * u + gx), np.cos(u + gy), 2 / 3 * np.sin(u + gz)])
+    fwd = look_at + wander - pos
     fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
     right = np.cross(fwd, [0.0, 0.0, 1.0])
     right /= np.linalg.norm(right, axis=1, keepdims=True)
     down = np.cross(fwd, right)
     rot = np.stack([right, down, fwd], axis=2)  # columns: camera x, y, z in world
-    roll = Rotation.from_rotvec(np.outer(0.05 * np.sin(2 * phase), [0, 0, 1])).as_matrix()
+    roll = Rotation.from_rotvec(np.outer(0.05 * np.sin(2 * u), [0, 0, 1])).as_matrix()
     return rot @ roll, pos
 
 
@@ -315,6 +412,14 @@ def generate(
     tmp.mkdir(parents=True)
     write_marker(tmp, {"frames": frames, "seed": seed, "size": list(size), "scene": scene_kind, "layout": layout})
     placed = kind.synth(tmp, Synth(frames, seed, size, scene_kind, out.name))
+    declared = set(kind.synth_outside(out))
+    for _, place in placed or ():
+        if place not in declared:  # never replace what the writer did not name in advance (checked above)
+            shutil.rmtree(tmp)
+            raise DatasetError(
+                f"layout {layout} ({kind.provider}): its writer put {place} beside {out}, a file its synth_outside "
+                "does not declare; nothing was written (the writer must declare every file it places)"
+            )
     if out.exists():  # empty, or generated by slamrun (checked above)
         shutil.rmtree(out)
     tmp.rename(out)
@@ -337,16 +442,16 @@ class Synth:
 
     @property
     def scene(self) -> Scene:
-        return make_scene(self.scene_kind, np.random.default_rng(self.seed))
+        return make_scene(self.scene_kind, np.random.default_rng(self.seed), path_shape(self.scene_kind, self.seed))
 
     def renderer(self, cam) -> tuple[Scene, Renderer]:
         rng = np.random.default_rng(self.seed)
-        scene = make_scene(self.scene_kind, rng)
+        scene = make_scene(self.scene_kind, rng, path_shape(self.scene_kind, self.seed))
         return scene, Renderer(scene, make_texture(rng), camera_rays(cam), (cam.height, cam.width))
 
     def poses_at(self, scene: Scene, fraction: np.ndarray) -> np.ndarray:
         """Camera-to-world 4x4 poses at `fraction` of the sequence's path (0: first frame, 1: last)."""
-        rots, positions = camera_path_at(scene, 2 * np.pi * self.laps * np.asarray(fraction, float))
+        rots, positions = camera_path_at(scene, self.laps * np.asarray(fraction, float))
         t = np.tile(np.eye(4), (len(rots), 1, 1))
         t[:, :3, :3], t[:, :3, 3] = rots, positions
         return t
