@@ -500,3 +500,80 @@ def test_an_unreachable_dask_scheduler_is_named(tmp_path):
 
     with pytest.raises(InfraError, match=r"cannot reach the Dask scheduler at tcp://127\.0\.0\.1:9"):
         DaskBackend("local", "tcp://127.0.0.1:9", tmp_path, connect_timeout_s=2)
+
+
+def test_a_full_disk_on_a_finished_campaign_is_said_as_a_full_disk_by_every_command(tmp_path, tiny_dataset, small_disk):
+    """A finished campaign's disk fills: `campaign` (nothing left to run) said "not a readable ledger (disk I/O
+    error) ... move it aside" of a whole ledger, `report` and `import` ended in tracebacks. Now each says the disk is
+    full in one line and exits 1; `status` reads as ever; the ledger and the runs are unchanged."""
+    results = small_disk / "results"
+    spec = write_spec(
+        tmp_path,
+        tiny_dataset,
+        [fake_method()],
+        datasets=one_sequence(tiny_dataset),
+        trials=1,
+        results=str(results),
+        report=False,
+    )
+    out, err = slamrun("campaign", str(spec)).communicate(timeout=300)
+    assert all(r["state"] == "done" for r in ledger_rows(results)), err
+    run_dir = Path(ledger_rows(results)[0]["run_dir"])
+    source = tmp_path / "published"
+    source.mkdir()
+    (source / "seq_a_fw_1.txt").write_bytes((run_dir / "trajectory.txt").read_bytes())
+    before = kept(results)
+    filler = _fill(small_disk)
+    try:
+        commands = {
+            "campaign": ["campaign", str(spec)],
+            "report": ["report", str(results)],
+            "import": [
+                "import",
+                str(source),
+                "--campaign",
+                str(results),
+                "--as",
+                "lab:vo",
+                "--pattern",
+                r"(?P<sequence>seq_a)_(?P<direction>fw)_(?P<trial>\d+)\.txt",
+            ],
+        }
+        for name, argv in commands.items():
+            proc = slamrun(*argv)
+            out, err = proc.communicate(timeout=300)
+            assert proc.returncode == 1, (name, proc.returncode, err[-2000:])
+            assert "Traceback" not in err and "disk is full" in err, (name, err[-2000:])
+            assert "move it aside" not in err and "damaged" not in err, (name, err[-2000:])
+        proc = slamrun("status", str(results))
+        out, err = proc.communicate(timeout=120)
+        assert proc.returncode == 0 and "done" in out, err
+    finally:
+        filler.unlink()
+    assert kept(results) == before
+
+
+def kept(results: Path) -> dict:
+    """What a campaign keeps: the ledger and the runs (not the lock's PID, SQLite's -wal/-shm, the report)."""
+    return {
+        p.relative_to(results): p.read_bytes()
+        for p in results.rglob("*")
+        if p.is_file() and p.name != "runner.lock" and not p.name.endswith(("-wal", "-shm")) and "report" not in p.parts
+    }
+
+
+def test_concurrent_reports_of_one_campaign_are_written_one_after_the_other(tmp_path, tiny_dataset):
+    """Three `slamrun report` of one campaign at once, three rounds: one in three rounds ended in a
+    FileNotFoundError traceback (one report clearing what another was writing). Now each waits for the one
+    writing, and all end with a whole report."""
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method(extra=["--noise", "0.01", "--vary"])], trials=2)
+    out, err = slamrun("campaign", str(spec)).communicate(timeout=300)
+    results = tmp_path / "results"
+    assert all(r["state"] == "done" for r in ledger_rows(results)), err
+    for _ in range(3):
+        procs = [slamrun("report", str(results)) for _ in range(3)]
+        ends = [p.communicate(timeout=300) + (p.returncode,) for p in procs]
+        for out, err, code in ends:
+            assert code == 0 and "Traceback" not in err, err[-2000:]
+        index = (results / "report" / "index.html").read_text()
+        assert index.rstrip().endswith("</html>") and "Provenance" in index

@@ -5,7 +5,10 @@ one script library, plotly.js, is written beside it)."""
 
 from __future__ import annotations
 
+import fcntl
 import re
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -18,6 +21,7 @@ from runner.analysis.provenance import provenance
 from runner.analysis.stats import study_statistics
 from runner.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
 from runner.core import jsonio
+from runner.engine.folders import REPORT, claim_output_folder
 from runner.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS, UNDER_MIN_COVERAGE
 
 RUNS_COLUMNS = {
@@ -63,8 +67,23 @@ def write_report(
     campaign of several datasets gets one section (and folder report/datasets/<name>/) per dataset, after the views
     that are sound to pool (counts, success rates, ranks within sequences), labelled as pooled."""
     results = Path(results)
-    df = load_results(results)
     out = results / "report"
+    claim_output_folder(out, REPORT)  # its marker is also the lock below
+    with one_at_a_time(out / REPORT.marker):
+        return _write_report(results, out, level, adjust, alpha, trajectory_sequences)
+
+
+@contextmanager
+def one_at_a_time(marker: Path) -> Iterator[None]:
+    """An exclusive lock on the report folder's marker while a report is written: two reports of one campaign at
+    once (a user's and the campaign's end) are written one after the other, never one clearing the other's files."""
+    with open(marker, "a") as fh:  # "a": the marker's content stays
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        yield
+
+
+def _write_report(results: Path, out: Path, level: float, adjust: str, alpha: float, trajectory_sequences: int) -> Path:
+    df = load_results(results)
     clear_previous(out)
     out.mkdir(parents=True, exist_ok=True)
     groups = by_dataset(df)

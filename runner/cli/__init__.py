@@ -8,7 +8,7 @@ import os
 import sys
 
 from runner.cli import analysis, campaign, data, evaluate, images, native, serve
-from runner.errors import SlamRunError
+from runner.errors import SlamRunError, storage_problem
 
 GROUPS = (campaign, evaluate, analysis, images, native, data, serve)
 
@@ -31,6 +31,17 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("slamrun: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # a full disk, a read-only filesystem: said as such, in one line; anything else raises
+        why = storage_problem(exc)
+        if why is None:
+            raise
+        where = f" ({exc.filename})" if getattr(exc, "filename", None) else ""
+        print(
+            f"slamrun: error: {why}{where}: {exc}; make room (or fix the folder) and run the command again; "
+            "what was written before is kept",
+            file=sys.stderr,
+        )
+        return 1
 
 
 def _reader_gone() -> int:

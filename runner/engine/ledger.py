@@ -5,6 +5,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import shutil
 import sqlite3
 import stat
 import threading
@@ -14,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 from urllib.parse import quote
 
-from runner.errors import LedgerLockedError, LedgerLostError, SlamRunError
+from runner.errors import LedgerLockedError, LedgerLostError, SlamRunError, StorageError
 from runner.results.vocabulary import IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
 
 if TYPE_CHECKING:
@@ -57,6 +58,9 @@ def _coltype(c: str) -> str:
     return _TYPES.get(c, "REAL" if c in _REAL else "TEXT")
 
 
+FULL_BELOW_BYTES = 1 << 20  # free space under which a ledger SQLite cannot open is a full disk, not damage
+
+
 class LedgerDamaged(SlamRunError):
     """The ledger file is not a readable SQLite database (overwritten, truncated, a folder)."""
 
@@ -68,6 +72,21 @@ def damaged_ledger(path: Path, why: str) -> LedgerDamaged:
         f"{path}.damaged) and run `slamrun campaign SPEC` again: every finished run is imported from its folder "
         "under runs/ into a new ledger, nothing is redone"
     )
+
+
+def unreadable_ledger(path: Path, why: str) -> SlamRunError:
+    """The error for a ledger SQLite cannot open or check: a full disk (SQLite says "disk I/O error" when it cannot
+    make the -shm file beside a whole ledger) is said as a full disk, anything else as a damaged ledger."""
+    try:
+        full = shutil.disk_usage(path.parent).free < FULL_BELOW_BYTES
+    except OSError:
+        full = False
+    if full:
+        return StorageError(
+            f"{path}: cannot open the ledger: the disk is full ({why}); make room and run the command again (the "
+            "ledger and every finished run are kept as they are)"
+        )
+    return damaged_ledger(path, why)
 
 
 def _not_a_file(path: Path) -> str | None:
@@ -140,12 +159,18 @@ class Ledger:
                 raise damaged_ledger(self.path, why)
             # Without a -wal file no process writes it now: `immutable` then reads without creating the -shm
             # and -wal files a read-only open of a WAL database would otherwise leave behind.
-            writer = Path(f"{self.path}-wal").exists()
-            mode = "mode=ro" if writer else "mode=ro&immutable=1"
-            uri = f"file:{quote(str(self.path.absolute()))}?{mode}"  # '#', '?' and '%' in a folder's name encoded
-            self._db = sqlite3.connect(uri, uri=True, check_same_thread=False, timeout=30)
-            self._db.row_factory = sqlite3.Row
-            self._check_whole()
+            wal = Path(f"{self.path}-wal")
+            writer = wal.exists()
+            try:
+                self._open_read_only(immutable=not writer)
+            except sqlite3.OperationalError as exc:
+                # A full disk: no -shm can be made beside it. A -wal holding nothing (left by a writer that could
+                # not start) hides no commit, so the file alone is read exactly; else the disk is said full.
+                if not (isinstance(unreadable_ledger(self.path, str(exc)), StorageError) and writer):
+                    raise
+                if wal.stat().st_size:
+                    raise unreadable_ledger(self.path, str(exc)) from None
+                self._open_read_only(immutable=True)
             self._inode = os.stat(self.path).st_ino
             return
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -156,7 +181,7 @@ class Ledger:
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
         except sqlite3.DatabaseError as exc:
-            raise damaged_ledger(self.path, str(exc)) from None
+            raise unreadable_ledger(self.path, str(exc)) from None
         self._check_whole()
         self._db.row_factory = sqlite3.Row
         cols = ", ".join(f"{c} {_coltype(c)}" for c in ALL_COLUMNS if c != "key")
@@ -170,6 +195,17 @@ class Ledger:
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT)")
             self._db.execute("CREATE INDEX IF NOT EXISTS runs_state ON runs(active, state)")
 
+    def _open_read_only(self, immutable: bool) -> None:
+        mode = "mode=ro&immutable=1" if immutable else "mode=ro"
+        uri = f"file:{quote(str(self.path.absolute()))}?{mode}"  # '#', '?' and '%' in a folder's name encoded
+        self._db = sqlite3.connect(uri, uri=True, check_same_thread=False, timeout=30)
+        self._db.row_factory = sqlite3.Row
+        try:
+            self._check_whole()
+        except sqlite3.OperationalError:
+            self._db.close()
+            raise
+
     def _check_whole(self) -> None:
         """LedgerDamaged (closed) when SQLite finds the file is no database or a damaged one (overwritten,
         truncated): every reader and writer gets the same one line instead of an error from deep in a query."""
@@ -179,7 +215,7 @@ class Ledger:
             raise  # locked, busy, cannot open: not a damaged file
         except sqlite3.DatabaseError as exc:
             self._db.close()
-            raise damaged_ledger(self.path, str(exc)) from None
+            raise unreadable_ledger(self.path, str(exc)) from None
         if found != ["ok"]:
             self._db.close()
             raise damaged_ledger(self.path, "; ".join(found)[:300])
