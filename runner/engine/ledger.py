@@ -162,7 +162,14 @@ class Ledger:
             wal = Path(f"{self.path}-wal")
             writer = wal.exists()
             try:
-                self._open_read_only(immutable=not writer)
+                try:
+                    self._open_read_only(immutable=not writer)
+                except LedgerDamaged:
+                    if writer:
+                        raise
+                    # `immutable` reads the file as if no one wrote it: a writer that started after the -wal was
+                    # looked for makes a whole ledger look damaged. Read again as a reader beside a writer does.
+                    self._open_read_only(immutable=False)
             except sqlite3.OperationalError as exc:
                 # A full disk: no -shm can be made beside it. A -wal holding nothing (left by a writer that could
                 # not start) hides no commit, so the file alone is read exactly; else the disk is said full.
