@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict
 
 from runner.core.trajectory import Trajectory, read_tum
@@ -201,17 +202,35 @@ def guarded(cls: type[Method], who: str) -> type[Method]:
         @functools.wraps(inner)
         def call(self, *args, **kwargs):
             try:
-                return inner(self, *args, **kwargs)
+                value = inner(self, *args, **kwargs)
             except (MethodFailure, TrajectoryFormatError, KeyboardInterrupt, GeneratorExit):
                 raise
             except BaseException as exc:  # noqa: BLE001 - whatever a plug-in raises is its own failure
                 raise MethodFailure("crashed", f"{who}: {cls.__name__}.{attr}() raised {one_line(exc)}") from None
+            if attr == "read_trajectory" and (why := not_a_trajectory(value)):
+                raise MethodFailure("crashed", f"{who}: {cls.__name__}.read_trajectory() returned {why}")
+            return value
 
         return call
 
     namespace = {attr: wrap(attr) for attr in GUARDED_CALLS}
     namespace.update(__module__=cls.__module__, __qualname__=cls.__qualname__, __doc__=cls.__doc__)
     return type(cls.__name__, (cls,), namespace)
+
+
+def not_a_trajectory(value) -> str | None:
+    """What `value` is when it is not a usable Trajectory (a plug-in's read_trajectory returned it), else None."""
+    if not isinstance(value, Trajectory):
+        return f"{type(value).__name__}, not a Trajectory"
+    shapes = [np.shape(value.timestamps), np.shape(value.positions), np.shape(value.quaternions)]
+    n = shapes[0][0] if len(shapes[0]) == 1 else -1
+    if shapes != [(n,), (n, 3), (n, 4)]:
+        counts = [s[0] if s else 0 for s in shapes]
+        return f"a Trajectory of {counts[0]} times, {counts[1]} positions and {counts[2]} rotations"
+    for name in ("timestamps", "positions", "quaternions"):
+        if not np.issubdtype(np.asarray(getattr(value, name)).dtype, np.number):
+            return f"a Trajectory whose {name} are not numbers"
+    return None
 
 
 class PythonProcess:

@@ -306,6 +306,16 @@ RAISES = {
     def read_trajectory(self, workdir, view):
         raise RuntimeError("parser bug")
 """,
+    "read-returns-garbage": """
+    def read_trajectory(self, workdir, view):
+        return [[0.0, 1.0, 2.0]]
+""",
+    "read-returns-a-broken-trajectory": """
+    def read_trajectory(self, workdir, view):
+        from runner.core.trajectory import Trajectory
+        import numpy as np
+        return Trajectory(np.arange(3.0), np.zeros((2, 3)), np.zeros((5, 4)))
+""",
 }
 
 
@@ -339,8 +349,14 @@ def test_a_plugin_that_raises_is_the_methods_failure_not_infra(tmp_path, tiny_da
     message = row["message"]
     assert "Traceback" not in message and "\n" not in message
     assert "shaky" in message and "shaky-vo 0.2" in message
-    exc = {"command-raises": "ValueError", "command-exits": "SystemExit", "configure-raises": "KeyError"}
-    assert exc.get(case, "RuntimeError") in message
+    exc = {
+        "command-raises": "ValueError",
+        "command-exits": "SystemExit",
+        "configure-raises": "KeyError",
+        "read-returns-garbage": "returned list, not a Trajectory",
+        "read-returns-a-broken-trajectory": "returned a Trajectory of 3 times, 2 positions and 5 rotations",
+    }
+    assert exc.get(case, "RuntimeError") in message, message
     record = json.loads((Path(row["run_dir"]) / "run.json").read_text())
     assert record["failure"] == "crashed" and record["provider"]["distribution"] == "shaky-vo"
     out = slamrun("campaign", spec, env=env)  # a method's failure is a result: never retried
