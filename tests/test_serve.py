@@ -474,6 +474,28 @@ def test_a_folder_of_several_campaigns_is_listed(finished, tmp_path):
         assert get(base, "/c/not-a-campaign/api/state")[0] == 404
 
 
+def test_the_65th_viewer_polls_instead_of_waiting(finished, tmp_path):
+    """64 viewers stream (server-sent events); the 65th's stream is refused (503) and its page stayed "loading...".
+    Now its page polls api/state and shows the campaign, saying why it polls."""
+    with serving(finished) as base:
+        host, port = base.removeprefix("http://").split(":")
+        streams = []
+        try:
+            for _ in range(64):
+                s = socket.create_connection((host, int(port)), timeout=10)
+                s.sendall(f"GET /c/results/events HTTP/1.1\r\nHost: {host}:{port}\r\n\r\n".encode())
+                assert s.recv(64).startswith(b"HTTP/1.1 200")
+                streams.append(s)
+            assert get(base, "/c/results/events")[0] == 503
+            with chromium_page(f"{base}/c/results/", tmp_path / "profile") as page:
+                progress = "document.getElementById('progress')"
+                assert page.until(f"{progress} && {progress}.dataset.total", timeout_s=60) == "8"
+                assert "polls" in page.until("document.querySelector('.polling')?.textContent", timeout_s=30)
+        finally:
+            for s in streams:
+                s.close()
+
+
 def test_a_ledger_damaged_while_served_is_one_line_not_a_crash(finished, tmp_path):
     copy = tmp_path / "results"
     shutil.copytree(finished, copy, symlinks=True)

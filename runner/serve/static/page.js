@@ -186,12 +186,30 @@ function render(s) {
   document.title = `${s.progress.finished}/${s.progress.total} · ${s.campaign} · slamrun`;
 }
 
+const POLL_MS = 5000;
+
 function campaignPage() {
   let last = null;
   const source = new EventSource(`${base()}events`);
   source.addEventListener("state", (e) => { last = JSON.parse(e.data); render(last); });
   source.addEventListener("problem", (e) => { document.getElementById("app").prepend($("p", { class: "problem", text: JSON.parse(e.data) })); });
-  source.onerror = () => { if (last) document.title = `(disconnected) ${last.campaign} · slamrun`; };
+  source.onerror = () => {
+    // refused (the server streams to 64 viewers at most: 503) or gone for good: the page polls api/state instead
+    if (source.readyState === EventSource.CLOSED) { polling(); return; }
+    if (last) document.title = `(disconnected) ${last.campaign} · slamrun`;
+  };
+}
+
+function polling() {
+  const note = $("p", { class: "polling", text: `This page polls the campaign every ${POLL_MS / 1000} s: the server streams to as many viewers as it can at once.` });
+  const tick = async () => {
+    try {
+      const r = await fetch(`${base()}api/state`);
+      if (r.ok) { render(await r.json()); document.getElementById("app").prepend(note); }
+    } catch (err) { /* the server is away: the next tick asks again */ }
+    setTimeout(tick, POLL_MS);
+  };
+  tick();
 }
 
 // ---------------------------------------------------------------- a folder of campaigns
