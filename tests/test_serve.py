@@ -508,6 +508,28 @@ def test_a_ledger_damaged_while_served_is_one_line_not_a_crash(finished, tmp_pat
         assert get(base, "/c/results/files/report/index.html")[0] == 200  # the server goes on
 
 
+def test_a_folder_moved_away_while_served_is_one_line_not_a_crash(finished, tmp_path):
+    """The served campaign's folder moved (or deleted) while served: each request is one line (503 for the
+    campaign's state, 404 for its files), never a 500 with a traceback; the server goes on."""
+    copy = tmp_path / "results"
+    shutil.copytree(finished, copy, symlinks=True)
+    log = tmp_path / "serve.err"
+    with serving(copy, stderr=log) as base:
+        assert get(base, "/c/results/api/state")[0] == 200
+        copy.rename(tmp_path / "moved")
+        time.sleep(1.2)  # past the snapshot's shortest age
+        for path in ("/c/results/api/state", "/c/results/api/runs", "/c/results/", "/c/results/files/results.csv"):
+            status, body, _ = get(base, path)
+            assert status in (404, 503) and b"Traceback" not in body, (path, status, body[:300])
+        status, body, _ = get(base, "/c/results/api/state")
+        assert status == 503 and b"results" in body, body
+        status, body, _ = get(base, "/api/campaigns")  # the served folder itself is gone: said, not a crash
+        assert status == 503 and b"no such folder" in body, body
+        copy.parent.joinpath("moved").rename(copy)  # back: served again
+        assert get(base, "/c/results/api/state")[0] == 200
+    assert "Traceback" not in log.read_text(), log.read_text()[-3000:]
+
+
 def _printed_address(*args: str) -> tuple[subprocess.Popen, str]:
     """`slamrun serve ARGS` as a process, and the address it printed (stdout's first line)."""
     proc = subprocess.Popen(

@@ -137,7 +137,7 @@ def make_app(
     request; `port` (when bound to loopback) limits the Host header to loopback names (no DNS rebinding); `watch`
     (the server's connections) learns which connection is answering a request."""
     hub = Hub(Path(root), interval_s)
-    middlewares = [_guard(token, port, host)] + ([_answering(watch)] if watch is not None else [])
+    middlewares = [_guard(token, port, host), _one_line_errors] + ([_answering(watch)] if watch is not None else [])
     app = web.Application(middlewares=middlewares, client_max_size=1024)
     app["hub"] = hub
     app["streams"] = 0
@@ -193,6 +193,18 @@ def _guard(token: str | None, port: int | None, host: str | None = None):
         return response
 
     return guard
+
+
+@web.middleware
+async def _one_line_errors(request: web.Request, handler):
+    """What goes wrong with the folder served (a damaged ledger, a folder moved or deleted while served) is a 503
+    with one line, never a 500 with a traceback; the server goes on."""
+    try:
+        return await handler(request)
+    except SlamRunError as exc:
+        raise web.HTTPServiceUnavailable(text=f"{' '.join(str(exc).split())[:500]}\n") from None
+    except (FileNotFoundError, NotADirectoryError) as exc:
+        raise web.HTTPServiceUnavailable(text=f"{exc.filename}: gone (moved or deleted while served)\n") from None
 
 
 def _answering(watch: Watch):
