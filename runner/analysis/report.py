@@ -67,10 +67,11 @@ def write_report(
     campaign of several datasets gets one section (and folder report/datasets/<name>/) per dataset, after the views
     that are sound to pool (counts, success rates, ranks within sequences), labelled as pooled."""
     results = Path(results)
+    df = load_results(results)  # first: results that cannot be read leave no report folder behind
     out = results / "report"
     claim_output_folder(out, REPORT)  # its marker is also the lock below
     with one_at_a_time(out / REPORT.marker):
-        return _write_report(results, out, level, adjust, alpha, trajectory_sequences)
+        return _write_report(df, results, out, level, adjust, alpha, trajectory_sequences)
 
 
 @contextmanager
@@ -82,8 +83,9 @@ def one_at_a_time(marker: Path) -> Iterator[None]:
         yield
 
 
-def _write_report(results: Path, out: Path, level: float, adjust: str, alpha: float, trajectory_sequences: int) -> Path:
-    df = load_results(results)
+def _write_report(
+    df: pd.DataFrame, results: Path, out: Path, level: float, adjust: str, alpha: float, trajectory_sequences: int
+) -> Path:
     clear_previous(out)
     out.mkdir(parents=True, exist_ok=True)
     groups = by_dataset(df)
