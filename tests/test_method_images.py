@@ -92,9 +92,10 @@ def test_real_dso_on_the_euroc_and_kitti_layouts_through_docker(dso_image, tmp_p
 
 def test_real_dso_through_podman_matches_docker(dso_image, tmp_path):
     """The same DSO image run by podman (no daemon; loaded from `slamrun images --export`'s archive) and by
-    Docker: 2 rooms x forward/backward x 2 trials each, every run done, e_align medians within 10 %. DSO runs
-    single-threaded (nomt=1, repeatable), so the engines' timing cannot make the two differ; multi-threaded, two
-    campaigns of 8 runs differ by ~15 % in their medians on the same engine."""
+    Docker: 2 rooms x forward/backward, one trial each (single-threaded DSO repeats itself: a second trial would
+    cost CI 3 minutes to say the same), every run done, e_align medians within 10 %. DSO runs single-threaded
+    (nomt=1, repeatable), so the engines' timing cannot make the two differ; multi-threaded, two campaigns of 8 runs
+    differ by ~15 % in their medians on the same engine."""
     import shutil
 
     from tests.test_docker import in_podman
@@ -116,14 +117,14 @@ def test_real_dso_through_podman_matches_docker(dso_image, tmp_path):
             [{"name": "dso", "params": {"single_thread": True}}],
             datasets=[{"name": "synth", "path": str(data), "sequences": ["room_a", "room_b"]}],
             backend=backend,
-            trials=2,
+            trials=1,
             lanes=2,
             timeout_s=600,
             name=f"dso-{backend}",
         )
         res = run_campaign(load_spec(spec), log=lambda *a: None)
         df = pd.read_csv(res.results_csv)
-        assert res.counts["done"] == 8, df[["direction", "status", "failure", "message"]].to_string()
+        assert res.counts["done"] == 4, df[["direction", "status", "failure", "message"]].to_string()
         assert (df.eval_status == "ok").all() and df.ram_peak_mb.notna().all() and (df.fps > 0).all()
         medians[backend] = float(df.e_align.median())
     assert abs(medians["podman"] - medians["docker"]) <= 0.10 * medians["docker"], medians
