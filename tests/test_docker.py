@@ -124,6 +124,31 @@ def _no_containers(backend, campaign: str) -> bool:
     return not backend.client.containers.list(all=True, filters={"label": f"slamrun.campaign={campaign}"})
 
 
+def _engine_process(backend):
+    """The process that answers the backend's API: podman's service, or dockerd."""
+    import psutil
+
+    if backend.name == "podman":
+        return psutil.Process(backend.service.proc.pid)
+    return next(p for p in psutil.process_iter(["name"]) if p.info["name"] == "dockerd")
+
+
+def test_the_engine_spends_no_core_while_a_run_waits(backend, image, tmp_path, view):
+    """A run's container is watched without costing the method CPU: podman's API service answered slamrun's
+    `wait` requests by polling flat out (containers/podman#18150), 1.2-1.3 cores of this 2-core machine for as
+    long as a container ran, so a podman run's FPS and CPU figures were taken beside slamrun's own load (DSO at 2
+    lanes ran 3 times slower than under Docker). The engine's CPU time while a container sleeps 4 s stays under a
+    tenth of the wall time (Docker's and podman's measured: about 0.01)."""
+    req = _request(tmp_path, view, ["python3", "-c", "import time; time.sleep(4)"])
+    engine = _engine_process(backend)
+    before, t0 = engine.cpu_times(), time.monotonic()
+    res = backend.execute(req, threading.Event())
+    after, wall = engine.cpu_times(), time.monotonic() - t0
+    assert res.exit_code == 0 and not res.timed_out
+    busy = (after.user + after.system) - (before.user + before.system)
+    assert busy < 0.1 * wall, f"{backend.name}'s engine used {busy:.2f} s of CPU in a {wall:.1f} s run"
+
+
 def test_hang_is_killed_at_timeout(backend, image, tmp_path, view):
     req = _request(
         tmp_path, view, ["python3", "-c", "import time; print('start', flush=True); time.sleep(600)"], timeout_s=3
@@ -306,7 +331,7 @@ def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo
         [{"name": "reference_vo"}],
         backend=backend.name,
         timeout_s=300,
-        trials=2,
+        trials=1,
         datasets=one_sequence(vo_dataset),
         name="killtest",
     )
@@ -332,7 +357,7 @@ def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo
     assert interrupted <= at_kill
     assert backend.client.containers.list(all=True, filters=labels)  # the orphan is still there
     res = run_campaign(load_spec(spec), log=lambda *a: None)
-    assert res.counts["done"] == 4
+    assert res.counts["done"] == 2
     assert res.recovered["requeued"] + res.recovered["imported"] == len(at_kill), res.recovered
     assert _no_containers(backend, "killtest")
     df = pd.read_csv(res.results_csv)

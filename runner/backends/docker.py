@@ -273,12 +273,12 @@ class DockerBackend(Defaults):
         def step(remaining: float) -> bool:
             nonlocal exit_code
             try:
-                exit_code = container.wait(timeout=min(0.2, max(remaining, 0.01))).get("StatusCode")
-                return True
-            except Exception as exc:  # noqa: BLE001 - requests' ReadTimeout / ConnectionError, or a dead daemon
-                if _timed_out(exc) or self.daemon_answers():
+                exit_code = self.exit_status(container, min(0.2, max(remaining, 0.01)))
+            except Exception as exc:  # noqa: BLE001 - requests' ConnectionError, or a dead daemon
+                if self.daemon_answers():
                     return False
                 raise self.daemon_lost(exc) from None
+            return exit_code is not None
 
         try:
             timed_out, cancelled, exceeded = supervise(step, t0, req.timeout_s, cancel, OutputWatch.of(req))
@@ -292,7 +292,7 @@ class DockerBackend(Defaults):
             except docker.errors.APIError:
                 pass
             try:
-                exit_code = container.wait(timeout=30).get("StatusCode")
+                exit_code = self.exit_status(container, 30)
             except Exception:  # noqa: BLE001
                 exit_code = None
         wall_s = time.monotonic() - t0
@@ -313,6 +313,16 @@ class DockerBackend(Defaults):
             resources=series.summary(wall_s, req.view.n_frames),
             output_exceeded=exceeded,
         )
+
+    @staticmethod
+    def exit_status(container, timeout_s: float) -> int | None:
+        """The container's exit status once it has exited, waiting at most `timeout_s`; None while it runs."""
+        try:
+            return container.wait(timeout=timeout_s).get("StatusCode")
+        except Exception as exc:  # noqa: BLE001 - requests' ReadTimeout is the answer "still running"
+            if _timed_out(exc):
+                return None
+            raise
 
     @staticmethod
     def out_of_memory(container, exit_code: int | None, req: ExecRequest) -> bool:
