@@ -573,7 +573,7 @@ def test_concurrent_reports_of_one_campaign_are_written_one_after_the_other(tmp_
     for _ in range(3):
         procs = [slamrun("report", str(results)) for _ in range(3)]
         ends = [p.communicate(timeout=300) + (p.returncode,) for p in procs]
-        for out, err, code in ends:
+        for _out, err, code in ends:
             assert code == 0 and "Traceback" not in err, err[-2000:]
         index = (results / "report" / "index.html").read_text()
         assert index.rstrip().endswith("</html>") and "Provenance" in index
