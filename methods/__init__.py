@@ -30,6 +30,7 @@ from methods.orb_slam2 import OrbSlam2
 from methods.orb_slam3 import OrbSlam3
 from methods.reference_vo.adapter import ReferenceVO
 from methods.svo import Svo
+from runner.suggest import did_you_mean
 
 STUDY_METHODS = ("orb_slam2", "df_orb_slam", "lsd_slam", "dso", "svo", "ldso", "dsm", "dynaslam", "cnn_dso", "cnn_svo")
 
@@ -120,7 +121,8 @@ def get(name: str) -> type[Method]:
     except KeyError:
         if name in PLUGIN_ERRORS:
             raise KeyError(PLUGIN_ERRORS[name]) from None
-        raise KeyError(f"unknown method {name!r} (known: {', '.join(sorted(REGISTRY))})") from None
+        hint = did_you_mean(name, REGISTRY)
+        raise KeyError(f"unknown method {name!r}{hint} (known: {', '.join(sorted(REGISTRY))})") from None
 
 
 def describe(name: str) -> str:

@@ -28,7 +28,7 @@ def test_every_problem_listed_at_once(tmp_path, tiny_dataset):
     with pytest.raises(SpecError) as err:
         load_spec(p)
     msg = str(err.value)
-    assert "methods[2].name: unknown method 'dsoo' (known: " in msg
+    assert "methods[2].name: unknown method 'dsoo'; did you mean 'dso'? (known: " in msg
     assert "methods[1].params.colour: unknown parameter" in msg
     assert "lanse: unknown key" in msg
     assert "trials: Input should be greater than or equal to 1" in msg
@@ -110,3 +110,83 @@ def test_distributed_spec(tmp_path, tiny_dataset):
     with pytest.raises(SpecError) as err:
         load_spec(timing)
     assert "'exclusive' (timing) needs one machine" in str(err.value)
+
+
+TYPOS = """\
+name: typos
+trails: 2
+backnd: docker
+datasets:
+  - name: e
+    path: data
+    layuot: euroc
+    sequences: [MH_synth]
+  - name: k
+    path: kitti/sequences
+    layout: kitti
+    sequences: [00, 07, "08"]
+  - name: x
+    path: data
+    layout: EuRoC
+    sequences: MH_synth
+methods:
+  - name: reference_v0
+  - name: colmap
+    params: {strid: 3}
+directions: [forwrd]
+"""
+
+
+def test_every_typo_gets_the_name_it_was_meant_to_be_in_line_order(tmp_path):
+    """A newcomer's typos, each answered with the close name (case-insensitively), in the file's line order,
+    without pydantic's "Value error, " prefix; KITTI's 00 (a number to YAML) is told to be quoted."""
+    (tmp_path / "spec.yaml").write_text(TYPOS)
+    with pytest.raises(SpecError) as err:
+        load_spec(tmp_path / "spec.yaml", check_files=False)
+    known = "cnn_dso, cnn_svo, colmap, df_orb_slam, dpvo, droid_slam, dsm, dso, dynaslam, external, glomap, ldso"
+    assert err.value.problems == [
+        "line 2: trails: unknown key; did you mean 'trials'?",
+        "line 3: backnd: unknown key; did you mean 'backend'?",
+        "line 7: datasets[0].layuot: unknown key; did you mean 'layout'?",
+        'line 12: datasets[1].sequences[0]: 0 is a number to YAML, not a folder name: quote it: "00"',
+        'line 12: datasets[1].sequences[1]: 7 is a number to YAML, not a folder name: quote it: "07"',
+        "line 15: datasets[2].layout: unknown layout 'EuRoC'; did you mean 'euroc'? (known: tum-mono, euroc, kitti, "
+        "tum-rgbd, tum-vi, icl-nuim, tartanair)",
+        f"line 18: methods[0].name: unknown method 'reference_v0'; did you mean 'reference_vo'? (known: {known}, "
+        "lsd_slam, orb_slam2, orb_slam3, reference_vo, svo)",
+        "line 20: methods[1].params.strid: unknown parameter; did you mean 'stride'?",
+        "line 21: directions[0]: Input should be 'forward' or 'backward'; did you mean 'forward'?",
+    ]
+    assert not any("Value error" in p for p in err.value.problems)
+
+
+def test_problems_are_sorted_by_line_whichever_check_found_them(tmp_path):
+    """The method checks run after the schema's: their problems still come in the file's order."""
+    (tmp_path / "spec.yaml").write_text(
+        "name: order\nmethods:\n  - name: nope\ndatasets:\n  - {name: d, path: ., sequences: [a]}\nlanse: 2\n"
+    )
+    with pytest.raises(SpecError) as err:
+        load_spec(tmp_path / "spec.yaml", check_files=False)
+    lines = [int(p.split(":")[0].removeprefix("line ")) for p in err.value.problems]
+    assert lines == sorted(lines) == [3, 6], err.value.problems
+
+
+def test_a_missing_sequence_names_the_close_one_and_lists_those_present(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], datasets=[
+        {"name": "d", "path": str(tiny_dataset), "sequences": ["seq_aa", "sqe_b", "other"]},
+    ])  # fmt: skip
+    with pytest.raises(SpecError) as err:
+        load_spec(spec)
+    holds = f"({tiny_dataset} holds seq_a, seq_b)"
+    assert [p.split(": ", 1)[1] for p in err.value.problems] == [
+        f"datasets[0].sequences[0]: {tiny_dataset / 'seq_aa'} not found; did you mean 'seq_a'? {holds}",
+        f"datasets[0].sequences[1]: {tiny_dataset / 'sqe_b'} not found; did you mean 'seq_b'? {holds}",
+        f"datasets[0].sequences[2]: {tiny_dataset / 'other'} not found {holds}",
+    ]
+
+
+def test_one_sequence_name_is_a_list_of_one(tmp_path, tiny_dataset):
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], datasets=[
+        {"name": "d", "path": str(tiny_dataset), "sequences": "seq_a"},
+    ])  # fmt: skip
+    assert load_spec(spec).datasets[0].sequences == ["seq_a"]

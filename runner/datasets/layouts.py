@@ -32,6 +32,7 @@ from runner.datasets.plugin_checks import TIME_LIMITS_S, bounded, checked_reader
 from runner.datasets.protocol import METRICS, Layout
 from runner.datasets.sequence import Sequence, folder_identity
 from runner.errors import DatasetError, SlamRunError
+from runner.suggest import did_you_mean
 
 BUILT_IN: tuple[Layout, ...] = (
     tum_vi.LAYOUT,
@@ -171,7 +172,7 @@ def get(name: str) -> Layout:
         return plugins[name]
     if name in errors:
         raise DatasetError(f"layout {name!r}: {errors[name]}")
-    raise DatasetError(f"unknown layout {name!r}; known: {', '.join(names())}")
+    raise DatasetError(f"unknown layout {name!r}{did_you_mean(name, names())} (known: {', '.join(names())})")
 
 
 def names() -> tuple[str, ...]:

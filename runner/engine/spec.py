@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import re
+import typing
 from enum import StrEnum
 from pathlib import Path
 from typing import Any, Literal
@@ -30,6 +31,7 @@ from runner.engine.folders import (
     path_part_problem,
 )
 from runner.errors import DatasetError, SlamRunError, SpecError
+from runner.suggest import did_you_mean
 
 
 class Strict(BaseModel):
@@ -80,7 +82,15 @@ class RpeSpec(Strict):
 class DatasetSpec(Strict):
     name: str = Field(description="Dataset name, e.g. tum-mono.")
     path: Path = Field(description="Folder holding one folder per sequence.")
-    sequences: list[str] = Field(min_length=1, description="Sequence folder names, e.g. sequence_01.")
+    sequences: list[str] = Field(
+        min_length=1, description="Sequence folder names, e.g. [sequence_01, sequence_02], or one name."
+    )
+
+    @field_validator("sequences", mode="before")
+    @classmethod
+    def _one_name_is_a_list(cls, v: Any) -> Any:
+        return [v] if isinstance(v, str) else v
+
     layout: str = Field(
         "tum-mono",
         description="The sequences' layout: tum-mono, euroc (ASL), kitti (sequences/NN), tum-rgbd, tum-vi, icl-nuim, "
@@ -314,6 +324,62 @@ def _loc(loc: tuple) -> str:
     return out or "<top>"
 
 
+def _fields_at(model: type[BaseModel], loc: tuple) -> list[str]:
+    """The field names of the model found at `loc` below `model` (list and dict items and optional fields passed
+    through), or [] where `loc` leaves the models."""
+    current: Any = model
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        fields = getattr(current, "model_fields", {})
+        if part not in fields:
+            return []
+        current = _model_in(fields[part].annotation)
+        if current is None:
+            return []
+    return list(getattr(current, "model_fields", {}))
+
+
+def _model_in(annotation: Any) -> type[BaseModel] | None:
+    """The pydantic model an annotation holds (itself, or inside Optional/list/dict), or None."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in typing.get_args(annotation):
+        if (found := _model_in(arg)) is not None:
+            return found
+    return None
+
+
+def _message(err: dict, model: type[BaseModel], kind: str, raw: dict | None = None) -> str:
+    """One pydantic error as the spec's reader needs it: an unknown `kind` (key or parameter) with the close one, a
+    validator's own sentence without pydantic's "Value error, ", a choice with the close option, a number YAML read
+    where a sequence name was meant."""
+    loc, value = err["loc"], err.get("input")
+    if err["type"] == "extra_forbidden":
+        return f"unknown {kind}" + did_you_mean(str(loc[-1]), _fields_at(model, loc[:-1]))
+    if err["type"] in ("value_error", "assertion_error") and "error" in (err.get("ctx") or {}):
+        return str(err["ctx"]["error"])
+    if err["type"] in ("literal_error", "enum") and isinstance(value, str):
+        return err["msg"] + did_you_mean(value, re.findall(r"'([^']*)'", str(err["ctx"].get("expected", ""))))
+    if err["type"] == "string_type" and loc[-2:-1] == ("sequences",) and _is_number(value):
+        return _number_name(value, raw or {}, loc)
+    return err["msg"]
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _number_name(value: int | float, raw: dict, loc: tuple) -> str:
+    """A sequence name YAML read as a number (KITTI's 00 is the integer 0): what to write instead."""
+    try:
+        layout = raw["datasets"][loc[1]].get("layout")
+    except (KeyError, IndexError, TypeError, AttributeError):
+        layout = None
+    name = f"{value:02d}" if layout == "kitti" and isinstance(value, int) and 0 <= value < 100 else str(value)
+    return f'{value} is a number to YAML, not a folder name: quote it: "{name}"'
+
+
 MAX_SPEC_BYTES = 2**20  # a spec is a page of YAML
 MAX_SPEC_VALUES = 100_000  # values in the document once its aliases are expanded
 
@@ -355,7 +421,17 @@ def load_spec(
             check_gpu=check_gpu,
         )
     except SpecError as exc:
-        raise SpecError(exc.source, [_with_line(p, node) for p in exc.problems]) from None
+        raise SpecError(exc.source, _by_line([_with_line(p, node) for p in exc.problems])) from None
+
+
+def _by_line(problems: list[str]) -> list[str]:
+    """Problems in the order of their lines in the file (those without a line last, in their order)."""
+
+    def line(problem: str) -> int:
+        found = re.match(r"line (\d+): ", problem)
+        return int(found.group(1)) if found else 1 << 30
+
+    return sorted(problems, key=line)
 
 
 def _with_line(problem: str, root: yaml.Node | None) -> str:
@@ -394,10 +470,7 @@ def validate_spec(
         spec = CampaignSpec.model_validate(raw)
     except ValidationError as exc:
         for err in exc.errors():
-            msg = err["msg"]
-            if err["type"] == "extra_forbidden":
-                msg = "unknown key"
-            problems.append(f"{_loc(err['loc'])}: {msg}")
+            problems.append(f"{_loc(err['loc'])}: {_message(err, CampaignSpec, 'key', raw)}")
         spec = None
     # Method checks also run when other parts failed, so that every problem is listed at once.
     raw_methods = raw.get("methods") if isinstance(raw.get("methods"), list) else []
@@ -414,8 +487,7 @@ def validate_spec(
             params = cls.Params.model_validate(m.get("params") or {})
         except ValidationError as exc:
             for err in exc.errors():
-                msg = "unknown parameter" if err["type"] == "extra_forbidden" else err["msg"]
-                problems.append(f"methods[{i}].params.{_loc(err['loc'])}: {msg}")
+                problems.append(f"methods[{i}].params.{_loc(err['loc'])}: {_message(err, cls.Params, 'parameter')}")
         else:
             backend = raw.get("backend", "local")
             method = cls(params)
@@ -541,10 +613,32 @@ def _file_problems(spec: CampaignSpec, results_source: str = "results") -> list[
         if not ds.path.is_dir():
             problems.append(f"datasets[{d}].path: folder {ds.path} not found (download it: slamrun dataset download)")
             continue
-        for s, seq in enumerate(ds.sequences):
-            if not (ds.path / seq).is_dir():
-                problems.append(f"datasets[{d}].sequences[{s}]: {ds.path / seq} not found")
+        missing = [(s, seq) for s, seq in enumerate(ds.sequences) if not (ds.path / seq).is_dir()]
+        present = _sequence_folders(ds.path) if missing else []
+        for s, seq in missing:
+            problems.append(
+                f"datasets[{d}].sequences[{s}]: {ds.path / seq} not found{did_you_mean(seq, present)} "
+                f"({_listing(ds.path, present)})"
+            )
     return problems
+
+
+LISTED = 8  # folder names a "not found" lists
+
+
+def _sequence_folders(path: Path) -> list[str]:
+    """The folders in a dataset folder (not hidden), sorted."""
+    try:
+        return sorted(p.name for p in path.iterdir() if p.is_dir() and not p.name.startswith("."))
+    except OSError:
+        return []
+
+
+def _listing(path: Path, names: list[str]) -> str:
+    if not names:
+        return f"{path} holds no folder"
+    more = f" and {len(names) - LISTED} more" if len(names) > LISTED else ""
+    return f"{path} holds {', '.join(names[:LISTED])}{more}"
 
 
 def json_schema() -> dict:
