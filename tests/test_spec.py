@@ -190,3 +190,13 @@ def test_one_sequence_name_is_a_list_of_one(tmp_path, tiny_dataset):
         {"name": "d", "path": str(tiny_dataset), "sequences": "seq_a"},
     ])  # fmt: skip
     assert load_spec(spec).datasets[0].sequences == ["seq_a"]
+
+
+def test_plan_counts_the_views_and_sequences_not_generated_yet(tmp_path, capsys):
+    """Two synthetic sequences not generated yet, forward and backward: 4 views of 2 sequences (it said "4 of
+    synthetic sequences")."""
+    data = {"name": "s", "path": str(tmp_path / "data"), "sequences": ["a", "b"], "synthetic": {"frames": 30}}
+    spec = write_spec(tmp_path, tmp_path / "data", [fake_method()], datasets=[data])
+    assert main(["plan", str(spec)]) == 0
+    out = " ".join(capsys.readouterr().out.split())
+    assert "and 4 view(s) of 2 synthetic sequence(s) generated on first use (their size is known once generated)" in out

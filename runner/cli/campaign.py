@@ -136,7 +136,12 @@ def _print_dry_run(spec) -> int:
     if d.views_to_prepare or d.views_unknown:
         console.print(
             f"{d.views_to_prepare} view(s) to prepare in {spec.cache}, about {d.view_bytes / 2**30:.2f} GB"
-            + (f", and {d.views_unknown} of synthetic sequences generated on first use" if d.views_unknown else "")
+            + (
+                f", and {d.views_unknown} view(s) of {d.sequences_unknown} synthetic sequence(s) generated on first "
+                "use (their size is known once generated)"
+                if d.views_unknown
+                else ""
+            )
         )
     else:
         console.print("every view it needs is prepared")

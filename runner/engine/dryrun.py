@@ -35,6 +35,7 @@ class DryRun:
     views_to_prepare: int = 0
     view_bytes: int = 0
     views_unknown: int = 0  # of synthetic sequences not generated yet
+    sequences_unknown: int = 0  # those sequences
     eta_s: float | None = None
     eta_basis: str = "unknown"
 
@@ -98,14 +99,17 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         groups=groups,
     )
     frames_counted: set[tuple[Path, Profile]] = set()  # a view's other direction links the same frames
+    ungenerated: set[Path] = set()
     for seq_dir, direction, profile in sorted(todo_views, key=str):
         size = _view_bytes_if_missing(seq_dir, direction, profile, spec)
         if size is None:
             out.views_unknown += 1
+            ungenerated.add(seq_dir)
         elif size:
             out.views_to_prepare += 1
             out.view_bytes += 0 if (seq_dir, profile) in frames_counted else size
             frames_counted.add((seq_dir, profile))
+    out.sequences_unknown = len(ungenerated)
     overhead = last_session_overhead(list(rows.values()), session)
     out.eta_s, out.eta_basis = eta(dict(todo_by_group), wall_times(rows.values()), lanes, overhead)
     return out
