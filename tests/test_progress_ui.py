@@ -147,14 +147,28 @@ def test_live_view_total_eta_resume_and_failed_runs(tmp_path, tiny_dataset):
 
 
 def test_plain_lines_carry_the_same_figures(tmp_path, tiny_dataset):
-    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], trials=2, lanes=1, report=False)
+    """The headline every few runs, and each run's line with its main figure whatever the dataset's metrics:
+    TUM-Mono's e_align, EuRoC's ATE RMSE (it showed none for an ATE dataset)."""
+    from runner.datasets.synth import generate
+
+    euroc = generate(tmp_path / "euroc" / "V1_tiny", frames=40, seed=1, size=(160, 120), layout="euroc")
+    datasets = [
+        {"name": "tum", "path": str(tiny_dataset), "sequences": ["seq_a", "seq_b"]},
+        {"name": "euroc", "path": str(euroc.parent), "sequences": [euroc.name], "layout": "euroc"},
+    ]
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], datasets=datasets, trials=2, lanes=1, report=False)
     proc = subprocess.run(
         [sys.executable, "-m", "runner.cli", "campaign", str(spec)], capture_output=True, text=True, timeout=240
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("progress:")]
-    assert lines and "8/8 finished" in lines[-1] and "done 8" in lines[-1]
+    assert lines and "12/12 finished" in lines[-1] and "done 12" in lines[-1]
     assert any("ETA" in ln for ln in lines[:-1])
+    runs = [ln for ln in proc.stdout.splitlines() if ln.startswith("[lane ")]
+    assert len(runs) == 12, proc.stdout
+    for ln in runs:
+        figure = r" ate_rmse=[0-9.e+-]+ m$" if "/V1_tiny@" in ln else r" e_align=[0-9.e+-]+$"
+        assert re.search(r": done \(ok\)" + figure, ln), ln
 
 
 # ------------------------------------------------------------ the dry run

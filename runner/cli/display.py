@@ -64,6 +64,20 @@ def status_view(f: Figures) -> Group:
     return Group(group_table(f), headline(f), Text(f"campaign {state}, {f.lanes} lane(s)"))
 
 
+MAIN_FIGURES = (("e_align", ""), ("ate_rmse", " m"), ("rpe_t_rmse", " m"), ("kitti_t_pct", " %"))
+
+
+def finished_line(lane: int, run_id: str, info: dict) -> str:
+    """A finished run's plain line: its state, failure, and its main figure, whatever its dataset's metrics
+    (TUM-Mono's e_align, else ATE's RMSE, else RPE's, else KITTI's segment error)."""
+    line = f"[lane {lane}] {run_id}: {info.get('state')} ({info.get('failure') or 'ok'})"
+    for name, unit in MAIN_FIGURES:
+        value = info.get(name)
+        if isinstance(value, float) and value == value:
+            return f"{line} {name}={value:.4g}{unit}"
+    return line
+
+
 class LiveProgress:
     """The campaign's live view: a headline over the whole plan and what each lane runs now, refreshed from
     the ledger; plain lines (each finished run, and the headline every `every` runs) when not on a terminal."""
@@ -152,11 +166,7 @@ class LiveProgress:
             self.finished_here += 1
             f = self.figures()
             if not self.tty:
-                what = info.get("failure") or "ok"
-                metric = info.get("e_align")
-                extra = f" e_align={metric:.4g}" if isinstance(metric, float) else ""
-                line = f"[lane {lane.index}] {run.key.id}: {info.get('state')} ({what}){extra}"
-                self.console.print(line, markup=False, highlight=False)
+                self.console.print(finished_line(lane.index, run.key.id, info), markup=False, highlight=False)
                 every = self.every or max(1, min(10, (f.total if f else 20) // 20))
                 if f is not None and self.finished_here % every == 0:
                     self.console.print(f"progress: {one_line(f)}")
