@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 from runner.errors import SlamRunError
@@ -25,7 +26,12 @@ def add_commands(sub) -> None:
         "serve",
         help="a live page of a campaign in a browser: progress, lanes, failures, medians, figures, paths (read-only)",
     )
-    s.add_argument("results", type=Path, help="a campaign's results folder, or a folder of several (listed)")
+    s.add_argument(
+        "results",
+        type=Path,
+        help="a campaign's results folder, a folder of several (listed), or a spec (its results folder); one that "
+        "holds no campaign yet is waited for",
+    )
     s.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1: this machine only)")
     s.add_argument("--port", type=_port, default=8765, help="port (default 8765; 0: any free port)")
     s.add_argument(
@@ -42,4 +48,15 @@ def cmd_serve(args) -> int:
 
     if not 0.1 <= args.interval <= 60:
         raise SlamRunError(f"--interval {args.interval}: expected 0.1 to 60 seconds")
-    return serve(args.results, args.host, args.port, args.token, args.interval)
+    return serve(served_folder(args.results), args.host, args.port, args.token, args.interval)
+
+
+def served_folder(path: Path) -> Path:
+    """The folder to serve: `path`, or where `path` is a file, the results folder of the spec it is."""
+    if not path.is_file():
+        return path
+    from runner.engine.spec import load_spec
+
+    results = load_spec(path, check_files=False, check_gpu=False).results
+    print(f"slamrun serve: {path} is a spec; serving its results folder {results}", file=sys.stderr, flush=True)
+    return results

@@ -9,6 +9,7 @@ import secrets
 import signal
 import socket
 import sys
+import time
 from pathlib import Path
 
 from runner.errors import SlamRunError
@@ -37,9 +38,33 @@ def check_folder(root: Path) -> dict[str, Path]:
     return found
 
 
+WAIT_POLL_S = 0.5
+
+
+def wait_for_campaign(root: Path, poll_s: float = WAIT_POLL_S) -> None:
+    """Return once `root` holds a campaign; until then say once what it waits for (a campaign started a moment
+    before creates its folder and ledger a moment later). Ctrl-C ends the wait."""
+    said = False
+    while True:
+        try:
+            if campaigns(root):
+                return
+            why = "holds no campaign yet"
+        except SlamRunError:
+            why = "does not exist yet"
+        if not said:
+            print(
+                f"slamrun serve: {root} {why}; waiting for a campaign there (`slamrun campaign` creates its "
+                f"results folder and {LEDGER}; Ctrl-C to stop)",
+                file=sys.stderr,
+                flush=True,
+            )
+            said = True
+        time.sleep(poll_s)
+
+
 def serve(root: Path, host: str, port: int, token: str | None, interval_s: float) -> int:
     """Serve `root` until interrupted; 0 when stopped by Ctrl-C or SIGTERM."""
-    check_folder(root)
     loopback = is_loopback(host)
     if loopback:
         token = None
@@ -47,7 +72,32 @@ def serve(root: Path, host: str, port: int, token: str | None, interval_s: float
         if token is not None and len(token) < MIN_TOKEN:
             raise SlamRunError(f"--token: at least {MIN_TOKEN} characters (a random one is made when none is given)")
         token = token or secrets.token_urlsafe(24)
+    wait_for_campaign(root)
+    check_folder(root)
     return asyncio.run(_serve(root, host, port, token, interval_s, loopback))
+
+
+def urls(host: str, port: int, token: str | None, names: list[str]) -> list[str]:
+    """The addresses to print: `host`'s, or for a wildcard host (0.0.0.0, ::), one per name of this machine (`names`:
+    its host name, then its addresses), since 0.0.0.0 opens nothing on a colleague's machine."""
+    wildcard = host in ("0.0.0.0", "::", "[::]", "")
+    query = f"?token={token}" if token else ""
+    return [f"http://{f'[{h}]' if ':' in h else h}:{port}/{query}" for h in (names if wildcard else [host])]
+
+
+def machine_names(host: str) -> list[str]:
+    """This machine's host name and its addresses beyond loopback (IPv4 for 0.0.0.0; IPv6 too for ::)."""
+    import psutil
+
+    families = (socket.AF_INET,) if host == "0.0.0.0" else (socket.AF_INET, socket.AF_INET6)
+    found = [socket.gethostname()]
+    for addrs in psutil.net_if_addrs().values():
+        for a in addrs:
+            address = a.address.split("%")[0]
+            if a.family in families and not ipaddress.ip_address(address).is_loopback:
+                if not ipaddress.ip_address(address).is_link_local:
+                    found.append(address)
+    return list(dict.fromkeys(found))
 
 
 async def _serve(root: Path, host: str, port: int, token: str | None, interval_s: float, loopback: bool) -> int:
@@ -67,15 +117,16 @@ async def _serve(root: Path, host: str, port: int, token: str | None, interval_s
     loop.set_exception_handler(lambda _loop, context: watch.refusals.note(_loop_error(context)))
     listening = await loop.create_server(watch.factory(runner.server), sock=sock)
     sweeper = asyncio.create_task(watch.sweeping())
-    shown = f"[{host}]" if ":" in host else host
-    url = f"http://{shown}:{bound}/" + (f"?token={token}" if token else "")
+    addresses = urls(host, bound, token, machine_names(host))
     if not loopback:
         print(
             f"slamrun serve: WARNING: listening on {host}, not this machine alone: anyone who can reach it and has "
             "the token sees the campaign (its logs, paths and figures). The traffic is not encrypted.",
             file=sys.stderr,
         )
-    print(f"slamrun serve: {root} at {url} (Ctrl-C to stop)", flush=True)
+    print(f"slamrun serve: {root} at {addresses[0]} (Ctrl-C to stop)", flush=True)
+    for other in addresses[1:]:
+        print(f"slamrun serve: also at {other}", flush=True)
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
