@@ -271,3 +271,31 @@ def test_a_dataset_without_an_evaluated_run_gives_an_empty_block_not_an_error(tm
         and p.stderr.startswith("slamrun: error: ")
         and "dataset 'b' has no value of ate_rmse" in p.stderr
     )
+
+
+def test_serve_shows_every_datasets_report_figures_grouped_by_dataset(two_datasets, tmp_path):
+    """A multi-dataset report writes report/datasets/NAME/figures/; `serve` looked in report/figures/ alone and said
+    "no report yet" after the report was written. Each dataset's figures are listed under its name, and load."""
+    import json
+
+    from tests.test_report_page import chromium_page
+    from tests.test_serve import get, serving
+
+    folders = {p.parent.name: p for p in (two_datasets.results / "report" / "datasets").glob("*/figures")}
+    assert set(folders) == {"euroc", "kitti"}
+    with serving(two_datasets.results) as base:
+        status, body, _ = get(base, "/c/results/api/state")
+        assert status == 200
+        figures = json.loads(body)["figures"]
+        for name, folder in folders.items():
+            listed = [f for f in figures if f["dataset"] == name]
+            on_disk = {p.stem for p in folder.iterdir() if p.suffix == ".png"}
+            assert on_disk and {f["name"] for f in listed} >= on_disk, (name, listed)
+            for f in listed:
+                assert f["path"].startswith(f"report/datasets/{name}/figures/")
+                assert get(base, f"/c/results/files/{f['path']}")[0] == 200
+        with chromium_page(f"{base}/c/results/", tmp_path / "profile") as page:  # a heading and grid per dataset
+            heads = "[...document.querySelectorAll('#figures h3')].map(h => h.textContent).join(',')"
+            assert page.until(heads, timeout_s=60) == "dataset euroc,dataset kitti"
+            shown = "document.querySelectorAll('#figures .dataset-figures img').length"
+            assert page.evaluate(shown) == sum(f["dataset"] is not None for f in figures)

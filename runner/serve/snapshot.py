@@ -38,7 +38,8 @@ class Signature:
     @classmethod
     def of(cls, results: Path) -> Signature:
         stamps = []
-        for path in (results / LEDGER, results / f"{LEDGER}-wal", results / "report" / "figures", results / "report"):
+        folders = [results / "report" / "figures", results / "report", *_dataset_figure_folders(results).values()]
+        for path in (results / LEDGER, results / f"{LEDGER}-wal", *folders):
             try:
                 st = os.stat(path)
                 stamps.append((st.st_mtime_ns, st.st_size, st.st_ino))
@@ -124,10 +125,27 @@ def medians(done: list[dict]) -> dict:
     return out
 
 
+def _dataset_figure_folders(results: Path) -> dict[str, Path]:
+    """A multi-dataset report's folders of figures by dataset (report/datasets/NAME/figures), sorted by name."""
+    try:
+        with os.scandir(results / "report" / "datasets") as entries:
+            names = sorted(e.name for e in entries if e.is_dir(follow_symlinks=False) and not e.name.startswith("."))
+    except OSError:
+        return {}
+    return {name: results / "report" / "datasets" / name / "figures" for name in names}
+
+
 def report_figures(results: Path) -> list[dict]:
-    """The report's figures (PNG, SVG when there is no PNG of the name), newest first, with their times: the page
-    reloads one when its time changes."""
-    folder = results / "report" / "figures"
+    """The report's figures (PNG, SVG when there is no PNG of the name) with their times (the page reloads one when
+    its time changes): those of the whole campaign, newest first, then each dataset's of a multi-dataset report
+    (`dataset` names it), datasets by name."""
+    found = _figures_in(results / "report" / "figures", "report/figures", None)
+    for name, folder in _dataset_figure_folders(results).items():
+        found += _figures_in(folder, f"report/datasets/{name}/figures", name)
+    return found[:MAX_FIGURES]
+
+
+def _figures_in(folder: Path, served: str, dataset: str | None) -> list[dict]:
     try:
         entries = [e for e in os.scandir(folder) if e.is_file(follow_symlinks=False)]
     except OSError:
@@ -138,9 +156,9 @@ def report_figures(results: Path) -> list[dict]:
         stem, suffix = os.path.splitext(e.name)
         if suffix not in FIGURE_SUFFIXES or e.name.startswith(".") or (suffix == ".svg" and f"{stem}.png" in names):
             continue
-        found.append({"path": f"report/figures/{e.name}", "name": stem, "mtime": e.stat().st_mtime})
+        found.append({"path": f"{served}/{e.name}", "name": stem, "mtime": e.stat().st_mtime, "dataset": dataset})
     found.sort(key=lambda f: (-f["mtime"], f["name"]))
-    return found[:MAX_FIGURES]
+    return found
 
 
 def _finite(v) -> bool:

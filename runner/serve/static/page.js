@@ -126,9 +126,17 @@ function medians(s) {
 
 function figures(s) {
   if (!s.figures.length) return section("figures", "Report figures", $("p", { class: "muted", text: "no report yet: its figures appear here when it is written" }));
-  return section("figures", "Report figures", $("div", { class: "grid" },
-    ...s.figures.map((f) => $("figure", {}, $("a", { href: `${base()}files/${f.path}` },
-      $("img", { src: `${base()}files/${f.path}?v=${f.mtime}`, alt: f.name, loading: "lazy" })), $("figcaption", { text: f.name })))));
+  const grid = (list) => $("div", { class: "grid" },
+    ...list.map((f) => $("figure", {}, $("a", { href: `${base()}files/${f.path}` },
+      $("img", { src: `${base()}files/${f.path}?v=${f.mtime}`, alt: f.name, loading: "lazy" })), $("figcaption", { text: f.name }))));
+  const byDataset = new Map();  // the campaign's own figures first, then each dataset's (a multi-dataset report)
+  for (const f of s.figures) {
+    const key = f.dataset || "";
+    if (!byDataset.has(key)) byDataset.set(key, []);
+    byDataset.get(key).push(f);
+  }
+  return section("figures", "Report figures", ...[...byDataset].map(([name, list]) =>
+    name ? $("div", { class: "dataset-figures" }, $("h3", { text: `dataset ${name}` }), grid(list)) : grid(list)));
 }
 
 // The path viewer keeps its own state across updates (what the user picked).
