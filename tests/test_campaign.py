@@ -305,6 +305,29 @@ def test_sigint_stops_cleanly_and_resumes(tmp_path, tiny_dataset):
     assert all(r["state"] == "done" for r in ledger_rows(results))
 
 
+def test_ctrl_c_after_which_every_run_finished_says_so_and_writes_the_report(tmp_path, tiny_dataset):
+    """SIGINT while the last runs run, which then finish within the grace period: nothing is left to resume, so
+    it said "stopped before the end" and wrote no report. It says the campaign is complete, writes the report and
+    exits 0."""
+    spec = write_spec(
+        tmp_path, tiny_dataset, [fake_method(sleep=2.0)], datasets=one_sequence(tiny_dataset), report=True
+    )
+    results = tmp_path / "results"
+    proc = slamrun("campaign", str(spec))
+    # both runs (forward, backward) on the two lanes: nothing pending, so the stop can only let them finish
+    assert _wait_for(lambda: sum(r["state"] == "running" for r in ledger_rows(results)) == 2)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 0, out + err
+    assert all(r["state"] == "done" for r in ledger_rows(results))
+    assert "stopped before the end" not in out
+    assert (
+        "SIGINT came after the last runs had started; they finished within the grace period: the campaign is "
+        "complete" in " ".join(out.split())
+    )
+    assert (results / "report" / "index.html").is_file() and "report: " in out
+
+
 def test_status_cli(tmp_path, tiny_dataset):
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(), fake_method("crash", label="crashy")])
     campaign(spec)

@@ -60,6 +60,7 @@ def cmd_campaign(args) -> int:
     sched_ref = {}
 
     def on_signal(signum, _frame):
+        sched_ref.setdefault("signal", signal.Signals(signum).name)
         sched = sched_ref.get("s")
         if sched is None:
             raise KeyboardInterrupt
@@ -93,6 +94,11 @@ def cmd_campaign(args) -> int:
         + ", ".join(f"{k} {v}" for k, v in result.counts.items())
         + f" ({time.monotonic() - t0:.0f} s{busy})"
     )
+    if result.stop_requested and not result.interrupted:
+        console.print(
+            f"{sched_ref.get('signal', 'The stop')} came after the last runs had started; they finished within the "
+            "grace period: the campaign is complete"
+        )
     if spec.report and not result.interrupted:
         from runner.analysis.report import write_report
 

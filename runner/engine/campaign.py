@@ -39,7 +39,8 @@ class CampaignResult:
     recovered: dict[str, int]
     added: int
     infra_failures: int
-    interrupted: bool
+    interrupted: bool  # stopped with runs left to resume
+    stop_requested: bool = False  # a stop was asked (a signal), whether or not runs were left
 
 
 def ensure_datasets(spec: CampaignSpec, log=print) -> None:
@@ -253,6 +254,8 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         counts = ledger.counts()
         infra = sum(1 for r in ledger.rows(state="failed") if is_infra(r["state"], r["failure"]))
         ledger.close()
-        return CampaignResult(results, csv, counts, recovered, added, infra, sched.stop.is_set())
+        left = counts.get("pending", 0) + counts.get("running", 0)
+        stopped = sched.stop.is_set()
+        return CampaignResult(results, csv, counts, recovered, added, infra, stopped and left > 0, stopped)
     finally:
         lock.release()
