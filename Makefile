@@ -5,26 +5,33 @@ BIN    := $(VENV)/bin
 SPEC   ?= configs/demo.yaml
 ARGS   ?=
 
-.PHONY: install campaign test bench lint images verify-images paper clean gpu-wheels gpu-check
+.PHONY: install install-dev campaign test bench lint images verify-images paper clean gpu-wheels gpu-check
 
+# install: what running slamrun needs; install-dev: that and the test tools (pytest, ruff, evo, dask, ...)
 install: $(VENV)/.installed
+
+install-dev: $(VENV)/.installed-dev
 
 $(VENV)/.installed: pyproject.toml setup.py runner/core/_tumparse.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
+	$(BIN)/python -m pip install -q -e .
+	touch $@
+
+$(VENV)/.installed-dev: $(VENV)/.installed
 	$(BIN)/python -m pip install -q -e '.[dev]'
 	touch $@
 
 campaign: install
 	$(BIN)/slamrun campaign $(SPEC) $(ARGS)
 
-test: install
+test: install-dev
 	$(BIN)/python -m pytest $(ARGS)
 
-bench: install
+bench: install-dev
 	$(BIN)/python -m bench $(ARGS)
 
-lint: install
+lint: install-dev
 	$(BIN)/ruff check runner methods tests bench docker
 	$(BIN)/ruff format --check runner methods tests bench
 
