@@ -417,3 +417,38 @@ def test_a_bad_image_description_is_named_on_the_page_and_the_report_is_written(
     block = text.split("<h3>Images</h3>")[1].split("</p>")[0]
     assert str(path) in block and why in block
     assert "<pre>name: [unclosed\n</pre>" in text and "not a readable spec" in text  # shown as it is
+
+
+def test_cumulative_figures_keep_their_legend_off_the_curves_and_count_in_whole_runs(report_figures):
+    """The legend stood over the data (lower right, where the curves end) and the counts read 1.0, 1.5, 2.0: the
+    legend is beside the axes, and the y axis labels whole numbers only."""
+    cumulative = {k: d for k, d in report_figures.items() if k.startswith("cumulative_")}
+    assert cumulative
+    for name, d in cumulative.items():
+        ax = d.figure.axes[0]
+        assert ax.get_legend() is None and d.figure.legends, name
+        entries = {id(t) for t in d.figure.legends[0].get_texts()}
+        drawn_entries = [extent for t, extent in d.texts if id(t) in entries]
+        assert drawn_entries and all(e.x0 >= ax.bbox.x1 for e in drawn_entries), name  # beside the axes
+        labels = d.labels(ax.yaxis)
+        assert labels and all(re.fullmatch(r"\d+", t) for t in labels), (name, labels)
+
+
+def test_the_heatmap_colour_scale_does_not_stretch_a_small_range(drawn, tmp_path):
+    """Two methods 6 % apart (0.0282 and 0.0300) were drawn as the colour scale's two ends: the linear scale starts
+    at zero, so their colours are close; values a decade apart or more keep the log scale from least to greatest."""
+    from matplotlib.colors import LogNorm
+
+    rows = [
+        {"method": m, "sequence": "s1", "direction": "forward", "trial": t, "status": "done", "e_align": v}
+        for m, v in (("a", 0.0282), ("b", 0.0300))
+        for t in range(2)
+    ]
+    df = pd.DataFrame(rows).assign(failure=None, eval_status="ok")
+    figures.heatmap(df, tmp_path, "e_align")
+    image = drawn["heatmap_e_align"].figure.axes[0].images[0]
+    assert image.norm.vmin == 0 and image.norm.vmax == pytest.approx(0.0300)
+    a, b = (np.asarray(image.cmap(image.norm(v))[:3]) for v in (0.0282, 0.0300))
+    assert np.abs(a - b).max() < 0.15  # neighbours on the scale, not its two ends
+    wide = figures.colour_norm(np.array([0.001, 0.05]))
+    assert isinstance(wide, LogNorm) and (wide.vmin, wide.vmax) == (0.001, 0.05)

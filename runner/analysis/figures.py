@@ -79,9 +79,15 @@ def readable_log_ticks(axis, lo: float, hi: float) -> None:
 def cumulative(
     df: pd.DataFrame, metric: str, folder: Path, name: str | None = None, bold_all: bool = False, label: str = ""
 ) -> Path:
-    """Runs (y) whose error is below x, one curve per method: best methods reach the top left; x is logarithmic
-    where the values span a decade or more, else linear; `label` (the dataset) heads the title."""
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), layout="constrained")
+    """The cumulative figure of `metric` (cumulative_figure), saved in `folder`."""
+    return save(cumulative_figure(df, metric, bold_all, label), folder, name or f"cumulative_{metric}")
+
+
+def cumulative_figure(df: pd.DataFrame, metric: str, bold_all: bool = False, label: str = "") -> plt.Figure:
+    """Runs (y, whole numbers) whose error is below x, one curve per method: best methods reach the top left; x is
+    logarithmic where the values span a decade or more, else linear; `label` (the dataset) heads the title; the
+    legend beside the axes, never over a curve."""
+    fig, ax = plt.subplots(figsize=(7.4, 4.2), layout="constrained")
     methods = sorted(df.method.unique())
     colors = _colors(methods)
     log = use_log_scale(df[metric].to_numpy(float))
@@ -102,6 +108,7 @@ def cumulative(
         readable_log_ticks(ax.xaxis, v.min(), v.max())
     ax.set_xlabel(LABELS.get(metric, metric) + (" (log scale)" if log else ""))
     ax.set_ylabel("number of runs with a smaller error")
+    ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts: 1, 2, 3, never 1.5
     ax.set_title(_labelled(label, f"cumulative {LABELS.get(metric, metric)}"), fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
     handles, labels = ax.get_legend_handles_labels()
@@ -110,8 +117,8 @@ def cumulative(
             handles.append(Line2D([], [], color="0.3", ls=style, lw=lw))
             labels.append(what)
     if handles:
-        ax.legend(handles, labels, fontsize=8, loc="lower right")
-    return save(fig, folder, name or f"cumulative_{metric}")
+        fig.legend(handles, labels, fontsize=8, loc="outside right upper", frameon=False)
+    return fig
 
 
 def _sorted(values: pd.Series, log: bool) -> np.ndarray:
@@ -164,20 +171,34 @@ def heatmap_cells(
 
 
 def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "") -> Path:
+    """The heat map of `metric` (heatmap_figure), saved in `folder`."""
+    return save(heatmap_figure(df, metric, label), folder, f"heatmap_{metric}")
+
+
+def colour_norm(finite: np.ndarray) -> Normalize:
+    """The heat map's colour scale. Values spanning a decade or more: logarithmic, from the least to the greatest.
+    Otherwise linear from zero (an error's origin) to the greatest, so that colours differ as much as the values'
+    ratio does: 0.0282 and 0.0300 are two close colours, not the scale's two ends (a min-max scale made a 6 %
+    difference look like the whole range). Values below zero: linear from the least."""
+    if not len(finite):
+        return Normalize(0, 1)
+    if use_log_scale(finite):
+        return LogNorm(finite.min(), finite.max())
+    low = min(0.0, float(finite.min()))
+    return Normalize(low, max(float(finite.max()), low + 1e-12))
+
+
+def heatmap_figure(df: pd.DataFrame, metric: str = "e_align", label: str = "") -> plt.Figure:
     """Colour-coded error per method (rows) and run (columns: sequence at the top, direction and trial below);
     failed runs, runs without a value and runs never planned (a method with fewer trials or directions) each drawn
-    apart and named in the legend."""
+    apart and named in the legend; the colour scale as colour_norm says."""
     methods, cols, values, kinds = heatmap_cells(df, metric)
     col_pt = 9.0 if len(cols) <= 130 else max(1.0, 1100 / len(cols))  # room for one label per column when few
     width = min(18.0, max(5.5, 2.8 + len(cols) * col_pt / 72))
     fig, ax = plt.subplots(figsize=(width, 2.6 + 0.32 * len(methods)), layout="constrained")
     finite = values[np.isfinite(values)]
-    log = use_log_scale(finite)
-    norm = (
-        LogNorm(finite.min(), finite.max())
-        if log
-        else Normalize(*(finite.min(), finite.max()) if len(finite) else (0, 1))
-    )
+    norm = colour_norm(finite)
+    log = isinstance(norm, LogNorm)
     im = ax.imshow(np.ma.masked_invalid(values), aspect="auto", cmap="viridis", norm=norm, interpolation="nearest")
     colours = [CELL_KINDS[k][0] for k in (FAILED, NO_VALUE, NOT_PLANNED)]
     empty = np.ma.masked_where(kinds == 0, kinds)
@@ -202,7 +223,7 @@ def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str 
     handles.append(Patch(fc="white", ec="0.6", hatch="///", label=CELL_KINDS[NOT_PLANNED][1]))
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
     ax.set_title(_labelled(label, f"{LABELS.get(metric, metric)} of each run"), fontsize=9)
-    return save(fig, folder, f"heatmap_{metric}")
+    return fig
 
 
 def _heatmap_columns(ax, cols: list[tuple[str, str, str]], col_pt: float) -> None:
