@@ -213,6 +213,52 @@ def test_the_page_follows_a_running_campaign_in_chromium(tmp_path, tiny_dataset)
             campaign.wait()
 
 
+def test_the_box_plot_keeps_each_methods_colour_and_labels_its_log_axis_with_whole_values(finished, tmp_path):
+    """A method's colour on the page came from the order its first result arrived (it changed when another method's
+    first result came), and the log axis labelled one decade only ("3 4 5 ... 0.01 2 3": "3" meant 0.003 on the left
+    and 0.03 on the right), with no unit. Now: the campaign's colours (the report's), whole values, units."""
+    from runner.analysis.colours import TAB10, method_colours
+
+    with serving(finished) as base:
+        state = json.loads(get(base, "/c/results/api/state")[1])
+        # `broken` has no result to plot: `steady` still has the second colour of the campaign's two methods
+        assert state["colours"] == method_colours(["steady", "broken"]) == {"broken": TAB10[0], "steady": TAB10[1]}
+        with chromium_page(f"{base}/c/results/", tmp_path / "profile") as page:
+            box = "document.querySelector('#medians .box')"
+            drawn = f"{box} && {box}.data && {box}.querySelectorAll('.xtick text').length > 0"
+            end = time.monotonic() + 60
+            while not page.evaluate(drawn) and time.monotonic() < end:
+                time.sleep(0.2)
+            diag = f"[!!{box}, {box} && !!{box}.data, {box} && {box}.querySelectorAll('text').length].join()"
+            shown = "document.getElementById('app').innerText"
+            assert page.evaluate(drawn), (page.evaluate(diag), page.evaluate(shown))  # what it shows if not drawn
+            assert page.evaluate(f"{box}.data.map(t => t.name + ' ' + t.marker.color).join()") == f"steady {TAB10[1]}"
+            ticks = page.evaluate(f"[...{box}.querySelectorAll('.xtick text')].map(t => t.textContent).join(' ')")
+            for tick in ticks.split():
+                value = float(tick)  # a whole value, never a digit whose decade is written elsewhere
+                assert value >= 1 or tick.startswith("0.") or "e-" in tick, ticks
+            title = page.evaluate(f"{box}.querySelector('.xtitle').textContent")
+            assert title == "e_align (ground-truth units)", title
+
+
+def test_the_reports_curves_take_the_campaigns_colours():
+    """A dataset where only one of the campaign's two methods has results draws it in its campaign colour."""
+    import pandas as pd
+
+    from runner.analysis import figures
+    from runner.analysis.colours import TAB10, TAB20, method_colours
+
+    df = pd.DataFrame({"method": ["steady"] * 3, "e_align": [0.01, 0.02, 0.03]})
+    fig = figures.cumulative_figure(df, "e_align", colours=method_colours(["broken", "steady"]))
+    assert [line.get_color() for line in fig.axes[0].lines] == [TAB10[1]]
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    for n, palette in ((10, TAB10), (20, TAB20)):  # the page's palette is matplotlib's, as the figures draw it
+        cmap = plt.get_cmap("tab10" if n == 10 else "tab20")
+        assert [plt.matplotlib.colors.to_hex(cmap(i)) for i in range(n)] == list(palette)
+
+
 # ---------------------------------------------------------------- read-only, and nothing outside the folder
 
 

@@ -17,6 +17,7 @@ from matplotlib.colors import ListedColormap, LogNorm, Normalize  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
+from runner.analysis.colours import method_colours  # noqa: E402
 from runner.analysis.paths import SequencePaths  # noqa: E402
 from runner.analysis.stats import StudyStats  # noqa: E402
 from runner.results.vocabulary import INFRA, LABELS  # noqa: E402
@@ -48,11 +49,6 @@ def _labelled(label: str, title: str) -> str:
     return f"{label}: {title}" if label else title
 
 
-def _colors(methods: list[str]) -> dict[str, tuple]:
-    cmap = plt.get_cmap("tab10" if len(methods) <= 10 else "tab20")
-    return {m: cmap(i % cmap.N) for i, m in enumerate(methods)}
-
-
 def _number(x: float, _pos=None) -> str:
     """A tick's value as a reader writes it: 0.2, 5, 1e-05."""
     return f"{x:g}"
@@ -77,19 +73,27 @@ def readable_log_ticks(axis, lo: float, hi: float) -> None:
 
 
 def cumulative(
-    df: pd.DataFrame, metric: str, folder: Path, name: str | None = None, bold_all: bool = False, label: str = ""
+    df: pd.DataFrame,
+    metric: str,
+    folder: Path,
+    name: str | None = None,
+    bold_all: bool = False,
+    label: str = "",
+    colours: dict[str, str] | None = None,
 ) -> Path:
     """The cumulative figure of `metric` (cumulative_figure), saved in `folder`."""
-    return save(cumulative_figure(df, metric, bold_all, label), folder, name or f"cumulative_{metric}")
+    return save(cumulative_figure(df, metric, bold_all, label, colours), folder, name or f"cumulative_{metric}")
 
 
-def cumulative_figure(df: pd.DataFrame, metric: str, bold_all: bool = False, label: str = "") -> plt.Figure:
+def cumulative_figure(
+    df: pd.DataFrame, metric: str, bold_all: bool = False, label: str = "", colours: dict[str, str] | None = None
+) -> plt.Figure:
     """Runs (y, whole numbers) whose error is below x, one curve per method: best methods reach the top left; x is
     logarithmic where the values span a decade or more, else linear; `label` (the dataset) heads the title; the
-    legend beside the axes, never over a curve."""
+    legend beside the axes, never over a curve; `colours`: the campaign's (method_colours), else these methods'."""
     fig, ax = plt.subplots(figsize=(7.4, 4.2), layout="constrained")
     methods = sorted(df.method.unique())
-    colors = _colors(methods)
+    colors = {**method_colours(methods), **(colours or {})}
     log = use_log_scale(df[metric].to_numpy(float))
     for m in methods:
         g = df[df.method == m]

@@ -15,6 +15,7 @@ from pathlib import Path
 import pandas as pd
 
 from runner.analysis import figures, interactive, page, tables
+from runner.analysis.colours import method_colours
 from runner.analysis.load import NO_DATASET, by_dataset, evaluated, load_results, main_metric, metrics_for
 from runner.analysis.paths import sequence_paths
 from runner.analysis.provenance import provenance
@@ -90,6 +91,7 @@ def _write_report(
     out.mkdir(parents=True, exist_ok=True)
     groups = by_dataset(df)
     options = {"level": level, "adjust": adjust, "alpha": alpha, "trajectory_sequences": trajectory_sequences}
+    options["colours"] = method_colours(df.method) if "method" in df.columns else None
     prov = provenance(results, df)
     sections = [Section("Provenance", page.provenance_html(prov, out, results))]
     if len(groups) == 1:
@@ -195,6 +197,7 @@ def dataset_report(
     adjust: str = "holm",
     alpha: float = 0.05,
     trajectory_sequences: int = 2,
+    colours: dict[str, str] | None = None,
 ) -> list[Section]:
     """The study's report of one dataset's runs into `out` (statistics*.json, tables/, figures/, views/): its
     sections, their links relative to `root` (the folder of index.html). `dataset` labels captions and titles."""
@@ -235,10 +238,12 @@ def dataset_report(
     if not ok.empty:
         for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "ate_rmse", "rpe_t_rmse"):
             if m in metrics:
-                figs.append(figures.cumulative(ok, m, fig_dir, label=dataset))
+                figs.append(figures.cumulative(ok, m, fig_dir, label=dataset, colours=colours))
         if main is not None:
             figs.append(
-                figures.cumulative(ok, main, fig_dir, f"cumulative_{main}_motion_bias", bold_all=True, label=dataset)
+                figures.cumulative(
+                    ok, main, fig_dir, f"cumulative_{main}_motion_bias", bold_all=True, label=dataset, colours=colours
+                )
             )
             figs.append(figures.heatmap(df, fig_dir, main, label=dataset))
     if st is not None:

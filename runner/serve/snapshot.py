@@ -14,6 +14,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from runner.analysis.colours import method_colours
 from runner.engine.ledger import Ledger
 from runner.engine.progress import Tracker
 from runner.engine.session import current_session
@@ -55,7 +56,8 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
     try:
         session = current_session(ledger)
         campaign = ledger.meta("campaign", name)
-        progress = Tracker(ledger.progress_rows(), session, campaign).figures(now)
+        rows = ledger.progress_rows()
+        progress = Tracker(rows, session, campaign).figures(now)
         running = ledger.rows(state="running", columns=RUN_COLUMNS)
         failed = ledger.rows(state="failed", columns=(*RUN_COLUMNS, "failure", "message"))
         done = ledger.rows(state="done", columns=("label", "dataset", "coverage", *SUMMARY_METRICS))
@@ -69,6 +71,7 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         "lanes": [_lane(r, now) for r in sorted(running, key=lambda r: r.get("started_at") or 0.0)],
         "failed": _failed(failed),
         "medians": medians(done),
+        "colours": method_colours(r["label"] for r in rows),
         "figures": report_figures(results),
         "report": "report/index.html" if (results / "report" / "index.html").is_file() else None,
     }

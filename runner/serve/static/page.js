@@ -103,7 +103,21 @@ function failures(s) {
   );
 }
 
-const LABELS = { coverage: "coverage (median)", e_t: "e_t", e_r: "e_r (deg)", e_s_sym: "e_s'", e_align: "e_align", e_rmse: "e_rmse", ate_rmse: "ATE RMSE", rpe_t_rmse: "RPE-t RMSE" };
+// with their units: TUM-Mono's lengths are in its ground truth's units (the benchmark's ground truth has no metric scale)
+const LABELS = { coverage: "coverage (median, share of frames)", e_t: "e_t (ground-truth units)", e_r: "e_r (deg)", e_s_sym: "e_s' (factor)", e_align: "e_align (ground-truth units)", e_rmse: "e_rmse (ground-truth units)", ate_rmse: "ATE RMSE (m)", rpe_t_rmse: "RPE-t RMSE (m)" };
+
+// A log axis a reader can read values off: 1, 2 and 5 of each decade where the values span three decades or less,
+// else each decade; every tick labelled with its whole value (0.002, never a bare "2" whose decade is elsewhere).
+function logTicks(values) {
+  const v = values.filter((x) => x > 0 && Number.isFinite(x));
+  if (!v.length) return {};
+  const lo = Math.floor(Math.log10(Math.min(...v)));
+  const hi = Math.max(Math.ceil(Math.log10(Math.max(...v))), lo + 1);
+  const steps = hi - lo <= 3 ? [1, 2, 5] : [1];
+  const tickvals = [];
+  for (let d = lo; d <= hi; d++) for (const s of steps) tickvals.push(+(s * 10 ** d).toPrecision(1));
+  return { tickmode: "array", tickvals, ticktext: tickvals.map(String) };
+}
 
 function medians(s) {
   const out = [];
@@ -113,10 +127,12 @@ function medians(s) {
     out.push($("h3", { text: `${dataset || "(no dataset)"}: medians over the done runs so far` }),
       $("div", { class: "scroll" }, table(["method", "done", ...d.metrics.map((k) => LABELS[k] || k)], rows)), plot);
     if (d.main && window.Plotly) {
-      const traces = Object.entries(d.values).map(([method, vs]) => ({ type: "box", x: vs, name: method, orientation: "h", boxpoints: vs.length < 60 ? "all" : "outliers" }));
-      requestAnimationFrame(() => Plotly.react(plot, traces, {
+      // each method in its colour for the whole campaign (the report's figures use the same)
+      const traces = Object.entries(d.values).map(([method, vs]) => ({ type: "box", x: vs, name: method, orientation: "h", boxpoints: vs.length < 60 ? "all" : "outliers", marker: { color: s.colours[method] }, line: { color: s.colours[method] } }));
+      const ticks = logTicks(Object.values(d.values).flat());
+      setTimeout(() => Plotly.react(plot, traces, {  // once the section is in the page (a frame may never come in a hidden tab)
         title: { text: `${LABELS[d.main] || d.main} per method (${dataset}), done runs so far`, font: { size: 13 } },
-        xaxis: { type: "log", title: { text: LABELS[d.main] || d.main } }, margin: { l: 110, r: 20, t: 40, b: 45 }, height: 90 + 40 * traces.length, showlegend: false,
+        xaxis: { type: "log", title: { text: LABELS[d.main] || d.main }, ...ticks }, yaxis: { title: { text: "method" } }, margin: { l: 110, r: 20, t: 40, b: 45 }, height: 90 + 40 * traces.length, showlegend: false,
       }, { displaylogo: false, responsive: true }));
     }
   }
@@ -186,7 +202,7 @@ function render(s) {
     header(s),
     part("lanes", () => lanes(s), s.lanes.map((l) => [l.key, Math.round((l.running_s || 0) / 5)])),
     part("failures", () => failures(s), s.failed),
-    part("medians", () => medians(s), s.medians),
+    part("medians", () => medians(s), [s.medians, s.colours]),
     part("groups", () => groups(s), p.per_group),
     part("figures", () => figures(s), [s.figures, s.report]),
     pathViewer(),
