@@ -108,15 +108,21 @@ const LABELS = { coverage: "coverage (median, share of frames)", e_t: "e_t (grou
 
 // A log axis a reader can read values off: 1, 2 and 5 of each decade where the values span three decades or less,
 // else each decade; every tick labelled with its whole value (0.002, never a bare "2" whose decade is elsewhere).
+// The axis runs from the tick below the least value to the tick above the greatest, so that values closer together
+// than two ticks (0.030 to 0.043) still have a labelled tick at each end.
 function logTicks(values) {
   const v = values.filter((x) => x > 0 && Number.isFinite(x));
   if (!v.length) return {};
-  const lo = Math.floor(Math.log10(Math.min(...v)));
-  const hi = Math.max(Math.ceil(Math.log10(Math.max(...v))), lo + 1);
+  const least = Math.min(...v), greatest = Math.max(...v);
+  const lo = Math.floor(Math.log10(least));
+  const hi = Math.max(Math.ceil(Math.log10(greatest)), lo + 1);
   const steps = hi - lo <= 3 ? [1, 2, 5] : [1];
-  const tickvals = [];
-  for (let d = lo; d <= hi; d++) for (const s of steps) tickvals.push(+(s * 10 ** d).toPrecision(1));
-  return { tickmode: "array", tickvals, ticktext: tickvals.map(String) };
+  const all = [];
+  for (let d = lo; d <= hi; d++) for (const s of steps) all.push(+(s * 10 ** d).toPrecision(1));
+  const below = Math.max(...all.filter((t) => t <= least)), above = Math.min(...all.filter((t) => t >= greatest));
+  const tickvals = all.filter((t) => t >= below && t <= above);
+  const pad = 0.02 * (Math.log10(above) - Math.log10(below));  // the end ticks' labels not cut
+  return { tickmode: "array", tickvals, ticktext: tickvals.map(String), autorange: false, range: [Math.log10(below) - pad, Math.log10(above) + pad] };
 }
 
 function medians(s) {
