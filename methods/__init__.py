@@ -30,7 +30,7 @@ from methods.orb_slam2 import OrbSlam2
 from methods.orb_slam3 import OrbSlam3
 from methods.reference_vo.adapter import ReferenceVO
 from methods.svo import Svo
-from runner.suggest import did_you_mean
+from runner.core.suggest import did_you_mean
 
 STUDY_METHODS = ("orb_slam2", "df_orb_slam", "lsd_slam", "dso", "svo", "ldso", "dsm", "dynaslam", "cnn_dso", "cnn_svo")
 

@@ -27,12 +27,12 @@ from dataclasses import replace
 from pathlib import Path
 
 from runner.core.metrics import RpeInterval
+from runner.core.suggest import did_you_mean
 from runner.datasets import euroc, icl_nuim, kitti, tartanair, tum_mono, tum_rgbd, tum_vi
 from runner.datasets.plugin_checks import TIME_LIMITS_S, bounded, checked_reader
 from runner.datasets.protocol import METRICS, Layout
 from runner.datasets.sequence import Sequence, folder_identity
 from runner.errors import DatasetError, SlamRunError
-from runner.suggest import did_you_mean
 
 BUILT_IN: tuple[Layout, ...] = (
     tum_vi.LAYOUT,

@@ -18,6 +18,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 import methods
 from runner.backends.monitor import host_gpus
 from runner.core.inputs import expanded_size, read_text_bounded
+from runner.core.suggest import did_you_mean
 from runner.datasets.generated import target_problem
 from runner.datasets.layouts import get as get_layout
 from runner.datasets.layouts import holds_sequence
@@ -31,7 +32,6 @@ from runner.engine.folders import (
     path_part_problem,
 )
 from runner.errors import DatasetError, SlamRunError, SpecError
-from runner.suggest import did_you_mean
 
 
 class Strict(BaseModel):
