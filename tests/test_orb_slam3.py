@@ -282,9 +282,10 @@ def slowed(sequence: Path, factor: float) -> None:
 
 def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path):
     """The image on a synthetic room forward and backward (done, evaluated, every tracked frame at a frame time,
-    the vocabulary stated in run.json), and on a room with 3.3 s of blank frames in the middle: ORB-SLAM3 is lost
-    for good and starts a new map (in at least one direction: a first map of 10 keyframes or fewer is reset
-    instead), and the run says so (the maps in run.json, the largest evaluated, the run marked lost)."""
+    the vocabulary stated in run.json), and on a room with 40 blank frames (6.7 s at 6 fps) in the middle:
+    ORB-SLAM3 is lost for good and starts a new map (in at least one direction: a first map of 10 keyframes or
+    fewer is reset instead), and the run says so (the maps in run.json, the largest evaluated, the run marked
+    lost)."""
     from runner.datasets.synth import generate
     from runner.engine.campaign import run_campaign
     from runner.engine.spec import load_spec
@@ -293,11 +294,12 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
 
     image_or_skip()
     data = tmp_path / "data"
-    generate(data / "room", frames=300, seed=0)
-    generate(data / "split", frames=360, seed=0)
-    # 100 frames (more than the 3 s ORB-SLAM3 stays `recently lost`) between two textured stretches of 130 frames,
-    # each long enough for a map of more than 10 keyframes (a smaller one is reset, not kept)
-    blank_out(data / "split", 130, 229)
+    generate(data / "room", frames=200, seed=0)
+    generate(data / "split", frames=300, seed=0)
+    # 40 frames (6.7 s at the 6 fps below: more than the 3.0 s a monocular ORB-SLAM3 stays `recently lost`, Tracking.cc)
+    # between two textured stretches of 130 frames, each long enough for a map of more than 10 keyframes (a smaller
+    # one is reset, not kept)
+    blank_out(data / "split", 130, 169)
     # Played at 6 fps, not 30: mono_tum paces frames in real time, and on a loaded machine ORB-SLAM3's local mapper
     # fell behind (0.8-3.1 s per keyframe of the 5x features it extracts for `Camera.fps` frames after initialising;
     # a monocular tracker takes no keyframe while it is busy) and lost the room in both directions (CI under load,
@@ -325,7 +327,7 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
     assert record["trajectory_report"]["n_maps"] == 1
     frames = np.loadtxt(data / "room" / "times.txt")[:, 1]
     traj = read_tum(Path(good.run_dir.iloc[0]) / "trajectory.txt")
-    assert len(traj) > 200 and np.isin(traj.timestamps, frames).all()  # every frame's pose, not keyframes'
+    assert len(traj) > 150 and np.isin(traj.timestamps, frames).all()  # every frame's pose, not keyframes'
     split = df[df.sequence == "split"]
     frames = np.loadtxt(data / "split" / "times.txt")[:, 1]
     several = 0
@@ -338,5 +340,5 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
             several += 1
             assert r.failure == "lost" or r.message == "the method reported it was lost", r.to_string()
         t = read_tum(Path(r.run_dir) / "trajectory.txt").timestamps
-        assert not np.isin(t, frames[130:230]).any()  # no pose is invented for a frame that was not tracked
+        assert not np.isin(t, frames[130:170]).any()  # no pose is invented for a frame that was not tracked
     assert several >= 1, split[["direction", "n_poses", "failure", "message"]].to_string()
