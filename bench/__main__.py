@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bench.eta import bench_eta
+
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS: list[tuple[str, str, str]] = []
 
@@ -894,6 +896,7 @@ BENCHES: dict[str, Callable[[Path], None]] = {
     "demo": bench_demo,
     "scale": bench_scale,
     "serve": bench_serve,
+    "eta": lambda tmp: bench_eta(report),
 }
 
 

@@ -77,6 +77,29 @@ def test_eta_tells_a_long_sequence_from_a_short_one_of_the_same_method():
     assert (seconds, basis) == (2 * 40.0, "partly estimated")
 
 
+def test_the_eta_does_not_jump_when_a_slow_methods_first_run_ends():
+    """A method with no finished run borrowed the others' pace (4 s) until its first run ended 40 s later, and the
+    ETA went from about a minute to several between two readings (a campaign: 1 min 16 s, then 8 min 44 s). Its
+    running run now shows its pace as it goes, and a running run counts for what it has still to go."""
+
+    def row(key, label, state, wall=None, started=None):
+        return {"key": key, "label": label, "dataset": "d", "sequence": "s", "direction": "forward"} | {
+            "state": state, "failure": None, "wall_s": wall, "started_at": started
+        }  # fmt: skip
+
+    rows = [row(f"f{i}", "fast", "done", 4.0) for i in range(4)]
+    rows += [row("s0", "slow", "running", started=10.0)] + [row(f"s{i}", "slow", "pending") for i in range(1, 6)]
+    tracker = Tracker(rows, {"lanes": 1, "started_at": 0.0})
+    before = tracker.figures(now=49.9).eta_s
+    tracker.update("s0", state="done", wall_s=40.0)
+    after = tracker.figures(now=50.0).eta_s
+    assert after == pytest.approx(5 * 40.0)
+    assert before == pytest.approx(6 * 39.9 - 39.9)  # its run so far: at least 39.9 s a run, 39.9 s of it gone
+    # measured: a run 6 s into a group of 10 s runs has 4 s to go
+    rows = [row("a", "m", "done", 10.0), row("b", "m", "running", started=100.0), row("c", "m", "pending")]
+    assert figures(rows, {"lanes": 1}, now=106.0).eta_s == pytest.approx(4.0 + 10.0)
+
+
 def test_the_tracker_and_figures_agree_per_sequence():
     rows = [
         {"key": f"k{i}", "label": "m", "dataset": "d", "sequence": seq, "direction": "forward", "state": state}

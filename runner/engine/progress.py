@@ -91,20 +91,34 @@ def eta(
     walls: dict[RunGroup, list[float]] | WallTimes,
     lanes: int,
     overhead_s: float = 0.0,
+    running: Iterable[tuple[RunGroup, float]] = (),
 ) -> tuple[float | None, str]:
     """Seconds until the runs left end: per method and sequence, the median wall time of its finished runs plus
     the runner's own time per run on a lane (`overhead_s`: starting, collecting, waiting for a view), times its
     runs left, summed and spread over the lanes. A sequence a method has not finished yet borrows that method's
-    median over its other sequences; a method with no finished run, the median of all."""
+    median over its other sequences; a method with no finished run, the median of all, or the longest time one of
+    its `running` runs (group, seconds so far) has run when that is longer: they show its runs take at least that.
+    A running run counts for what it has still to go (its typical time less its seconds so far, at least nothing),
+    so the ETA falls as runs progress and does not jump when a slow method's first run ends."""
     todo = {g: n for g, n in left.items() if n > 0}
     if not todo:
         return 0.0, "-"
     times = walls if isinstance(walls, WallTimes) else WallTimes(walls)
     if not times:
         return None, "unknown"
-    total = sum(n * (times.typical(g) + overhead_s) for g, n in todo.items())
+    running = list(running)
+    at_least: dict[str, float] = defaultdict(float)  # a method with no finished run: its longest running run so far
+    for (label, _), so_far in running:
+        if not times.by_method.get(label):
+            at_least[label] = max(at_least[label], so_far)
+
+    def typical(g: RunGroup) -> float:
+        return max(times.typical(g), at_least.get(g[0], 0.0))
+
+    total = sum(n * (typical(g) + overhead_s) for g, n in todo.items())
+    total -= sum(min(so_far, typical(g)) for g, so_far in running if todo.get(g))
     basis = "measured" if all(times.by_group.get(g) for g in todo) else "partly estimated"
-    return total / max(lanes, 1), basis
+    return max(total, 0.0) / max(lanes, 1), basis
 
 
 def overhead_per_run(busy_s: float, runs: int, lanes: int, elapsed_s: float | None) -> float:
@@ -183,13 +197,14 @@ class Tracker:
         self.failures: Counter = Counter()
         self.walls = WallTimes()
         self.left: Counter = Counter()  # (label, sequence) -> runs left
+        self.running: dict = {}  # key -> (group, started_at) of the runs running now (a lane's worth each)
         self.busy = 0.0
         self.session_runs = 0
         self.unknown = 0
         for i, r in enumerate(rows):
             row = {k: r.get(k) for k in ("label", "direction", "state", "failure", "wall_s", "started_at")}
-            row["group"] = run_group(r)
-            self.rows[r.get("key", i)] = row
+            row["group"], row["key"] = run_group(r), r.get("key", i)
+            self.rows[row["key"]] = row
             self._count(row, +1)
 
     def update(self, key: str, **changes) -> None:
@@ -212,6 +227,11 @@ class Tracker:
         group = row["group"]
         if cat in ("pending", "running", "infra"):
             self.left[group] += sign
+        if cat == "running":
+            if sign > 0:
+                self.running[row["key"]] = (group, row["started_at"])
+            else:
+                self.running.pop(row["key"], None)
         if cat in ("done", "failed") and row["wall_s"]:
             if sign > 0:
                 self.walls.add(group, float(row["wall_s"]))
@@ -251,7 +271,8 @@ class Tracker:
                 elapsed = max(end - self.started, 0.0)
                 occupancy = self.busy / (self.lanes * elapsed) if elapsed > 0 else None
                 overhead = overhead_per_run(self.busy, self.session_runs, self.lanes, elapsed)
-        eta_s, basis = eta(self.left, self.walls, self.lanes, overhead)
+        so_far = [(g, max(now - t0, 0.0)) for g, t0 in self.running.values() if t0 and now is not None]
+        eta_s, basis = eta(self.left, self.walls, self.lanes, overhead, so_far)
         kinds = [k for k in METHOD_FAILURES if self.failures[k]] + sorted(
             k for k in self.failures if k not in METHOD_FAILURES and self.failures[k]
         )
