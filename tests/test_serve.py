@@ -213,11 +213,84 @@ def test_the_page_follows_a_running_campaign_in_chromium(tmp_path, tiny_dataset)
             campaign.wait()
 
 
+def in_own_group(argv: list[str], timeout_s: float) -> str:
+    """`argv`'s stdout; past `timeout_s` its whole process group (a browser and its helpers) is killed and the test
+    fails."""
+    proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, start_new_session=True)
+    try:
+        return proc.communicate(timeout=timeout_s)[0]
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        pytest.fail(f"{argv[0]} did not end within {timeout_s} s: {' '.join(argv[-2:])}")
+
+
+def test_the_page_comes_with_its_first_state_and_a_headless_browser_settles_on_it(finished, tmp_path):
+    """The page was JavaScript only: curl and text browsers saw "loading...", a headless screenshot showed the page
+    on some tries and "loading..." on others, and with a virtual time budget the browser never finished (the event
+    stream stayed open). Now the server renders the first state; on a campaign that is not running the page closes
+    its stream between states: ten screenshots in a row under a virtual time budget each end, each of the page."""
+    import html as html_
+
+    import cv2
+
+    from tests.test_report import CHROMIUM_FLAGS, chromium_or_skip
+
+    with serving(finished) as base:
+        status, body, _ = get(base, "/c/results/")
+        page = body.decode()
+        state = json.loads(get(base, "/c/results/api/state")[1])
+        text = html_.unescape(re.sub(r"<[^>]+>", " ", page.split('<script type="application/json"')[0]))
+        assert status == 200 and "loading..." not in text  # what curl and a text browser show
+        assert "8 of 8 runs finished (100 %) · done 4 · failed 4" in text and " · ".join(state["facts"]) in text
+        assert "by kind: crashed 4" in text and "Per method and direction" in text
+        assert "e_align (ground-truth units)" in text and " steady " in text  # the medians table, with units
+        for figure in state["figures"]:
+            assert f'src="/c/results/files/{figure["path"]}?v=' in page
+        chromium = chromium_or_skip()
+        for i in range(10):
+            shot = tmp_path / f"shot-{i}.png"
+            argv = [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--window-size=1400,1000"]
+            argv += ["--virtual-time-budget=3000", f"--screenshot={shot}", f"{base}/c/results/"]
+            in_own_group(argv, 90)  # never ended with the stream open
+            grey = cv2.imread(str(shot), cv2.IMREAD_GRAYSCALE)
+            inked = int((grey < 160).any(axis=1).sum())  # rows holding text, tables or figures
+            assert inked > 300, (i, inked)  # "loading..." alone inks under 20
+        dom = in_own_group(
+            [chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=3000"]
+            + ["--dump-dom", f"{base}/c/results/"],
+            90,
+        )
+        assert 'class="main-svg"' in dom and "first-state" not in dom  # the script's render, with the box plot
+
+
+def test_the_first_state_escapes_every_text_it_shows():
+    from runner.serve.firstpaint import campaign_body, embedded
+
+    hostile = "</script><script>alert(1)</script>"
+    progress = {"total": 1, "finished": 1, "done": 0, "failed": 1, "infra": 0, "active": False, "per_group": []}
+    snap = {
+        "name": "c&d", "campaign": "<b>c</b>", "generated_at": 0.0, "progress": progress, "state": "finished",
+        "facts": ["1 of 1 runs finished (100 %)"], "labels": {}, "lanes": [], "medians": {}, "figures": [],
+        "report": None,
+        "failed": {"total": 1, "kinds": {"crashed": 1}, "runs": [
+            {"failure": "crashed", "label": hostile, "dataset": "d", "sequence": "s", "direction": "forward",
+             "trial": 0, "message": hostile}
+        ]},
+    }  # fmt: skip
+    body = campaign_body(snap)
+    assert "<script" not in body and "<b>" not in body and "&lt;/script&gt;&lt;script&gt;alert(1)" in body
+    block = embedded(json.dumps(snap).encode())
+    assert block.count("</script>") == 1 and block.endswith("</script>")  # no text in it ends the block
+    assert json.loads(block.split(">", 1)[1].removesuffix("</script>")) == snap
+
+
 def test_the_box_plot_keeps_each_methods_colour_and_labels_its_log_axis_with_whole_values(finished, tmp_path):
     """A method's colour on the page came from the order its first result arrived (it changed when another method's
     first result came), and the log axis labelled one decade only ("3 4 5 ... 0.01 2 3": "3" meant 0.003 on the left
     and 0.03 on the right), with no unit. Now: the campaign's colours (the report's), whole values, units."""
     from runner.analysis.colours import TAB10, method_colours
+    from runner.core.ticks import log_ticks
 
     with serving(finished) as base:
         state = json.loads(get(base, "/c/results/api/state")[1])
@@ -235,8 +308,11 @@ def test_the_box_plot_keeps_each_methods_colour_and_labels_its_log_axis_with_who
             assert page.evaluate(f"{box}.data.map(t => t.name + ' ' + t.marker.color).join()") == f"steady {TAB10[1]}"
             ticks = page.evaluate(f"[...{box}.querySelectorAll('.xtick text')].map(t => t.textContent).join(' ')")
             assert len(ticks.split()) >= 2, ticks  # a labelled tick at each end, however close the values
-            # values between two ticks (this test's plot had none labelled one try in three): the axis widens to them
-            assert page.evaluate("JSON.stringify(logTicks([0.030, 0.043]).tickvals)") == "[0.02,0.05]"
+            # the server's ticks (the report's rule), whole values; values between two ticks (this test's plot had
+            # none labelled one try in three): the axis widens to them
+            shown = page.evaluate(f"JSON.stringify({box}.layout.xaxis.tickvals)")
+            assert json.loads(shown) == next(iter(state["medians"].values()))["ticks"]
+            assert log_ticks([0.030, 0.043]) == [0.02, 0.05]
             for tick in ticks.split():
                 value = float(tick)  # a whole value, never a digit whose decade is written elsewhere
                 assert value >= 1 or tick.startswith("0.") or "e-" in tick, ticks

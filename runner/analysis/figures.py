@@ -20,6 +20,7 @@ from matplotlib.patches import Patch, Rectangle  # noqa: E402
 from runner.analysis.colours import method_colours  # noqa: E402
 from runner.analysis.paths import SequencePaths  # noqa: E402
 from runner.analysis.stats import StudyStats  # noqa: E402
+from runner.core.ticks import log_steps  # noqa: E402
 from runner.results.vocabulary import INFRA, LABELS  # noqa: E402
 
 # best, median and worst run: told apart by colour and by line style (colour-blind safe, also in grey print)
@@ -62,11 +63,9 @@ def use_log_scale(values: np.ndarray) -> bool:
 
 
 def readable_log_ticks(axis, lo: float, hi: float) -> None:
-    """Ticks of a log axis from lo to hi that a reader can read values off: 1, 2 and 5 of each decade, labelled,
-    where the axis spans three decades or less (at least three labels over a decade), else every decade."""
-    decades = math.log10(hi / lo) if lo > 0 and hi > lo else 0
-    subs = (1.0, 2.0, 5.0) if decades <= 3 else (1.0,)
-    axis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=subs, numticks=40))
+    """Ticks of a log axis from lo to hi that a reader can read values off (runner.core.ticks: the live page's
+    rule), each labelled with its whole value."""
+    axis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=log_steps(lo, hi), numticks=40))
     axis.set_major_formatter(matplotlib.ticker.FuncFormatter(_number))
     axis.set_minor_locator(matplotlib.ticker.LogLocator(base=10, subs=np.arange(1, 10), numticks=40))
     axis.set_minor_formatter(matplotlib.ticker.NullFormatter())

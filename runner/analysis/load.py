@@ -7,7 +7,7 @@ from pathlib import Path
 import pandas as pd
 
 from runner.errors import SlamRunError
-from runner.results.vocabulary import STUDY_METRICS, TRAJECTORY_STATS_METRICS
+from runner.results.vocabulary import MAIN_METRICS, STUDY_METRICS, TRAJECTORY_STATS_METRICS
 
 NO_DATASET = "all"  # the one dataset of a table without a dataset column (or the name of rows that have none)
 
@@ -92,4 +92,4 @@ def one_dataset(groups: dict[str, pd.DataFrame], name: str, source: Path) -> dic
 def main_metric(df: pd.DataFrame) -> str | None:
     """The accuracy figure of one run that a table's per-run views use: TUM-Mono's e_align where the runs have it,
     else ATE RMSE (datasets without TUM-Mono's metrics); None where neither has a value."""
-    return next((m for m in ("e_align", "ate_rmse") if m in df.columns and df[m].notna().any()), None)
+    return next((m for m in MAIN_METRICS if m in df.columns and df[m].notna().any()), None)

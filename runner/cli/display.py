@@ -18,6 +18,7 @@ from rich.text import Text
 
 from runner.engine.progress import Figures, Tracker, duration, one_line
 from runner.engine.session import read_tracker
+from runner.results.vocabulary import MAIN_METRICS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -64,7 +65,7 @@ def status_view(f: Figures) -> Group:
     return Group(group_table(f), headline(f), Text(f"campaign {state}, {f.lanes} lane(s)"))
 
 
-MAIN_FIGURES = (("e_align", ""), ("ate_rmse", " m"), ("rpe_t_rmse", " m"), ("kitti_t_pct", " %"))
+MAIN_FIGURES = tuple(zip((*MAIN_METRICS, "rpe_t_rmse", "kitti_t_pct"), ("", " m", " m", " %"), strict=True))
 
 
 def finished_line(lane: int, run_id: str, info: dict) -> str:

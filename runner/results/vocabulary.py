@@ -77,6 +77,8 @@ RESOURCE_COLUMNS = (
     "gpu_mem_peak_mb",
     "gpu_util_mean_pct",
     "n_frames",
+    "cpu_wait_pct",  # the run's threads' time runnable but waiting for a CPU, % of wall time (100 % = one thread)
+    "host_cpu_pressure_pct",  # the share of the run's wall time in which some task on the machine waited for a CPU
 )
 
 # `slamrun evaluate --metric tum-mono`: the fields of each file's result
@@ -87,6 +89,9 @@ STUDY_METRICS = ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "e_rmse")
 TRAJECTORY_STATS_METRICS = ("ate_rmse", "rpe_t_rmse", "rpe_r_rmse", "kitti_t_pct", "kitti_r_deg_m")
 # The per-method summary's medians (terminal table, status, report)
 SUMMARY_METRICS = ("e_t", "e_r", "e_s_sym", "e_align", "e_rmse", "ate_rmse", "rpe_t_rmse")
+# A run's accuracy figure, the first of these its dataset's runs have: TUM-Mono's e_align, else ATE RMSE (the per-run
+# views of the report, the live page's box plot); a finished run's progress line goes on to RPE's and KITTI's
+MAIN_METRICS = ("e_align", "ate_rmse")
 
 LABELS = {
     "e_t": "translation drift e_t",
@@ -108,4 +113,6 @@ LABELS = {
     "kitti_t_pct": "KITTI translation error (%)",
     "kitti_r_deg_m": "KITTI rotation error (deg/m)",
     "coverage": "frames with a pose",
+    "cpu_wait_pct": "waiting for a CPU (% of wall time)",
+    "host_cpu_pressure_pct": "machine's CPU pressure (%)",
 }

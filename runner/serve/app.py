@@ -34,7 +34,7 @@ from aiohttp import web
 from runner.analysis.page import INLINE_SCRIPTS
 from runner.core import jsonio
 from runner.errors import SlamRunError
-from runner.serve import runview
+from runner.serve import firstpaint, runview
 from runner.serve.connections import Watch
 from runner.serve.folders import campaigns, open_served
 from runner.serve.snapshot import Signature, snapshot
@@ -247,7 +247,8 @@ async def _secure(request: web.Request, response: web.StreamResponse) -> None:
         response.headers.setdefault(name, value)
 
 
-def _html(title: str, body_attrs: str) -> str:
+def _html(title: str, body_attrs: str, main: str = "<p>loading...</p>", data: str = "") -> str:
+    """A page: its `main` as the server renders it (the script takes over from there), `data` blocks after it."""
     return (
         "<!doctype html>\n<html lang=en><head><meta charset=utf-8>"
         '<meta name=viewport content="width=device-width, initial-scale=1">'
@@ -255,7 +256,7 @@ def _html(title: str, body_attrs: str) -> str:
         '<link rel=stylesheet href="/static/page.css">'
         '<script src="/static/plotly.min.js" defer></script>'
         '<script src="/static/page.js" defer></script>'
-        f"</head><body {body_attrs}><main id=app><p>loading...</p></main></body></html>\n"
+        f"</head><body {body_attrs}><main id=app>{main}</main>{data}</body></html>\n"
     )
 
 
@@ -308,10 +309,20 @@ def _cache_for(seconds: int) -> dict:
 
 
 async def page(request: web.Request) -> web.Response:
+    """The campaign's page with its state rendered on the server (curl and a screenshot see it) and embedded for
+    the script, whose first render then needs no request."""
     name = request.match_info["name"]
     request.app["hub"].folder(name)
     attrs = f'data-view=campaign data-campaign="{html.escape(name)}"'
-    return web.Response(text=_html(f"slamrun: {name}", attrs), content_type="text/html")
+    try:
+        body, _ = await request.app["hub"].state(name)
+    except SlamRunError as exc:  # a damaged ledger, one being replaced: said, and the script tries again
+        main = f'<p class="problem">{html.escape(str(exc))}</p><p>loading...</p>'
+        return web.Response(text=_html(f"slamrun: {name}", attrs, main), content_type="text/html")
+    snap = json.loads(body)
+    title = f"{snap['progress']['finished']}/{snap['progress']['total']} · {snap['campaign']} · slamrun"
+    page_html = _html(title, attrs, firstpaint.campaign_body(snap), firstpaint.embedded(body))
+    return web.Response(text=page_html, content_type="text/html")
 
 
 async def state(request: web.Request) -> web.Response:

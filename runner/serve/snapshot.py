@@ -15,10 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from runner.analysis.colours import method_colours
+from runner.core.ticks import log_ticks
 from runner.engine.ledger import Ledger
-from runner.engine.progress import Tracker
+from runner.engine.progress import Tracker, duration
 from runner.engine.session import current_session
-from runner.results.vocabulary import SUMMARY_METRICS
+from runner.results.vocabulary import MAIN_METRICS, SUMMARY_METRICS
 from runner.serve.folders import LEDGER
 
 MAX_FAILED = 100  # the newest failed runs listed (every failure is counted by kind)
@@ -27,6 +28,18 @@ MAX_FIGURES = 200
 MESSAGE_CHARS = 300
 FIGURE_SUFFIXES = (".png", ".svg")
 RUN_COLUMNS = ("key", "label", "dataset", "sequence", "direction", "trial", "attempts", "started_at", "ended_at")
+# a metric's name on the page, with its unit: TUM-Mono's lengths are in its ground truth's units (the benchmark's
+# ground truth has no metric scale)
+LABELS = {
+    "coverage": "coverage (median, share of frames)",
+    "e_t": "e_t (ground-truth units)",
+    "e_r": "e_r (deg)",
+    "e_s_sym": "e_s' (factor)",
+    "e_align": "e_align (ground-truth units)",
+    "e_rmse": "e_rmse (ground-truth units)",
+    "ate_rmse": "ATE RMSE (m)",
+    "rpe_t_rmse": "RPE-t RMSE (m)",
+}
 
 
 @dataclass(frozen=True)
@@ -63,11 +76,15 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         done = ledger.rows(state="done", columns=("label", "dataset", "coverage", *SUMMARY_METRICS))
     finally:
         ledger.close()
+    counts = progress.to_dict()
     return {
         "campaign": campaign,
         "name": name,
         "generated_at": now,
-        "progress": progress.to_dict(),
+        "progress": counts,
+        "state": state_of(counts),
+        "facts": facts(counts),
+        "labels": LABELS,
         "lanes": [_lane(r, now) for r in sorted(running, key=lambda r: r.get("started_at") or 0.0)],
         "failed": _failed(failed),
         "medians": medians(done),
@@ -75,6 +92,32 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         "figures": report_figures(results),
         "report": "report/index.html" if (results / "report" / "index.html").is_file() else None,
     }
+
+
+def state_of(progress: dict) -> str:
+    """running (a campaign process runs now), finished (every run finished), or stopped."""
+    return "running" if progress["active"] else "finished" if progress["finished"] >= progress["total"] else "stopped"
+
+
+def facts(p: dict) -> list[str]:
+    """The progress line of the page's header, one fact per item."""
+    share = 100 * p["finished"] / p["total"] if p["total"] else 0
+    shown = [
+        f"{p['finished']} of {p['total']} runs finished ({share:.0f} %)",
+        f"done {p['done']}",
+        f"failed {p['failed']}",
+    ]
+    if p["infra"]:
+        shown.append(f"infrastructure {p['infra']} (retried at the next start)")
+    shown.append(f"running {p['running']} on {p['lanes']} lane(s)")
+    if p["elapsed_s"] is not None:
+        shown.append(f"elapsed {duration(p['elapsed_s'])}")
+    if p["finished"] < p["total"]:
+        basis = p["eta_basis"] if p["eta_basis"] not in ("measured", "-") else ""
+        shown.append(f"ETA {duration(p['eta_s'])}" + (f" ({basis})" if basis else ""))
+    if p["occupancy"] is not None:
+        shown.append(f"lanes busy {100 * p['occupancy']:.0f} %")
+    return shown
 
 
 def _lane(row: dict, now: float) -> dict:
@@ -104,14 +147,14 @@ def medians(done: list[dict]) -> dict:
     """Per dataset (never pooled: metres of one dataset are not a population with another's), per method: the
     runs done, their median coverage (the share of the sequence's frames with a pose: an ATE over 31 poses is not
     one over 150), the median of each summary metric that has values, and up to MAX_VALUES values of the dataset's
-    main metric (e_align where the runs have it, else ATE RMSE) for the live box plot."""
+    main metric (e_align where the runs have it, else ATE RMSE) for the live box plot, with its log axis's ticks."""
     out: dict[str, dict] = {}
     by_dataset: dict[str, list[dict]] = {}
     for r in done:
         by_dataset.setdefault(r.get("dataset") or "", []).append(r)
     for dataset, rows in sorted(by_dataset.items()):
         metrics = [m for m in ("coverage", *SUMMARY_METRICS) if any(_finite(r.get(m)) for r in rows)]
-        main = next((m for m in ("e_align", "ate_rmse") if m in metrics), None)
+        main = next((m for m in MAIN_METRICS if m in metrics), None)
         methods = []
         values = {}
         for label in sorted({r["label"] for r in rows}):
@@ -124,7 +167,8 @@ def medians(done: list[dict]) -> dict:
             if main:
                 vs = [r[main] for r in mine if _finite(r.get(main))]
                 values[label] = _spread(vs, MAX_VALUES)
-        out[dataset] = {"metrics": metrics, "main": main, "methods": methods, "values": values}
+        ticks = log_ticks(v for vs in values.values() for v in vs)  # the box plot's log axis
+        out[dataset] = {"metrics": metrics, "main": main, "methods": methods, "values": values, "ticks": ticks}
     return out
 
 

@@ -41,20 +41,10 @@ const base = () => `/c/${encodeURIComponent(document.body.dataset.campaign)}/`;
 
 function header(s) {
   const p = s.progress;
-  const state = p.active ? "running" : p.finished >= p.total ? "finished" : "stopped";
-  const pct = p.total ? (100 * p.finished) / p.total : 0;
+  const state = s.state;
   const bar = $("div", { class: "bar" }, $("div", { class: "done", style: `width:${(100 * p.done) / (p.total || 1)}%` }),
     $("div", { class: "failed", style: `width:${(100 * (p.failed + p.infra)) / (p.total || 1)}%` }));
-  const facts = [
-    `${p.finished} of ${p.total} runs finished (${pct.toFixed(0)} %)`,
-    `done ${p.done}`,
-    `failed ${p.failed}`,
-    p.infra ? `infrastructure ${p.infra} (retried at the next start)` : null,
-    `running ${p.running} on ${p.lanes} lane(s)`,
-    p.elapsed_s != null ? `elapsed ${duration(p.elapsed_s)}` : null,
-    p.finished < p.total ? `ETA ${duration(p.eta_s)}${p.eta_basis && p.eta_basis !== "measured" && p.eta_basis !== "-" ? ` (${p.eta_basis})` : ""}` : null,
-    p.occupancy != null ? `lanes busy ${(100 * p.occupancy).toFixed(0)} %` : null,
-  ].filter(Boolean);
+  const facts = s.facts;  // written by the server (the same line its first render of the page shows)
   return $(
     "header",
     { id: "progress", "data-state": state, "data-finished": p.finished, "data-total": p.total, "data-done": p.done },
@@ -103,26 +93,13 @@ function failures(s) {
   );
 }
 
-// with their units: TUM-Mono's lengths are in its ground truth's units (the benchmark's ground truth has no metric scale)
-const LABELS = { coverage: "coverage (median, share of frames)", e_t: "e_t (ground-truth units)", e_r: "e_r (deg)", e_s_sym: "e_s' (factor)", e_align: "e_align (ground-truth units)", e_rmse: "e_rmse (ground-truth units)", ate_rmse: "ATE RMSE (m)", rpe_t_rmse: "RPE-t RMSE (m)" };
-
-// A log axis a reader can read values off: 1, 2 and 5 of each decade where the values span three decades or less,
-// else each decade; every tick labelled with its whole value (0.002, never a bare "2" whose decade is elsewhere).
-// The axis runs from the tick below the least value to the tick above the greatest, so that values closer together
-// than two ticks (0.030 to 0.043) still have a labelled tick at each end.
-function logTicks(values) {
-  const v = values.filter((x) => x > 0 && Number.isFinite(x));
-  if (!v.length) return {};
-  const least = Math.min(...v), greatest = Math.max(...v);
-  const lo = Math.floor(Math.log10(least));
-  const hi = Math.max(Math.ceil(Math.log10(greatest)), lo + 1);
-  const steps = hi - lo <= 3 ? [1, 2, 5] : [1];
-  const all = [];
-  for (let d = lo; d <= hi; d++) for (const s of steps) all.push(+(s * 10 ** d).toPrecision(1));
-  const below = Math.max(...all.filter((t) => t <= least)), above = Math.min(...all.filter((t) => t >= greatest));
-  const tickvals = all.filter((t) => t >= below && t <= above);
-  const pad = 0.02 * (Math.log10(above) - Math.log10(below));  // the end ticks' labels not cut
-  return { tickmode: "array", tickvals, ticktext: tickvals.map(String), autorange: false, range: [Math.log10(below) - pad, Math.log10(above) + pad] };
+// The box plot's log axis: the ticks the server chose (runner/core/ticks.py, the report's rule: 1, 2 and 5 of each
+// decade over three decades or less, every tick its whole value, the axis from the tick below the least value to
+// the one above the greatest), a little margin so the end labels are not cut.
+function logAxis(ticks) {
+  if (!ticks || !ticks.length) return {};
+  const a = Math.log10(ticks[0]), b = Math.log10(ticks[ticks.length - 1]), pad = 0.02 * (b - a);
+  return { tickmode: "array", tickvals: ticks, ticktext: ticks.map(String), autorange: false, range: [a - pad, b + pad] };
 }
 
 function medians(s) {
@@ -131,14 +108,14 @@ function medians(s) {
     const rows = d.methods.map((m) => [m.method, m.done, ...d.metrics.map((k) => num(m[k]))]);
     const plot = $("div", { class: "box", id: `box-${dataset}` });
     out.push($("h3", { text: `${dataset || "(no dataset)"}: medians over the done runs so far` }),
-      $("div", { class: "scroll" }, table(["method", "done", ...d.metrics.map((k) => LABELS[k] || k)], rows)), plot);
+      $("div", { class: "scroll" }, table(["method", "done", ...d.metrics.map((k) => s.labels[k] || k)], rows)), plot);
     if (d.main && window.Plotly) {
       // each method in its colour for the whole campaign (the report's figures use the same)
       const traces = Object.entries(d.values).map(([method, vs]) => ({ type: "box", x: vs, name: method, orientation: "h", boxpoints: vs.length < 60 ? "all" : "outliers", marker: { color: s.colours[method] }, line: { color: s.colours[method] } }));
-      const ticks = logTicks(Object.values(d.values).flat());
+      const ticks = logAxis(d.ticks);
       setTimeout(() => Plotly.react(plot, traces, {  // once the section is in the page (a frame may never come in a hidden tab)
-        title: { text: `${LABELS[d.main] || d.main} per method (${dataset}), done runs so far`, font: { size: 13 } },
-        xaxis: { type: "log", title: { text: LABELS[d.main] || d.main }, ...ticks }, yaxis: { title: { text: "method" } }, margin: { l: 110, r: 20, t: 40, b: 45 }, height: 90 + 40 * traces.length, showlegend: false,
+        title: { text: `${s.labels[d.main] || d.main} per method (${dataset}), done runs so far`, font: { size: 13 } },
+        xaxis: { type: "log", title: { text: s.labels[d.main] || d.main }, ...ticks }, yaxis: { title: { text: "method" } }, margin: { l: 110, r: 20, t: 40, b: 45 }, height: 90 + 40 * traces.length, showlegend: false,
       }, { displaylogo: false, responsive: true }));
     }
   }
@@ -218,10 +195,24 @@ function render(s) {
 
 const POLL_MS = 5000;
 
+// The page's first state comes with it (rendered by the server, embedded for this script): no request before the
+// first render. Then server-sent events while the campaign runs. Once a state says it is not running, the stream
+// is closed and opened again every POLL_MS (a stopped campaign may be started again): between two short requests
+// nothing is pending, so a headless browser's virtual time runs on and the page settles.
 function campaignPage() {
+  const first = document.getElementById("first-state");
+  if (first) { render(JSON.parse(first.textContent)); first.remove(); }
+  follow();
+}
+
+function follow() {
   let last = null;
   const source = new EventSource(`${base()}events`);
-  source.addEventListener("state", (e) => { last = JSON.parse(e.data); render(last); });
+  source.addEventListener("state", (e) => {
+    last = JSON.parse(e.data);
+    render(last);
+    if (!last.progress.active) { source.close(); setTimeout(follow, POLL_MS); }
+  });
   source.addEventListener("problem", (e) => { document.getElementById("app").prepend($("p", { class: "problem", text: JSON.parse(e.data) })); });
   source.onerror = () => {
     // refused (the server streams to 64 viewers at most: 503) or gone for good: the page polls api/state instead
