@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import functools
 
-from methods.base import Method, Provider, guarded, one_line
+from methods.base import Method, Provider, guarded
 from methods.cnn_dso import CnnDso
 from methods.cnn_svo import CnnSvo
 from methods.colmap import Colmap
@@ -31,6 +31,7 @@ from methods.orb_slam3 import OrbSlam3
 from methods.reference_vo.adapter import ReferenceVO
 from methods.svo import Svo
 from runner.core.suggest import did_you_mean
+from runner.errors import one_line
 
 STUDY_METHODS = ("orb_slam2", "df_orb_slam", "lsd_slam", "dso", "svo", "ldso", "dsm", "dynaslam", "cnn_dso", "cnn_svo")
 

@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict
 
 from runner.core.trajectory import Trajectory, read_tum
 from runner.datasets.view import PreparedView, Profile
-from runner.errors import MethodFailure, TrajectoryFormatError
+from runner.errors import MethodFailure, TrajectoryFormatError, one_line
 
 MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (MAX_ARG_STRLEN)
 
@@ -182,12 +182,6 @@ GUARDED_CALLS = (
     "launch_problems",
     "executable_problems",
 )
-
-
-def one_line(exc: BaseException, limit: int = 300) -> str:
-    """`Type: message` on one line, at most `limit` characters of message."""
-    text = " ".join(str(exc).split())
-    return f"{type(exc).__name__}: {text[:limit]}" if text else type(exc).__name__
 
 
 def guarded(cls: type[Method], who: str) -> type[Method]:

@@ -95,3 +95,10 @@ class LedgerLostError(SlamRunError):
 
 class LedgerLockedError(SlamRunError):
     """Another runner holds the results directory."""
+
+
+def one_line(exc: BaseException, limit: int = 300) -> str:
+    """Someone else's exception as `Type: message` on one line, at most `limit` characters of message (its type
+    alone when it has none): what a plug-in, a method class or a reader raised, named without a traceback."""
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text[:limit]}" if text else type(exc).__name__

@@ -32,7 +32,7 @@ from runner.datasets import euroc, icl_nuim, kitti, tartanair, tum_mono, tum_rgb
 from runner.datasets.plugin_checks import TIME_LIMITS_S, bounded, checked_reader
 from runner.datasets.protocol import METRICS, Layout
 from runner.datasets.sequence import Sequence, folder_identity
-from runner.errors import DatasetError, SlamRunError
+from runner.errors import DatasetError, SlamRunError, one_line
 
 BUILT_IN: tuple[Layout, ...] = (
     tum_vi.LAYOUT,
@@ -51,11 +51,6 @@ PLUGIN_GROUP = "slamrun.datasets"
 # ---------------------------------------------------------------------------------------------------- plug-ins
 
 
-def _one_line(exc: BaseException) -> str:
-    text = " ".join(str(exc).split()) or "(no message)"
-    return f"{type(exc).__name__}: {text[:300]}"
-
-
 def _guard(fn: Callable | None, who: str, what: str) -> Callable | None:
     """`fn` of a plug-in: whatever it raises but a SlamRunError (or an interrupt) becomes a DatasetError naming
     the plug-in and what it was doing."""
@@ -70,7 +65,7 @@ def _guard(fn: Callable | None, who: str, what: str) -> Callable | None:
             raise
         except BaseException as exc:  # noqa: BLE001 - someone else's package: named, never a traceback
             where = f" on {args[0]}" if args else ""
-            raise DatasetError(f"{who}: {what}{where} failed: {_one_line(exc)}") from None
+            raise DatasetError(f"{who}: {what}{where} failed: {one_line(exc)}") from None
 
     return guarded
 
@@ -111,7 +106,7 @@ def _load(name: str, ep, provider: str, where: str) -> Layout | str:
     except KeyboardInterrupt:
         raise
     except BaseException as exc:  # noqa: BLE001 - sys.exit() or any error of someone else's package
-        return f"plug-in {where} cannot be imported: {_one_line(exc)}"
+        return f"plug-in {where} cannot be imported: {one_line(exc)}"
     if not isinstance(layout, Layout):
         return f"plug-in {where} is {type(layout).__name__}, not a runner.datasets.protocol.Layout"
     if layout.name != name:

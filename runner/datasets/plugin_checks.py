@@ -21,7 +21,7 @@ import numpy as np
 from runner.core.camera import CameraFile
 from runner.core.trajectory import Trajectory
 from runner.datasets.sequence import MAX_POSITION_M, MAX_TIME_S, Sequence, camera_problem
-from runner.errors import DatasetError
+from runner.errors import DatasetError, one_line
 
 # Far above any real sequence's frame count (KITTI 00: 4,541; the longest TUM-Mono: about 21,000), far below what
 # would exhaust memory in a view's preparation (40 million times: 2 GB and 90 s before a method started).
@@ -169,9 +169,8 @@ def checked_reader(read: Callable[..., Sequence], who: str) -> Callable[..., Seq
             except (KeyboardInterrupt, SystemExit):
                 raise
             except BaseException as exc:  # noqa: BLE001 - someone else's package: named, never a traceback
-                text = " ".join(str(exc).split())[:300] or "(no message)"
                 raise DatasetError(
-                    f"{who}: reading the ground truth {seq.groundtruth_path} failed: {type(exc).__name__}: {text}"
+                    f"{who}: reading the ground truth {seq.groundtruth_path} failed: {one_line(exc)}"
                 ) from None
             if problem := groundtruth_problem(gt, seq):
                 raise DatasetError(f"{who}: {seq.groundtruth_path}: {problem}")
