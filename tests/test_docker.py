@@ -302,6 +302,8 @@ def test_campaign_with_reference_vo_image(backend, image, tmp_path, vo_dataset):
     assert (df.status == "done").all() and (df.eval_status == "ok").all(), df.message.tolist()
     assert (df.cpu_mean_pct > 10).all() and (df.ram_peak_mb > 20).all() and (df.fps > 0).all()
     assert df.gpu_mem_peak_mb.isna().all()
+    # the container's threads' wait for a CPU, read from this machine's /proc (its processes found by their cgroup)
+    assert df.cpu_wait_pct.notna().all() and (df.cpu_wait_pct >= 0).all(), df.cpu_wait_pct.tolist()
     series = pd.read_csv(Path(df.run_dir[0]) / "resources.csv")
     # sampled through the run (how many samples depends on the engine's load: a stats call can take a second; the
     # schedule, 2 Hz from the first sample, is checked on a fake clock in tests/test_monitor_rate.py)

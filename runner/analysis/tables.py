@@ -92,6 +92,8 @@ def resources_table(df: pd.DataFrame) -> pd.DataFrame:
         "ram_peak_mb": "RAM peak MB",
         "wall_s": "time (s)",
         "fps": "FPS",
+        "cpu_wait_pct": "CPU wait %",
+        "host_cpu_pressure_pct": "machine CPU pressure %",
     }
     present = [c for c in cols if c in df.columns]
     out = df.groupby("method")[present].mean().reset_index().rename(columns=cols)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from runner.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise
 from runner.backends.logcap import CappedLog, Tap
-from runner.backends.monitor import Gpu, ResourceSeries, Sample
+from runner.backends.monitor import Gpu, ResourceSeries, RunQueueWait, Sample, tree_pids
 from runner.datasets.view import PreparedView
 from runner.errors import DaemonUnreachable, InfraError
 
@@ -361,6 +361,14 @@ class DockerBackend(Defaults):
             pass
 
 
+def _in_container(pid: int, container_id: str) -> bool:
+    """Whether this machine's process `pid` runs in the container (its cgroup path names the container's id)."""
+    try:
+        return container_id in Path(f"/proc/{pid}/cgroup").read_text()
+    except OSError:
+        return False
+
+
 class ContainerMonitor:
     """Samples a container's cgroup figures (CPU time, memory) from the Docker stats API at a fixed rate."""
 
@@ -373,6 +381,8 @@ class ContainerMonitor:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._loop, daemon=True, name="container-monitor")
         self._last: tuple[float, int] | None = None
+        self.wait = RunQueueWait()
+        self._host_pid: int | None = None  # the container's first process, as this machine numbers it
 
     def start(self) -> None:
         self._thread.start()
@@ -380,7 +390,21 @@ class ContainerMonitor:
     def stop(self) -> ResourceSeries:
         self._stop.set()
         self._thread.join(timeout=10)
-        return self.series
+        return self.wait.close(self.series)
+
+    def _sample_wait(self) -> None:
+        """The container's threads' wait for a CPU, read from this machine's /proc: its first process's PID from the
+        engine once, taken only where that process's cgroup names the container (an engine on another machine numbers
+        its own processes: then nothing is counted, and the columns stay empty), its tree from /proc at each sample."""
+        if self._host_pid is None:
+            try:
+                self.container.reload()
+                pid = int(self.container.attrs["State"]["Pid"])
+            except Exception:  # noqa: BLE001 - not running yet, or gone
+                return
+            self._host_pid = pid if pid > 0 and _in_container(pid, self.container.id) else 0
+        if self._host_pid:
+            self.wait.sample(tree_pids(self._host_pid))
 
     def _loop(self) -> None:
         """One sample every interval_s from the first: the stats call's own time (up to a second on a busy engine) is
@@ -413,6 +437,7 @@ class ContainerMonitor:
             cpu_pct = max(0.0, (cpu_ns - self._last[1]) / 1e9 / max(dt, 1e-6) * 100.0)
         self._last = (now, cpu_ns)
         n_procs = (s.get("pids_stats") or {}).get("current") or 0
+        self._sample_wait()
         gmem = gutil = None
         if self.gpu is not None:
             try:

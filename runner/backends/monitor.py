@@ -1,4 +1,5 @@
-"""Resource sampling shared by the backends: CPU % (100 % = one core), memory, GPU where NVML exists.
+"""Resource sampling shared by the backends: CPU % (100 % = one core), memory, GPU where NVML exists, and the time
+the run's threads waited for a CPU with the machine's CPU pressure over the run (what else the machine ran).
 
 `ResourceSeries` turns samples into the per-run summary columns; GPU columns stay empty (None) when
 there is no GPU, never zero.
@@ -7,6 +8,7 @@ there is no GPU, never zero.
 from __future__ import annotations
 
 import csv
+import os
 import subprocess
 import threading
 import time
@@ -33,6 +35,8 @@ class Sample:
 @dataclass
 class ResourceSeries:
     samples: list[Sample] = field(default_factory=list)
+    waited_s: float | None = None  # the run's threads' time runnable but not running, summed (RunQueueWait)
+    host_pressure_s: float | None = None  # the time some task on the machine waited for a CPU, over the run
 
     def summary(self, wall_s: float, n_frames: int | None) -> dict:
         cpu = [s.cpu_pct for s in self.samples[1:]] or [s.cpu_pct for s in self.samples]
@@ -47,6 +51,8 @@ class ResourceSeries:
             "gpu_mem_peak_mb": max(gpu_mem) if gpu_mem else None,
             "gpu_util_mean_pct": sum(gpu_util) / len(gpu_util) if gpu_util else None,
             "n_frames": n_frames,
+            "cpu_wait_pct": _per_wall(self.waited_s, wall_s),
+            "host_cpu_pressure_pct": _per_wall(self.host_pressure_s, wall_s),
         }
 
     def write_csv(self, path: Path) -> None:
@@ -64,6 +70,58 @@ class ResourceSeries:
                         "" if s.gpu_util_pct is None else f"{s.gpu_util_pct:.1f}",
                     ]
                 )
+
+
+def _per_wall(seconds: float | None, wall_s: float) -> float | None:
+    return 100.0 * seconds / wall_s if seconds is not None and wall_s > 0 else None
+
+
+HOST_PRESSURE = Path("/proc/pressure/cpu")
+
+
+def host_pressure_s(path: Path = HOST_PRESSURE) -> float | None:
+    """The machine's CPU pressure so far (PSI, `some`): seconds in which at least one runnable task waited for a CPU;
+    None where the kernel does not keep it."""
+    try:
+        some = next(line for line in path.read_text().splitlines() if line.startswith("some "))
+        return int(some.rsplit("total=", 1)[1]) / 1e6
+    except (OSError, StopIteration, IndexError, ValueError):
+        return None
+
+
+class RunQueueWait:
+    """The time a process tree's threads were runnable but waited for a CPU: the kernel's run delay of each thread
+    (/proc/PID/task/TID/schedstat, its second field), the latest value seen per thread, summed; 100 % of the wall
+    time is one thread waiting all along. Threads that begin and end between two samples are not seen, and what the
+    last thread waited after the last sample is not counted (at most a sample period). And the machine's CPU
+    pressure over the same span (host_pressure_s), to tell the run's own threads' competition from the load beside
+    it."""
+
+    def __init__(self) -> None:
+        self.by_thread: dict[int, float] = {}
+        self.host_start = host_pressure_s()
+
+    def sample(self, pids) -> None:
+        for pid in pids:
+            try:
+                tids = os.listdir(f"/proc/{pid}/task")
+            except OSError:
+                continue
+            for tid in tids:
+                try:
+                    with open(f"/proc/{pid}/task/{tid}/schedstat", "rb") as f:
+                        waited = int(f.read().split()[1]) / 1e9
+                except (OSError, ValueError, IndexError):
+                    continue
+                if waited >= self.by_thread.get(int(tid), 0.0):
+                    self.by_thread[int(tid)] = waited
+
+    def close(self, series: ResourceSeries) -> ResourceSeries:
+        """`series` with the wait and the machine's pressure since this began."""
+        series.waited_s = sum(self.by_thread.values()) if self.by_thread else None
+        now = host_pressure_s()
+        series.host_pressure_s = now - self.host_start if now is not None and self.host_start is not None else None
+        return series
 
 
 UTIL_WINDOW_S = 1.0  # per-process utilisation: NVML's samples of the last second (its sample period is shorter)
@@ -177,6 +235,7 @@ class ProcessTreeMonitor:
         self._t0 = time.monotonic()
         self._last_cpu: float | None = None
         self._last_t = self._t0
+        self.wait = RunQueueWait()
 
     def start(self) -> ProcessTreeMonitor:
         self._thread.start()
@@ -185,7 +244,7 @@ class ProcessTreeMonitor:
     def stop(self) -> ResourceSeries:
         self._stop.set()
         self._thread.join()
-        return self.series
+        return self.wait.close(self.series)
 
     def descendants(self) -> list[psutil.Process]:
         """Every live process of the tree seen so far (the monitor remembers re-parented children)."""
@@ -219,8 +278,26 @@ class ProcessTreeMonitor:
         else:
             cpu_pct = max(0.0, (cpu_total - self._last_cpu) / max(now - self._last_t, 1e-6) * 100.0)
         self._last_cpu, self._last_t = max(cpu_total, self._last_cpu or 0.0), now
+        self.wait.sample([pid for pid, p in self.known.items() if _same(p)])
         gmem, gutil = self.gpu.sample(set(self.known)) if self.gpu else (None, None)
         self.series.samples.append(Sample(now - self._t0, cpu_pct, rss / 2**20, procs, gmem, gutil))
+
+
+def _same(p: psutil.Process) -> bool:
+    """The process is still the one first seen (its PID not yet reused by another)."""
+    try:
+        return p.is_running()
+    except psutil.Error:
+        return False
+
+
+def tree_pids(root: int) -> list[int]:
+    """`root` and its descendants now; [] when it is gone."""
+    try:
+        proc = psutil.Process(root)
+        return [root, *(c.pid for c in proc.children(recursive=True))]
+    except psutil.Error:
+        return []
 
 
 def _alive(p: psutil.Process) -> bool:
