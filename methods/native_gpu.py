@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+from abc import abstractmethod
 from pathlib import Path
 
 from methods.base import Method, PythonProcess
@@ -73,8 +74,9 @@ class NativeGpuMethod(PythonProcess, Method):
     recipe: Path  # the image's Dockerfile
     backend: str = "local"
 
+    @abstractmethod
     def default_build(self) -> Path:
-        raise NotImplementedError
+        """Where slamrun's cache holds this method's native build (each GPU method names its own)."""
 
     def for_backend(self, backend: str) -> Method:
         method = super().for_backend(backend)
