@@ -12,7 +12,7 @@ install: $(VENV)/.installed
 
 install-dev: $(VENV)/.installed-dev
 
-$(VENV)/.installed: pyproject.toml setup.py runner/core/_tumparse.c
+$(VENV)/.installed: pyproject.toml setup.py slamrun/core/_tumparse.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e .
@@ -32,8 +32,8 @@ bench: install-dev
 	$(BIN)/python -m bench $(ARGS)
 
 lint: install-dev
-	$(BIN)/ruff check runner methods tests bench docker
-	$(BIN)/ruff format --check runner methods tests bench
+	$(BIN)/ruff check slamrun tests bench docker
+	$(BIN)/ruff format --check slamrun tests bench
 
 IMAGE_ARGS = $(foreach m,$(METHOD),--method $(m)) $(if $(SOURCES),--sources $(SOURCES)) $(if $(MARCH),--march $(MARCH))
 

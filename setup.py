@@ -1,4 +1,4 @@
-"""The one compiled part: runner.core._tumparse, the fast reader of plain numeric tables (TUM trajectory files).
+"""The one compiled part: slamrun.core._tumparse, the fast reader of plain numeric tables (TUM trajectory files).
 
 Optional: where it cannot be built (no C compiler), slamrun installs without it and reads those files with
 Arrow's CSV reader instead (about half as fast, the same numbers)."""
@@ -7,6 +7,6 @@ from setuptools import Extension, setup
 
 setup(
     ext_modules=[
-        Extension("runner.core._tumparse", ["runner/core/_tumparse.c"], extra_compile_args=["-O3"], optional=True)
+        Extension("slamrun.core._tumparse", ["slamrun/core/_tumparse.c"], extra_compile_args=["-O3"], optional=True)
     ]
 )

@@ -37,8 +37,8 @@ def one_core() -> None:
 def bench_evaluator(tmp: Path) -> None:
     from scipy.spatial.transform import Rotation
 
-    from runner.core.evaluation import tum_mono
-    from runner.core.trajectory import Trajectory, read_tum, read_tum_many
+    from slamrun.core.evaluation import tum_mono
+    from slamrun.core.trajectory import Trajectory, read_tum, read_tum_many
 
     print("evaluator: 1,000 trajectories of 1,500 poses against one ground truth (one core)")
     n = 1500
@@ -116,8 +116,8 @@ def bench_evaluator(tmp: Path) -> None:
 def bench_evaluate_cores(tmp: Path) -> None:
     from scipy.spatial.transform import Rotation
 
-    from runner.core.batch_eval import evaluate_files
-    from runner.core.trajectory import Trajectory
+    from slamrun.core.batch_eval import evaluate_files
+    from slamrun.core.trajectory import Trajectory
 
     jobs = len(os.sched_getaffinity(0))
     print(f"slamrun evaluate on every core ({jobs}) against one core: 1,000 trajectories of 2,206 poses")
@@ -212,7 +212,7 @@ def bench_metrics(tmp: Path) -> None:
         return time.perf_counter() - t0
 
     ours = sum(
-        run([sys.executable, "-m", "runner.cli", "evaluate", "--metric", m, "--gt", str(tmp / "gt.txt"), *paths])
+        run([sys.executable, "-m", "slamrun.cli", "evaluate", "--metric", m, "--gt", str(tmp / "gt.txt"), *paths])
         for m in ("ate", "rpe")
     )
     evo_s = sum(
@@ -232,9 +232,9 @@ def bench_metrics(tmp: Path) -> None:
 def bench_scheduler(tmp: Path) -> None:
     import yaml
 
-    from runner.datasets.synth import generate
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import DistributedSpec, load_spec
+    from slamrun.datasets.synth import generate
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import DistributedSpec, load_spec
 
     print("scheduler: per-run overhead with a no-op method, against a bare spawn of the same command")
     generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
@@ -266,7 +266,7 @@ def bench_scheduler(tmp: Path) -> None:
     report("bare subprocess.run, per run", f"{bare_s / n * 1000:.1f} ms", "-")
     report("scheduler overhead per run", f"{overhead_ms:.1f} ms", "< 50 ms")
     # runs of 1 s on 2 lanes: the share of the lanes' time the runs use (status's occupancy)
-    from runner.engine.session import read_figures
+    from slamrun.engine.session import read_figures
 
     busy_spec = loaded.model_copy(
         update={
@@ -299,11 +299,11 @@ def bench_scheduler(tmp: Path) -> None:
 
 
 def bench_plan_status(tmp: Path) -> None:
-    from runner.analysis.summary import method_summary
-    from runner.engine.export import results_frame
-    from runner.engine.ledger import Ledger
-    from runner.engine.plan import plan
-    from runner.engine.spec import validate_spec
+    from slamrun.analysis.summary import method_summary
+    from slamrun.engine.export import results_frame
+    from slamrun.engine.ledger import Ledger
+    from slamrun.engine.plan import plan
+    from slamrun.engine.spec import validate_spec
 
     print("plan and status of a 10,000-run campaign")
     raw = {
@@ -337,10 +337,10 @@ def bench_plan_status(tmp: Path) -> None:
 def bench_datasets(tmp: Path) -> None:
     import cv2
 
-    from runner.core.camera import rectification_maps, rectified_pinhole
-    from runner.datasets.cache import prepare
-    from runner.datasets.layouts import open_sequence
-    from runner.datasets.synth import (
+    from slamrun.core.camera import rectification_maps, rectified_pinhole
+    from slamrun.datasets.cache import prepare
+    from slamrun.datasets.layouts import open_sequence
+    from slamrun.datasets.synth import (
         Renderer,
         camera_path,
         default_camera,
@@ -349,7 +349,7 @@ def bench_datasets(tmp: Path) -> None:
         make_scene,
         make_texture,
     )
-    from runner.datasets.view import Direction, Profile
+    from slamrun.datasets.view import Direction, Profile
 
     print("datasets: synthetic rendering (one core) and rectified preparation 1280x1024 -> 640x480")
     rng = np.random.default_rng(0)
@@ -406,9 +406,9 @@ def bench_datasets(tmp: Path) -> None:
 
 
 def bench_reference_vo(tmp: Path) -> None:
-    from runner.datasets.cache import prepare
-    from runner.datasets.synth import generate
-    from runner.datasets.view import Direction, Profile
+    from slamrun.datasets.cache import prepare
+    from slamrun.datasets.synth import generate
+    from slamrun.datasets.view import Direction, Profile
 
     print("reference VO at 640x480 (one core)")
     seq = generate(tmp / "vo" / "s", frames=300, seed=0)
@@ -420,7 +420,7 @@ def bench_reference_vo(tmp: Path) -> None:
             str(sorted(os.sched_getaffinity(0))[0]),
             sys.executable,
             "-m",
-            "methods.reference_vo",
+            "slamrun.methods.reference_vo",
             "--images",
             str(view.path(view.images_dir)),
             "--times",
@@ -453,7 +453,7 @@ def bench_demo(tmp: Path) -> None:
     spec = yaml.safe_load((ROOT / "configs" / "demo.yaml").read_text())
     data = tmp / "data"
     subprocess.run(  # data once, for both
-        [sys.executable, "-m", "runner.cli", "prepare", str(_demo_spec(tmp, spec, data, "warmup"))],
+        [sys.executable, "-m", "slamrun.cli", "prepare", str(_demo_spec(tmp, spec, data, "warmup"))],
         check=True,
         capture_output=True,
     )
@@ -462,7 +462,7 @@ def bench_demo(tmp: Path) -> None:
         path = _demo_spec(tmp, spec, data, name)
         t0 = time.time()
         env = {**os.environ, "PYTHONPATH": str(code)}
-        cmd = [sys.executable, "-m", "runner.cli", "campaign", str(path), "--no-report"]
+        cmd = [sys.executable, "-m", "slamrun.cli", "campaign", str(path), "--no-report"]
         subprocess.run(cmd, check=True, capture_output=True, cwd=code, env=env)
         wall = time.time() - t0
         db = sqlite3.connect(tmp / name / "results" / "ledger.sqlite")
@@ -502,13 +502,13 @@ def bench_docker(tmp: Path) -> None:
 
     import psutil
 
-    from runner.backends.base import ExecRequest
-    from runner.backends.docker import DockerBackend
-    from runner.backends.monitor import ProcessTreeMonitor
-    from runner.datasets.cache import prepare
-    from runner.datasets.synth import generate
-    from runner.datasets.view import Direction, Profile
-    from runner.errors import InfraError
+    from slamrun.backends.base import ExecRequest
+    from slamrun.backends.docker import DockerBackend
+    from slamrun.backends.monitor import ProcessTreeMonitor
+    from slamrun.datasets.cache import prepare
+    from slamrun.datasets.synth import generate
+    from slamrun.datasets.view import Direction, Profile
+    from slamrun.errors import InfraError
 
     print("docker backend: per-run overhead against `docker run --rm` of the same no-op image; monitor cost")
     backend = DockerBackend()
@@ -571,7 +571,7 @@ def bench_docker(tmp: Path) -> None:
 def bench_analysis(tmp: Path) -> None:
     import pandas as pd
 
-    from runner.analysis.report import write_report
+    from slamrun.analysis.report import write_report
 
     print("analysis: statistics, tables and all figures for a 10,000-run results table")
     rng = np.random.default_rng(0)
@@ -614,7 +614,7 @@ def bench_scale(tmp: Path, n_runs: int = 10_000) -> None:
 
     import yaml
 
-    from runner.datasets.synth import generate
+    from slamrun.datasets.synth import generate
 
     print(f"scale: a {n_runs:,}-run plan of a no-op method, 2 lanes, through `slamrun campaign`")
     generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
@@ -695,11 +695,11 @@ def bench_serve(tmp: Path, seconds: float = 30.0, rate: float = 20.0, viewers: i
 
     import psutil
 
-    from runner.engine.ledger import Ledger
-    from runner.engine.plan import plan
-    from runner.engine.session import read_figures
-    from runner.engine.spec import validate_spec
-    from runner.serve.snapshot import snapshot
+    from slamrun.engine.ledger import Ledger
+    from slamrun.engine.plan import plan
+    from slamrun.engine.session import read_figures
+    from slamrun.engine.spec import validate_spec
+    from slamrun.serve.snapshot import snapshot
 
     name = "live"
     print(f"slamrun serve: a 10,000-run campaign finishing {rate:.0f} runs/s, watched by {viewers} viewers (SSE)")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import heapq
 from collections.abc import Callable
 
-from runner.engine.progress import Tracker
+from slamrun.engine.progress import Tracker
 
 PACE_S = {"fast": 4.0, "medium": 12.0, "slow": 40.0}
 SEQUENCES = ("seq_a", "seq_b")

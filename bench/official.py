@@ -1,7 +1,7 @@
 """The TUM-Mono benchmark's own evaluator (tum-vision/mono_dataset_code, MatlabEvaluationCode/) run under GNU Octave,
 beside slamrun's: for the exactness test (tests/test_official_evaluator.py) and the speed ratio of `make bench`.
 
-The code is taken from its pinned archive (runner/images/sources.py: `mono_dataset_code`), unpacked once. Octave
+The code is taken from its pinned archive (slamrun/images/sources.py: `mono_dataset_code`), unpacked once. Octave
 lacks MATLAB's `dcm2quat`: a shim gives the quaternion of a rotation matrix (w first); efficientEvalDrift uses
 only its w (e_r = 2 acos(w)), which is the same for a matrix and its transpose.
 """
@@ -13,7 +13,7 @@ import subprocess
 import tarfile
 from pathlib import Path
 
-from runner.images.sources import SOURCES, obtain
+from slamrun.images.sources import SOURCES, obtain
 
 DCM2QUAT = """function q = dcm2quat(R)
   % quaternion [w x y z] of a rotation matrix (Octave has no dcm2quat)

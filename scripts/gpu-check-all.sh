@@ -28,7 +28,7 @@ pids=()
 for m in "${METHODS[@]}"; do
   (
     t=$(date +%s)
-    "$PYTHON" -m runner.cli native-build "$m" --sources "$WHEELS/sources" --eigen "$EIGEN" --jobs "${JOBS:-$(nproc)}" \
+    "$PYTHON" -m slamrun.cli native-build "$m" --sources "$WHEELS/sources" --eigen "$EIGEN" --jobs "${JOBS:-$(nproc)}" \
       --standin-model ${ARCH:+--arch "$ARCH"} >"$OUT_DIR/build-$m.log" 2>&1
     rc=$?
     say "build $m: exit $rc after $(( $(date +%s) - t )) s"

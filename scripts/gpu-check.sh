@@ -32,7 +32,7 @@ FRAMES=${FRAMES:-160}
 TRIALS=${TRIALS:-2}
 JOBS=${JOBS:-$(nproc)}
 METHOD=${METHOD:-dpvo}
-case $METHOD in  # the pinned archives the native build takes (runner/images/sources.py), carried in .whl/sources
+case $METHOD in  # the pinned archives the native build takes (slamrun/images/sources.py), carried in .whl/sources
   dpvo) ARCHIVES=(DPVO-859bbbfdac6c6185f345003b3c473901fcd13ace.tar.gz) ;;
   droid_slam) ARCHIVES=(DROID-SLAM-2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99.tar.gz
                         lietorch-7f687644fcea81ab337831749445224503c1290d.tar.gz) ;;
@@ -74,9 +74,9 @@ if ! logged "$PYTHON" -c 'from setuptools.command import bdist_wheel' && ! logge
   logged "$PYTHON" -m pip install --no-index --no-deps "$WHEELS"/setuptools-*.whl  # an editable install needs it
 fi
 logged "$PYTHON" -m pip install --no-index --no-deps --no-build-isolation -e .
-SLAMRUN=("$PYTHON" -m runner.cli)
+SLAMRUN=("$PYTHON" -m slamrun.cli)
 logged "${SLAMRUN[@]}" --version
-logged "$PYTHON" -c "import pydantic, runner.engine.spec, methods; assert '$METHOD' in methods.REGISTRY"
+logged "$PYTHON" -c "import pydantic, slamrun.engine.spec, slamrun.methods; assert '$METHOD' in slamrun.methods.REGISTRY"
 
 step eigen "Eigen 3.4's headers from the carried archive"
 if [ -f /usr/include/eigen3/Eigen/Core ]; then

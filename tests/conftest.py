@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from runner.datasets.synth import generate
+from slamrun.datasets.synth import generate
 
 FAKE = Path(__file__).parent / "fixtures" / "fake_method.py"
 # shared/ lies beside the repository (CI clones main next to it); SLAMRUN_SHARED points elsewhere.
@@ -96,11 +96,11 @@ def require_upstream(path: Path = UPSTREAM) -> Path:
 
 
 def unpack_upstream(name: str, dest: Path) -> Path:
-    """The real upstream tree of source `name` (runner/images/sources.py), unpacked from shared/upstream into `dest`;
+    """The real upstream tree of source `name` (slamrun/images/sources.py), unpacked from shared/upstream into `dest`;
     skips when shared/upstream is absent."""
     import tarfile
 
-    from runner.images.sources import SOURCES
+    from slamrun.images.sources import SOURCES
 
     archive = require_upstream(UPSTREAM / SOURCES[name].filename)
     with tarfile.open(archive, "r:gz") as tar:

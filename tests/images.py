@@ -8,8 +8,8 @@ import pytest
 
 def built_image(image: str, how: str):
     """The Docker API client and `image`'s labels, or a skip naming why (`how`: the command that builds it)."""
-    from runner.backends.docker import DockerBackend
-    from runner.errors import InfraError
+    from slamrun.backends.docker import DockerBackend
+    from slamrun.errors import InfraError
 
     try:
         api = DockerBackend().client.api

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.core.metrics import ate, rpe
-from runner.core.trajectory import read_tum, read_tum_many, write_tum
+from slamrun.core.metrics import ate, rpe
+from slamrun.core.trajectory import read_tum, read_tum_many, write_tum
 from tests.conftest import SHARED_DATA
 
 GT = SHARED_DATA / "evo_test_data" / "fr2_desk_groundtruth.txt"
@@ -190,7 +190,7 @@ def test_evaluate_command_gives_evos_figures(evo, files):
     """`slamrun evaluate` (the batched reader, worker processes) on the files with a repeated or backward time."""
     metrics = evo[0]
     names = ["noise, every row", "subsampled, jittered times", "backward (a backward run's file)"]
-    args = [sys.executable, "-m", "runner.cli", "evaluate", "--gt", str(GT), "--gt-format", "tum", "--json"]
+    args = [sys.executable, "-m", "slamrun.cli", "evaluate", "--gt", str(GT), "--gt-format", "tum", "--json"]
     for metric, extra in (
         ("ate", ["--align", "se3"]),
         ("rpe", ["--align", "sim3", "--delta", "10", "--delta-unit", "evo-f"]),
@@ -229,7 +229,7 @@ def test_evos_default_tolerance_too(evo, files):
 def test_matching_equals_evos_on_repeated_tied_and_unsorted_times(evo, seed):
     """Times on a coarse grid (ties at equal distance and repeated times are common), sorted or not, either side
     with repeats: the same pairs as evo's matching_time_indices, in the same order."""
-    from runner.core.metrics import matching_time_indices
+    from slamrun.core.metrics import matching_time_indices
 
     sync = evo[1]
     rng = np.random.default_rng(seed)
@@ -270,7 +270,7 @@ def test_tum_rgbd_ground_truth_at_frames_follows_evo(evo, tmp_path):
     the raw files."""
     import cv2
 
-    from runner.datasets.layouts import open_sequence
+    from slamrun.datasets.layouts import open_sequence
 
     metrics = evo[0]
     gt = _gt_rows()

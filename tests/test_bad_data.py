@@ -2,7 +2,7 @@
 with its file (and line), before any run, within seconds and bounded memory, with no traceback; what only view
 preparation can find is a dataset error naming the file, never a method's failure.
 
-Every case is a real synthetic sequence of its layout (runner.datasets.synth.generate), damaged as a user's or a
+Every case is a real synthetic sequence of its layout (slamrun.datasets.synth.generate), damaged as a user's or a
 hostile file would be, read by real `slamrun` processes (the hostile ones under an address-space limit).
 """
 
@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 import pytest
 
-from runner.datasets.synth import generate
-from runner.errors import DatasetError
+from slamrun.datasets.synth import generate
+from slamrun.errors import DatasetError
 from tests.conftest import fake_method, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -76,7 +76,7 @@ def slamrun(*args: str, timeout: float = 60) -> subprocess.CompletedProcess:
 
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "COLUMNS": "250"}
     return subprocess.run(
-        [sys.executable, "-m", "runner.cli", *args],
+        [sys.executable, "-m", "slamrun.cli", *args],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -182,8 +182,8 @@ def test_bad_data_never_reaches_a_method(seq, tmp_path, layout, damage, named):
     charged `no_output`; a `nan` in rgb.txt crashed the report; a nan P0 or degenerate distortion gave a nan camera
     and `not_initialized`; a 1e308 translation gave `done` with ATE = Inf. The campaign now refuses the sequence
     before any run, naming the file: nothing is written, nothing charged."""
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
 
     root = seq(layout)
     damage(root)
@@ -306,8 +306,8 @@ def test_a_frame_only_view_preparation_finds_broken_is_a_dataset_error_never_the
     """A frame whose header is whole (validate reads headers) and whose pixels are not: KITTI's view copied it
     as it was. Now the view's preparation decodes every frame: the run is infra naming the frame, never a method's
     failure, and a good frame elsewhere is not affected."""
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
 
     root = seq("kitti")
     frame = root / "image_0/000008.png"

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from runner.core.camera import (
+from slamrun.core.camera import (
     FovCamera,
     PinholeCamera,
     RadTanCamera,
@@ -15,7 +15,7 @@ from runner.core.camera import (
     rectification_maps,
     rectified_pinhole,
 )
-from runner.datasets.synth import Renderer, camera_path, fov_rays, make_scene, make_texture, pinhole_rays
+from slamrun.datasets.synth import Renderer, camera_path, fov_rays, make_scene, make_texture, pinhole_rays
 
 # TUM-Mono's documented example calibration line (tum-mono.md).
 TUM_LINE = "0.349 0.436 0.493 0.499 0.933\n1280 1024\ncrop\n640 480\n"
@@ -106,7 +106,7 @@ def test_radtan_round_trip():
 
 
 def test_rectified_fov_render_matches_direct_pinhole_render():
-    """Render through the FOV camera, rectify with runner.camera; render the rectified pinhole camera directly."""
+    """Render through the FOV camera, rectify with slamrun.camera; render the rectified pinhole camera directly."""
     rng = np.random.default_rng(3)
     scene = make_scene("indoor", rng)
     texture = make_texture(rng, size=1024)

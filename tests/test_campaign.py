@@ -18,11 +18,11 @@ import pandas as pd
 import psutil
 import pytest
 
-from runner.backends.local import LocalBackend
-from runner.engine.campaign import run_campaign
-from runner.engine.ledger import ResultsLock
-from runner.engine.spec import load_spec
-from runner.errors import InfraError
+from slamrun.backends.local import LocalBackend
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.ledger import ResultsLock
+from slamrun.engine.spec import load_spec
+from slamrun.errors import InfraError
 from tests.conftest import fake_method, mount_tmpfs, one_sequence, write_spec
 
 REQUIRED_COLUMNS = (
@@ -50,7 +50,7 @@ def ledger_rows(results: Path) -> list[dict]:
 
 def slamrun(*args: str) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "runner.cli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-m", "slamrun.cli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     )
 
 
@@ -484,10 +484,10 @@ def test_dask_engine_kill_9_then_the_next_start_kills_what_was_left(tmp_path, ti
 
 def test_a_run_on_a_worker_stops_when_its_staging_folder_disappears(tmp_path, tiny_dataset):
     """What a Dask worker does when the campaign machine crashed and its next start removed the attempt."""
-    from runner.backends.base import ExecRequest
-    from runner.backends.dask import _RemoteCancel
-    from runner.datasets.cache import prepare
-    from runner.datasets.view import Direction, Profile
+    from slamrun.backends.base import ExecRequest
+    from slamrun.backends.dask import _RemoteCancel
+    from slamrun.datasets.cache import prepare
+    from slamrun.datasets.view import Direction, Profile
 
     view = prepare(tiny_dataset / "seq_a", Direction.forward, Profile.native, tmp_path / "cache")
     stage = tmp_path / ".00.tmp-1"
@@ -509,7 +509,7 @@ def test_a_run_on_a_worker_stops_when_its_staging_folder_disappears(tmp_path, ti
 def test_a_worker_that_cannot_see_the_results_folder_is_named(tmp_path):
     import socket
 
-    from runner.backends.dask import _check_on_worker
+    from slamrun.backends.dask import _check_on_worker
 
     problem = _check_on_worker("local", None, str(tmp_path / "not-shared" / ".probe"))
     assert problem and socket.gethostname() in problem and "shared" in problem
@@ -519,7 +519,7 @@ def test_a_worker_that_cannot_see_the_results_folder_is_named(tmp_path):
 
 def test_an_unreachable_dask_scheduler_is_named(tmp_path):
     pytest.importorskip("distributed")
-    from runner.backends.dask import DaskBackend
+    from slamrun.backends.dask import DaskBackend
 
     with pytest.raises(InfraError, match=r"cannot reach the Dask scheduler at tcp://127\.0\.0\.1:9"):
         DaskBackend("local", "tcp://127.0.0.1:9", tmp_path, connect_timeout_s=2)

@@ -13,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from runner.backends.monitor import HOST_PRESSURE, ProcessTreeMonitor
+from slamrun.backends.monitor import HOST_PRESSURE, ProcessTreeMonitor
 from tests.conftest import fake_method, one_sequence, write_spec
 
 BUSY = """import time
@@ -65,9 +65,9 @@ def test_a_sleeping_process_waits_for_no_cpu_beside_the_same_hog(hog_on_one_cpu)
 
 
 def test_every_run_records_its_wait_and_the_machines_pressure(tmp_path: Path, tiny_dataset):
-    from runner.analysis.tables import resources_table
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.analysis.tables import resources_table
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
 
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=0.5)], datasets=one_sequence(tiny_dataset))
     res = run_campaign(load_spec(spec), on_event=None)

@@ -9,10 +9,10 @@ import json
 import pandas as pd
 import pytest
 
-from runner.analysis.report import write_report
-from runner.datasets.synth import generate
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
+from slamrun.analysis.report import write_report
+from slamrun.datasets.synth import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
 from tests.conftest import fake_method, write_spec
 
 
@@ -63,7 +63,7 @@ def test_statistics_and_tables_show_coverage(campaign):
     import sys
 
     res, _ = campaign
-    base = [sys.executable, "-m", "runner.cli", "stats", str(res.results), "--dataset", "open"]
+    base = [sys.executable, "-m", "slamrun.cli", "stats", str(res.results), "--dataset", "open"]
     out = json.loads(subprocess.run([*base, "--json"], capture_output=True, text=True, check=True).stdout)
     assert out["datasets"]["open"]["coverage"] == {"every": 1.0, "fifth": 0.2}
     text = subprocess.run(base, capture_output=True, text=True, check=True).stdout
@@ -74,8 +74,8 @@ def test_statistics_and_tables_show_coverage(campaign):
 
 
 def test_the_live_pages_medians_show_coverage(campaign):
-    from runner.engine.ledger import Ledger
-    from runner.serve.snapshot import medians
+    from slamrun.engine.ledger import Ledger
+    from slamrun.serve.snapshot import medians
 
     res, _ = campaign
     ledger = Ledger(res.results / "ledger.sqlite", read_only=True)

@@ -16,15 +16,15 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.core import metrics
-from runner.core.trajectory import read_euroc_csv, read_kitti, read_times, read_tum, write_tum
-from runner.datasets.cache import prepare
-from runner.datasets.euroc import read_sensor_yaml
-from runner.datasets.kitti import drive
-from runner.datasets.layouts import detect, open_sequence, sequence_identity
-from runner.datasets.synth import EUROC_T_BS, Synth, camera_path, generate
-from runner.datasets.view import Direction, Profile
-from runner.errors import DatasetError
+from slamrun.core import metrics
+from slamrun.core.trajectory import read_euroc_csv, read_kitti, read_times, read_tum, write_tum
+from slamrun.datasets.cache import prepare
+from slamrun.datasets.euroc import read_sensor_yaml
+from slamrun.datasets.kitti import drive
+from slamrun.datasets.layouts import detect, open_sequence, sequence_identity
+from slamrun.datasets.synth import EUROC_T_BS, Synth, camera_path, generate
+from slamrun.datasets.view import Direction, Profile
+from slamrun.errors import DatasetError
 
 FRAMES = 90
 SEED = 4  # a loop every layout's reference_vo and colmap (every 3rd frame) track in 90 frames
@@ -114,8 +114,8 @@ def test_each_layout_end_to_end_equals_the_same_sequence_in_tum_mono_layout(layo
     camera) and its copy: every run done and evaluated, and each method's metrics equal. (reference_vo's equality to
     1e-9 in both directions says the views are the same, whichever method reads them; colmap backward is tested in
     test_native_methods.py.)"""
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import write_spec
 
     datasets = []
@@ -330,8 +330,8 @@ def test_bad_input_is_named_with_its_file(layouts, tmp_path):
 
 def test_a_spec_names_bad_sequences_before_any_run(layouts, tmp_path):
     """`validate` and the campaign's check: a wrong layout and a missing calibration, every problem at once."""
-    from runner.engine.campaign import check_sequences
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import check_sequences
+    from slamrun.engine.spec import load_spec
     from tests.conftest import write_spec
 
     euroc = tmp_path / "euroc" / "V1"

@@ -8,12 +8,12 @@ import cv2
 import numpy as np
 import pytest
 
-from runner.core.trajectory import from_arrays
-from runner.datasets.cache import prepare
-from runner.datasets.synth import generate
-from runner.datasets.tum_mono import open_sequence
-from runner.datasets.view import Direction, PreparedView, Profile
-from runner.errors import DatasetError
+from slamrun.core.trajectory import from_arrays
+from slamrun.datasets.cache import prepare
+from slamrun.datasets.synth import generate
+from slamrun.datasets.tum_mono import open_sequence
+from slamrun.datasets.view import Direction, PreparedView, Profile
+from slamrun.errors import DatasetError
 
 
 @pytest.fixture
@@ -210,9 +210,9 @@ def test_synthetic_frames_have_strong_gradients(tiny_dataset):
 
 
 def test_disk_use_and_the_dry_runs_estimate_count_linked_frames_once(tmp_path, seq):
-    from runner.datasets.cache import disk_usage
-    from runner.engine.dryrun import dry_run
-    from runner.engine.spec import CampaignSpec
+    from slamrun.datasets.cache import disk_usage
+    from slamrun.engine.dryrun import dry_run
+    from slamrun.engine.spec import CampaignSpec
 
     spec = CampaignSpec.model_validate(
         {

@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
-import methods
-from runner.datasets.view import Direction, PreparedView, Profile
+import slamrun.methods
+from slamrun.datasets.view import Direction, PreparedView, Profile
 
 ROOT = Path(__file__).resolve().parents[1]
 DRIVER = ROOT / "docker" / "df_orb_slam" / "mono_tum_df.cc"
@@ -28,7 +28,7 @@ def _view(root: Path) -> PreparedView:
 
 
 def _settings_env(tmp_path: Path, **params) -> dict[str, str]:
-    m = methods.get("df_orb_slam")(params)
+    m = slamrun.methods.get("df_orb_slam")(params)
     path = tmp_path / "settings.yaml"
     path.write_text(m.configure(_view(tmp_path / "view"), Path("/work"))["settings.yaml"])
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
@@ -38,7 +38,7 @@ def _settings_env(tmp_path: Path, **params) -> dict[str, str]:
 
 
 def test_df_orb_slam_settings_carry_the_adapter_environment(tmp_path):
-    m = methods.get("df_orb_slam")({})
+    m = slamrun.methods.get("df_orb_slam")({})
     assert _settings_env(tmp_path) == m.environment() == {"ORB_SLAM2_NO_LOOP": "1", "DF_ORB_SLAM_MONO_POSE": "orb"}
     assert _settings_env(tmp_path, mono_pose="em", loop_closure=True) == {}
 
@@ -65,7 +65,7 @@ def test_df_orb_slam_driver_sets_the_environment_from_the_settings(tmp_path):
     subprocess.run(["g++", "-std=c++14", str(tmp_path / "t.cc"), "-o", str(tmp_path / "t"), *flags], check=True)
     settings = tmp_path / "settings.yaml"
     settings.write_text(
-        methods.get("df_orb_slam")({}).configure(_view(tmp_path / "view"), Path("/work"))["settings.yaml"]
+        slamrun.methods.get("df_orb_slam")({}).configure(_view(tmp_path / "view"), Path("/work"))["settings.yaml"]
     )
 
     def run(**env):

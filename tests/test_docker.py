@@ -22,12 +22,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from runner.backends.base import ExecRequest
-from runner.datasets.cache import prepare
-from runner.datasets.view import Direction, Profile
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
-from runner.errors import InfraError
+from slamrun.backends.base import ExecRequest
+from slamrun.datasets.cache import prepare
+from slamrun.datasets.view import Direction, Profile
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
+from slamrun.errors import InfraError
 from tests.conftest import one_sequence, write_spec
 
 IMAGE = "slamrun/reference_vo:latest"
@@ -44,7 +44,7 @@ def _unavailable(reason: str):
 def engine_with_base():
     """The Docker API client, when an engine answers and has the Debian base image; skips (fails under CI)
     otherwise."""
-    from runner.backends.docker import DockerBackend
+    from slamrun.backends.docker import DockerBackend
 
     try:
         api = DockerBackend().client.api
@@ -57,7 +57,7 @@ def engine_with_base():
 
 @pytest.fixture(scope="module", params=["docker", "podman"])
 def backend(request):
-    from runner.backends import make_local_backend
+    from slamrun.backends import make_local_backend
 
     if request.param == "podman" and shutil.which("podman") is None:
         _unavailable("podman is not installed (Debian: apt-get install podman)")
@@ -76,8 +76,8 @@ def backend(request):
 
 def in_podman(tag: str) -> None:
     """`tag`, built by Docker, in podman's store (exported and loaded when podman lacks it or has an older one)."""
-    from runner.backends.docker import DockerBackend
-    from runner.images.export import export_image
+    from slamrun.backends.docker import DockerBackend
+    from slamrun.images.export import export_image
 
     docker_id = DockerBackend().client.images.get(tag).id
     have = subprocess.run(["podman", "image", "inspect", "--format", "{{.Id}}", tag], capture_output=True, text=True)
@@ -91,7 +91,7 @@ def in_podman(tag: str) -> None:
 @pytest.fixture(scope="module")
 def image(backend):
     """The reference VO image, built from docker/reference_vo/Dockerfile (Docker's layer cache makes reruns fast)."""
-    from runner.images.build import build
+    from slamrun.images.build import build
 
     build(["reference_vo"], log=lambda *a: None)
     if backend.name == "podman":
@@ -187,7 +187,7 @@ def test_memory_limit_is_oom(backend, image, tmp_path, view, monkeypatch):
     cwd = tmp_path / "started-here"
     cwd.mkdir()
     monkeypatch.chdir(cwd)
-    from runner.backends import make_local_backend
+    from slamrun.backends import make_local_backend
 
     started_here = make_local_backend(backend.name)  # its engine's helpers (podman's service) start in `cwd`
     req = _request(tmp_path, view, ["python3", "-c", "x = bytearray(600 * 2**20); print(len(x))"], memory_mb=100)
@@ -270,7 +270,7 @@ def test_missing_image_is_infra(backend, tmp_path, view):
 
 
 def test_unreachable_daemon_is_reported_before_runs(tmp_path, monkeypatch):
-    from runner.backends.docker import DockerBackend
+    from slamrun.backends.docker import DockerBackend
 
     monkeypatch.setenv("DOCKER_HOST", f"unix://{tmp_path}/no-daemon.sock")
     with pytest.raises(InfraError, match="Docker daemon unreachable at"):
@@ -279,7 +279,7 @@ def test_unreachable_daemon_is_reported_before_runs(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="module")
 def vo_dataset(tmp_path_factory):
-    from runner.datasets.synth import generate
+    from slamrun.datasets.synth import generate
 
     root = tmp_path_factory.mktemp("docker_data")
     generate(root / "seq_a", frames=200, seed=3, size=(640, 480))
@@ -338,7 +338,7 @@ def test_kill_9_leaves_no_container_and_redoes_runs(backend, image, tmp_path, vo
         name="killtest",
     )
     proc = subprocess.Popen(
-        [sys.executable, "-m", "runner.cli", "campaign", str(spec)],
+        [sys.executable, "-m", "slamrun.cli", "campaign", str(spec)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -377,7 +377,7 @@ def test_dask_workers_check_their_own_docker_images(backend, image, tmp_path):
     pytest.importorskip("distributed")
     import socket
 
-    from runner.backends.dask import DaskBackend
+    from slamrun.backends.dask import DaskBackend
 
     dask = DaskBackend(backend.name, "local", tmp_path, local_workers=1)
     try:
@@ -395,7 +395,7 @@ def test_podmans_api_service_ends_with_a_runner_killed_by_sigkill():
         _unavailable("podman is not installed (Debian: apt-get install podman)")
     script = (
         "import sys, time\n"
-        "from runner.backends.podman import PodmanBackend\n"
+        "from slamrun.backends.podman import PodmanBackend\n"
         "b = PodmanBackend(); b.client.ping()\n"
         "print(b.service.proc.pid, flush=True)\n"
         "time.sleep(600)\n"

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import pytest
 
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
-from runner.errors import DaemonUnreachable
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
+from slamrun.errors import DaemonUnreachable
 from tests.conftest import one_sequence, write_spec
 from tests.test_campaign import ledger_rows
 from tests.test_docker import _unavailable

@@ -179,7 +179,7 @@ PLUGIN = """
 import sys
 from pathlib import Path
 
-from methods.base import Method
+from slamrun.methods.base import Method
 
 PY = {python!r}
 FAKE = {fake!r}
@@ -229,7 +229,7 @@ def test_a_plugin_that_exits_at_import_is_named_never_fatal(tmp_path, tiny_datas
     site = tmp_path / "site"
     plugin(site, "quitter", "0.1", "quitter_mod", "quitter", body="import sys\nsys.exit(3)\n")
     plugin(site, "fine", "1.0", "fine_mod", "fine")
-    hollow = "from methods.base import Method\n\nclass Good(Method):\n    name = 'hollow'\n"  # no command()
+    hollow = "from slamrun.methods.base import Method\n\nclass Good(Method):\n    name = 'hollow'\n"  # no command()
     plugin(site, "hollow", "1.0", "hollow_mod", "hollow", body=hollow)
     env = with_site(site)
     listed = slamrun("list-methods", env=env)
@@ -312,7 +312,7 @@ RAISES = {
 """,
     "read-returns-a-broken-trajectory": """
     def read_trajectory(self, workdir, view):
-        from runner.core.trajectory import Trajectory
+        from slamrun.core.trajectory import Trajectory
         import numpy as np
         return Trajectory(np.arange(3.0), np.zeros((2, 3)), np.zeros((5, 4)))
 """,

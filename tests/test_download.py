@@ -9,10 +9,10 @@ import zipfile
 
 import pytest
 
-from runner.cli import main
-from runner.datasets.download import fetch, parse_sequences
-from runner.datasets.tum_mono import open_sequence
-from runner.errors import DatasetError
+from slamrun.cli import main
+from slamrun.datasets.download import fetch, parse_sequences
+from slamrun.datasets.tum_mono import open_sequence
+from slamrun.errors import DatasetError
 
 
 class Server:
@@ -118,7 +118,7 @@ def archive_of(folder, kind: str, top: str | None) -> bytes:
 @pytest.fixture(scope="module")
 def published(tmp_path_factory):
     """Synthetic EuRoC, TUM RGB-D and TUM-VI sequences packed as each dataset's site serves them."""
-    from runner.datasets.synth import generate
+    from slamrun.datasets.synth import generate
 
     root = tmp_path_factory.mktemp("published")
     euroc = generate(root / "MH_01_easy", frames=30, seed=1, size=(160, 120), layout="euroc")
@@ -145,7 +145,7 @@ def published(tmp_path_factory):
 def test_download_of_each_dataset_unpacks_a_sequence_of_its_layout(
     tmp_path, published, dataset, sequence, folder, path
 ):
-    from runner.datasets.layouts import open_sequence as open_any
+    from slamrun.datasets.layouts import open_sequence as open_any
 
     args = ["dataset", "download", dataset, str(tmp_path), "--sequences", sequence, "--url", published.url]
     assert main(args) == 0

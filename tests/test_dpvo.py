@@ -16,16 +16,16 @@ import numpy as np
 import pytest
 import yaml
 
-import methods
-from methods import dpvo_process
-from methods.dpvo import Dpvo, DpvoParams
-from methods.native_gpu import native_problems as gpu_native_problems
-from runner.core.trajectory import read_tum
-from runner.datasets.cache import prepare
-from runner.datasets.synth import generate
-from runner.datasets.view import Direction, Profile
-from runner.images import native
-from runner.images.sources import SOURCES
+import slamrun.methods
+from slamrun.core.trajectory import read_tum
+from slamrun.datasets.cache import prepare
+from slamrun.datasets.synth import generate
+from slamrun.datasets.view import Direction, Profile
+from slamrun.images import native
+from slamrun.images.sources import SOURCES
+from slamrun.methods import dpvo_process
+from slamrun.methods.dpvo import Dpvo, DpvoParams
+from slamrun.methods.native_gpu import native_problems as gpu_native_problems
 from tests.conftest import require_upstream, unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -190,10 +190,10 @@ def test_settings_are_the_authors_defaults(patched):
 
 
 def test_registered_native_needing_a_gpu_with_an_image_recipe():
-    cls = methods.get("dpvo")
+    cls = slamrun.methods.get("dpvo")
     assert cls is Dpvo and cls.needs_gpu is True and cls.native and cls.profile is Profile.rectified
     assert Dpvo().problems("docker") == []  # docker/dpvo/Dockerfile (tests/test_dpvo_image.py)
-    from runner.images.build import buildable
+    from slamrun.images.build import buildable
 
     assert buildable()["dpvo"] == ("slamrun/dpvo:latest", ROOT / "docker" / "dpvo" / "Dockerfile")
 
@@ -210,7 +210,7 @@ def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:
 
 
 def test_native_problems_say_what_to_do(tmp_path):
-    from methods.native_gpu import installed_torch
+    from slamrun.methods.native_gpu import installed_torch
 
     assert "no native build" in problems(tmp_path / "none", None)[0]
     assert "slamrun native-build dpvo" in problems(tmp_path / "none", None)[0]
@@ -231,7 +231,7 @@ def test_command_carries_the_settings_and_the_build(tmp_path):
 
     view = make_view(tmp_path / "v", 1000 + np.arange(40) / 30, Profile.rectified)
     argv = m.command(view, tmp_path / "work")
-    assert argv[:3] == [sys.executable, "-m", "methods.dpvo_process"]
+    assert argv[:3] == [sys.executable, "-m", "slamrun.methods.dpvo_process"]
     opts = dict(zip(argv[3::2], argv[4::2], strict=False))
     assert opts["--build"] == str(build) and opts["--weights"] == str(build / "weights/dpvo.pth")
     assert opts["--stride"] == "1" and opts["--patches-per-frame"] == "64" and opts["--seed"] == "3"
@@ -259,7 +259,7 @@ def test_runner_reads_the_view_and_stops_at_the_missing_gpu(tmp_path, room_view,
     weights = tmp_path / "dpvo.pth"
     weights.write_bytes(b"x")
     argv = [
-        sys.executable, "-m", "methods.dpvo_process", "--build", str(patched.parent), "--weights", str(weights),
+        sys.executable, "-m", "slamrun.methods.dpvo_process", "--build", str(patched.parent), "--weights", str(weights),
         "--images", str(room_view.path("images")), "--times", str(room_view.path("times.txt")),
         "--camera", str(room_view.path("camera_pinhole.json")), "--out", str(tmp_path / "t.txt"),
     ]  # fmt: skip
@@ -300,7 +300,7 @@ def test_runner_output_reads_back_at_the_original_timestamps(tmp_path, room_view
 
 def test_native_build_refuses_a_cpu_pytorch_in_one_line(tmp_path):
     res = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "native-build", "dpvo", "--standin-model", "--arch", "9.0",
+        [sys.executable, "-m", "slamrun.cli", "native-build", "dpvo", "--standin-model", "--arch", "9.0",
          "--into", str(tmp_path / "b")],
         capture_output=True, text=True,
     )  # fmt: skip

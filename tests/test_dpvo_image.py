@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from runner.images import native
-from runner.images import sources as src
-from runner.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
+from slamrun.images import native
+from slamrun.images import sources as src
+from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
 from tests import images
 from tests.conftest import UPSTREAM, require_upstream
 
@@ -136,7 +136,7 @@ def test_labels_name_torch_cuda_and_the_targets():
 def test_the_context_of_a_standin_build_is_labelled_with_what_it_holds(tmp_path):
     """The build context `slamrun images --method dpvo --standin-model` assembles (the real archive, the fetched
     wheels, when this machine's download cache holds them): its labels say what the image will hold."""
-    from runner.images.build import assemble_context
+    from slamrun.images.build import assemble_context
 
     missing = [f for f in pypi_files_of(DOCKERFILE) if not (src.default_cache() / f).is_file()]
     if missing:
@@ -165,8 +165,8 @@ def test_weights_choice_is_given_standin_or_an_error_naming_the_file(tmp_path):
 def test_images_without_a_network_stop_before_fetching_anything(tmp_path):
     """`slamrun images --method dpvo` with neither --weights nor --standin-model: one line naming dpvo.pth and where
     it is published, before 2.6 GB of wheels are fetched (here from a PyPI address that answers nothing)."""
-    from runner.backends.docker import DockerBackend
-    from runner.errors import InfraError
+    from slamrun.backends.docker import DockerBackend
+    from slamrun.errors import InfraError
 
     try:
         DockerBackend().client.api.version()
@@ -177,7 +177,7 @@ def test_images_without_a_network_stop_before_fetching_anything(tmp_path):
     archive = require_upstream(UPSTREAM / src.SOURCES["dpvo"].filename)
     os.symlink(archive, sources / archive.name)
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path / "cache"), "SLAMRUN_PYPI_URL": "http://127.0.0.1:9"}
-    argv = [sys.executable, "-m", "runner.cli", "images", "--method", "dpvo", "--sources", str(sources)]
+    argv = [sys.executable, "-m", "slamrun.cli", "images", "--method", "dpvo", "--sources", str(sources)]
     res = subprocess.run([*argv, "--log-dir", str(tmp_path / "logs")], capture_output=True, text=True, env=env)
     assert res.returncode != 0
     assert "dpvo needs dpvo.pth" in res.stderr and "models.zip" in res.stderr and "--standin-model" in res.stderr
@@ -235,17 +235,17 @@ def test_the_compiled_extensions_and_dpvo_import_inside_the_image_without_a_gpu(
 
 
 def test_slamruns_dpvo_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
-    """The image's `python3 -m methods.dpvo_process`, as the docker backend runs it, on a real prepared view: it reads
-    the frames and the network, imports PyTorch, and exits 3 saying there is no GPU."""
-    from methods.dpvo import IMAGE_BUILD, IMAGE_WEIGHTS
-    from runner.datasets.cache import prepare
-    from runner.datasets.synth import generate
-    from runner.datasets.view import Direction, Profile
+    """The image's `python3 -m slamrun.methods.dpvo_process`, as the docker backend runs it, on a real prepared view: it
+    reads the frames and the network, imports PyTorch, and exits 3 saying there is no GPU."""
+    from slamrun.datasets.cache import prepare
+    from slamrun.datasets.synth import generate
+    from slamrun.datasets.view import Direction, Profile
+    from slamrun.methods.dpvo import IMAGE_BUILD, IMAGE_WEIGHTS
 
     api, _ = built_image()
     view = prepare(generate(tmp_path / "room", frames=20, seed=3), Direction.forward, Profile.rectified, tmp_path / "c")
     argv = [
-        "python3", "-m", "methods.dpvo_process", "--build", IMAGE_BUILD, "--weights", IMAGE_WEIGHTS,
+        "python3", "-m", "slamrun.methods.dpvo_process", "--build", IMAGE_BUILD, "--weights", IMAGE_WEIGHTS,
         "--images", f"/data/{view.images_dir}", "--times", f"/data/{view.times}",
         "--camera", "/data/camera_pinhole.json",
         "--out", "/tmp/trajectory.txt",

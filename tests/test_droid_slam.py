@@ -16,15 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import methods
-from methods import droid_slam_process as proc
-from methods.droid_slam import DroidSlam, DroidSlamParams
-from runner.core.trajectory import read_tum
-from runner.datasets.cache import prepare
-from runner.datasets.synth import generate
-from runner.datasets.view import Direction, Profile
-from runner.images import native
-from runner.images.sources import SOURCES
+import slamrun.methods
+from slamrun.core.trajectory import read_tum
+from slamrun.datasets.cache import prepare
+from slamrun.datasets.synth import generate
+from slamrun.datasets.view import Direction, Profile
+from slamrun.images import native
+from slamrun.images.sources import SOURCES
+from slamrun.methods import droid_slam_process as proc
+from slamrun.methods.droid_slam import DroidSlam, DroidSlamParams
 from tests.conftest import UPSTREAM, require_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -200,9 +200,9 @@ def test_images_are_resized_as_demo_py_does():
 
 
 def test_registered_native_needing_a_gpu_with_an_image_recipe():
-    cls = methods.get("droid_slam")
+    cls = slamrun.methods.get("droid_slam")
     assert cls is DroidSlam and cls.needs_gpu and cls.native and cls.profile is Profile.rectified
-    from runner.images.build import WEIGHTS, buildable
+    from slamrun.images.build import WEIGHTS, buildable
 
     assert buildable()["droid_slam"] == ("slamrun/droid_slam:latest", ROOT / "docker" / "droid_slam" / "Dockerfile")
     assert WEIGHTS["droid_slam"].name == "droid.pth" and WEIGHTS["droid_slam"].standin
@@ -224,7 +224,7 @@ def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:
 
 
 def test_problems_on_the_local_backend_say_what_to_do(tmp_path):
-    from methods.native_gpu import installed_torch
+    from slamrun.methods.native_gpu import installed_torch
 
     got = DroidSlam({"build": str(tmp_path / "none")}).problems("local")
     assert len(got) == 1 and "droid_slam has no native build" in got[0]
@@ -245,7 +245,7 @@ def test_command_carries_every_setting_and_the_build(tmp_path):
     m = DroidSlam({"build": str(build), "stride": 1, "buffer": 300, "upsample": True, "seed": 5}).for_backend("local")
     view = make_view(tmp_path / "v", 1000 + np.arange(40) / 30, Profile.rectified)
     argv = m.command(view, tmp_path / "work")
-    assert argv[:3] == [sys.executable, "-m", "methods.droid_slam_process"]
+    assert argv[:3] == [sys.executable, "-m", "slamrun.methods.droid_slam_process"]
     opts = dict(zip(argv[3::2], argv[4::2], strict=True))
     assert opts["--build"] == str(build) and opts["--weights"] == str(build / "weights/droid.pth")
     assert opts["--stride"] == "1" and opts["--buffer"] == "300" and opts["--upsample"] == "1" and opts["--seed"] == "5"
@@ -269,7 +269,7 @@ def room_view(tmp_path_factory):
 
 def process_argv(view, build: Path, weights: Path, out: Path, times: Path | None = None) -> list[str]:
     return [
-        sys.executable, "-m", "methods.droid_slam_process", "--build", str(build), "--weights", str(weights),
+        sys.executable, "-m", "slamrun.methods.droid_slam_process", "--build", str(build), "--weights", str(weights),
         "--images", str(view.path("images")), "--times", str(times or view.path("times.txt")),
         "--camera", str(view.path("camera_pinhole.json")), "--out", str(out),
     ]  # fmt: skip
@@ -335,7 +335,7 @@ def test_cli_unpack_only_checks_patches_and_refuses_a_used_folder(tmp_path):
     argv = [
         sys.executable,
         "-m",
-        "runner.cli",
+        "slamrun.cli",
         "native-build",
         "droid_slam",
         "--unpack-only",
@@ -356,7 +356,7 @@ def test_cli_unpack_only_checks_patches_and_refuses_a_used_folder(tmp_path):
 
 def test_native_build_refuses_a_cpu_pytorch_in_one_line(tmp_path):
     res = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "native-build", "droid_slam", "--standin-model", "--arch", "9.0",
+        [sys.executable, "-m", "slamrun.cli", "native-build", "droid_slam", "--standin-model", "--arch", "9.0",
          "--into", str(tmp_path / "b")],
         capture_output=True, text=True,
     )  # fmt: skip
@@ -366,7 +366,7 @@ def test_native_build_refuses_a_cpu_pytorch_in_one_line(tmp_path):
 
 
 def test_native_build_without_weights_names_droid_pth_and_where_it_is_published(tmp_path):
-    from runner.errors import SlamRunError
+    from slamrun.errors import SlamRunError
 
     with pytest.raises(SlamRunError, match=r"droid_slam needs droid.pth.*--standin-model.*download_model.sh"):
         native.build("droid_slam", native.NativeOptions(into=tmp_path / "b"), log=lambda m: None)
@@ -375,11 +375,11 @@ def test_native_build_without_weights_names_droid_pth_and_where_it_is_published(
 
 
 def test_the_cli_offers_every_native_recipe():
-    from runner.cli.native import NATIVE
+    from slamrun.cli.native import NATIVE
 
     assert set(NATIVE) == set(native.NATIVE)
     for name, m in native.NATIVE.items():
-        assert methods.get(name).native and m.patches.is_file() and m.standin.is_file()
+        assert slamrun.methods.get(name).native and m.patches.is_file() and m.standin.is_file()
         assert m.default_build().name == name
 
 

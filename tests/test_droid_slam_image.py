@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from runner.errors import SlamRunError
-from runner.images import native
-from runner.images import sources as src
-from runner.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
+from slamrun.errors import SlamRunError
+from slamrun.images import native
+from slamrun.images import sources as src
+from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
 from tests import images
 from tests.conftest import UPSTREAM, require_upstream
 from tests.test_dpvo_image import stages
@@ -76,7 +76,7 @@ def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_rec
     assert (int(seed), float(flow)) == (native.DROID_STANDIN_SEED, native.DROID_STANDIN_FLOW_PX)
     assert recipe.standin_args == (seed, str(float(flow)))
     # the process runs with its helpers from DPVO's process, both copied in
-    assert "COPY methods/dpvo_process.py methods/droid_slam_process.py /opt/slamrun/methods/" in runtime
+    assert "COPY slamrun/methods/dpvo_process.py slamrun/methods/droid_slam_process.py /opt/slamrun/methods/" in runtime
 
 
 def test_the_build_scripts_place_lietorch_as_the_native_build_does_and_parse():
@@ -237,12 +237,12 @@ def test_the_torch_scatter_stand_in_matches_pytorch_scatters_own_code(tmp_path):
 
 
 def test_slamruns_droid_slam_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
-    """The image's `python3 -m methods.droid_slam_process`, as the docker backend runs it, on a real prepared view: it
-    reads the frames and the network, imports PyTorch and exits 3 saying there is no GPU."""
-    from methods.droid_slam import DroidSlam
-    from runner.datasets.cache import prepare
-    from runner.datasets.synth import generate
-    from runner.datasets.view import Direction, Profile
+    """The image's `python3 -m slamrun.methods.droid_slam_process`, as the docker backend runs it, on a real prepared
+    view: it reads the frames and the network, imports PyTorch and exits 3 saying there is no GPU."""
+    from slamrun.datasets.cache import prepare
+    from slamrun.datasets.synth import generate
+    from slamrun.datasets.view import Direction, Profile
+    from slamrun.methods.droid_slam import DroidSlam
 
     api, _ = built_image()
     view = prepare(generate(tmp_path / "room", frames=20, seed=3), Direction.forward, Profile.rectified, tmp_path / "c")

@@ -1,5 +1,5 @@
 """DynaSLAM's image (docker/dynaslam): its patches on the real archive, its Python 2.7 packages (pinned in
-runner/images/sources.py, installed by hash), the fetch path refusing a wrong or missing wheel, its weights
+slamrun/images/sources.py, installed by hash), the fetch path refusing a wrong or missing wheel, its weights
 choice, and Mask R-CNN loading under the image's Python 2.7 (when the image has been built)."""
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from runner.images import sources as src
-from runner.images.build import BuildOptions, model_choice, pypi_files_of, vocabulary_choice
-from runner.images.sources import SourceError, obtain_pypi
+from slamrun.images import sources as src
+from slamrun.images.build import BuildOptions, model_choice, pypi_files_of, vocabulary_choice
+from slamrun.images.sources import SourceError, obtain_pypi
 from tests import images
 from tests.conftest import UPSTREAM, loopback_server, require_upstream, unpack_upstream
 
@@ -198,7 +198,7 @@ def test_the_image_claims_no_gpu_and_says_which_network_it_holds():
 
 
 def test_its_verification_fits_in_half_an_hour_and_says_what_it_ran():
-    from runner.images.verify import SCOPES, VerifyRow, markdown_table
+    from slamrun.images.verify import SCOPES, VerifyRow, markdown_table
 
     scope = SCOPES["dynaslam"]
     seconds_per_frame = 10  # Mask R-CNN on this machine's 2 cores, the slower end measured (the README's row)

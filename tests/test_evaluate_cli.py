@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.datasets.synth import generate
+from slamrun.datasets.synth import generate
 from tests.test_dataset_layouts import EUROC_SENSOR
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -45,7 +45,7 @@ def slamrun(*args, limit_as: int | None = None, timeout: float = 120) -> subproc
             resource.setrlimit(resource.RLIMIT_AS, (limit_as, resource.RLIM_INFINITY))
 
     return subprocess.run(
-        [sys.executable, "-m", "runner.cli", *map(str, args)],
+        [sys.executable, "-m", "slamrun.cli", *map(str, args)],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -67,8 +67,8 @@ def sequence_folder(root: Path, layout: str) -> Path:
 def campaign(tmp_path_factory) -> tuple[Path, pd.DataFrame]:
     """A small real campaign: reference_vo, forward and backward, one trial, on one synthetic sequence of each
     layout (each dataset with its layout's default metrics). Returns the data folder and results.csv."""
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import write_spec
 
     root = tmp_path_factory.mktemp("evaluate_campaign")
@@ -184,7 +184,7 @@ def image_files(folder: Path, names: list[str], size: tuple[int, int]) -> None:
 def v1_02(shared_data, tmp_path) -> tuple[Path, Path]:
     """EuRoC V1_02 as a sequence folder (its real state ground truth and camera extrinsics, frames at ground-truth
     samples) and the real estimate V102.txt moved to those frame times. Returns (folder, estimate)."""
-    from runner.core.trajectory import read_euroc_csv, read_tum
+    from slamrun.core.trajectory import read_euroc_csv, read_tum
 
     evo_data = shared_data / "evo_test_data"
     body = read_euroc_csv(evo_data / "V102_groundtruth.csv")

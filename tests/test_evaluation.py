@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.core.evaluation import tum_mono, tum_mono_file
-from runner.core.trajectory import Trajectory, from_arrays, read_tum
-from runner.results.vocabulary import EvalStatus
+from slamrun.core.evaluation import tum_mono, tum_mono_file
+from slamrun.core.trajectory import Trajectory, from_arrays, read_tum
+from slamrun.results.vocabulary import EvalStatus
 from tests.conftest import SHARED_DATA as DATA
 
 
@@ -143,8 +143,8 @@ def test_real_backward_file_evaluates_against_its_own_segments(shared_data):
 def test_evaluate_cli_many_files_json(tmp_path, capsys):
     import json
 
-    from runner.cli import main
-    from runner.core.trajectory import write_tum
+    from slamrun.cli import main
+    from slamrun.core.trajectory import write_tum
 
     gt = ground_truth()
     np.savetxt(tmp_path / "gt.txt", np.column_stack([gt.timestamps, gt.positions, gt.quaternions]))
@@ -165,7 +165,7 @@ def test_evaluate_cli_many_files_json(tmp_path, capsys):
 def reference_tum_mono(gt: Trajectory, est: Trajectory) -> tuple[float, ...]:
     """The definition in docs/tum-mono.md written plainly (masks, three separate fits), for cross-checking
     the batched implementation. Returns (e_t, e_r, e_s, e_align, e_start, e_end, e_rmse)."""
-    from runner.core.alignment import align_sim3, rmse, rotation_angle_deg
+    from slamrun.core.alignment import align_sim3, rmse, rotation_angle_deg
 
     dist = np.abs(gt.timestamps[None, :] - est.timestamps[:, None])
     match = dist.argmin(axis=1)
@@ -227,8 +227,8 @@ def test_a_segment_at_one_point_is_status_nan_without_warnings(which):
 
 def test_evaluation_on_every_core_gives_the_same_numbers_in_input_order(tmp_path):
     """Many files (good, noisy, unreadable, NaN-holding, empty) through 1 and 3 worker processes."""
-    from runner.core.batch_eval import evaluate_files
-    from runner.core.trajectory import write_tum
+    from slamrun.core.batch_eval import evaluate_files
+    from slamrun.core.trajectory import write_tum
 
     gt = ground_truth()
     rng = np.random.default_rng(5)
@@ -266,7 +266,7 @@ def test_many_estimates_at_once_give_each_file_its_own_result(monkeypatch):
     """tum_mono_many against tum_mono_file one by one: the usual estimates evaluated together, every other one
     (NaN-holding, empty, unassociated, incomplete, a segment at one point, a pose in both segments) with its own
     status and detail; the same figures to rounding, in order."""
-    from runner.core import evaluation
+    from slamrun.core import evaluation
 
     gt = ground_truth(400)
     base = np.nan_to_num(gt.positions)

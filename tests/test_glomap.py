@@ -10,23 +10,23 @@ import pandas as pd
 import pytest
 from pydantic import ValidationError
 
-import methods
-from runner.core.trajectory import read_tum
-from runner.datasets.synth import generate
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
-from runner.images.verify import scene_extent
+import slamrun.methods
+from slamrun.core.trajectory import read_tum
+from slamrun.datasets.synth import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
+from slamrun.images.verify import scene_extent
 from tests.conftest import one_sequence, write_spec
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_glomap_is_a_native_method_with_typed_parameters(tmp_path):
-    from runner.datasets.view import Profile
+    from slamrun.datasets.view import Profile
     from tests.test_methods import make_view
 
-    cls = methods.get("glomap")
-    assert cls.native and cls.image is None and cls.profile is methods.get("colmap").profile
+    cls = slamrun.methods.get("glomap")
+    assert cls.native and cls.image is None and cls.profile is slamrun.methods.get("colmap").profile
     with pytest.raises(ValidationError):
         cls({"stride": 0})
     with pytest.raises(ValidationError):
@@ -35,7 +35,7 @@ def test_glomap_is_a_native_method_with_typed_parameters(tmp_path):
         cls({"mapper": "incremental"})  # glomap is the global mapper; colmap is the incremental one
     view = make_view(tmp_path / "v", 1000.0 + np.arange(20) / 30.0, Profile.rectified)
     argv = cls({"stride": 2, "min_num_matches": 30}).command(view, tmp_path / "work")
-    assert argv[1:5] == ["-m", "methods.colmap_process", "--mapper", "global"]
+    assert argv[1:5] == ["-m", "slamrun.methods.colmap_process", "--mapper", "global"]
     assert argv[argv.index("--stride") + 1] == "2" and argv[argv.index("--min-num-matches") + 1] == "30"
     assert argv[argv.index("--out") + 1] == str(tmp_path / "work" / "trajectory.txt")
 
@@ -85,7 +85,7 @@ def test_glomap_forward_and_backward_on_a_short_room(tmp_path):
 
 
 def test_the_example_spec_runs_glomap_beside_colmap_natively():
-    from runner.engine.plan import plan
+    from slamrun.engine.plan import plan
 
     spec = load_spec(ROOT / "configs" / "glomap.yaml", check_files=False)
     assert spec.backend == "local" and [m.name for m in spec.methods] == ["glomap", "colmap"]

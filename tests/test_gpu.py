@@ -21,11 +21,11 @@ import psutil
 import pytest
 import yaml
 
-from runner.backends.local import LocalBackend
-from runner.backends.monitor import Gpu, host_gpus
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec, validate_spec
-from runner.errors import SpecError
+from slamrun.backends.local import LocalBackend
+from slamrun.backends.monitor import Gpu, host_gpus
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec, validate_spec
+from slamrun.errors import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
 NO_GPU = "needs a GPU; this host has none"
@@ -39,7 +39,7 @@ def gpu_less():
 
 def slamrun(*args, env=None, cwd=None) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "runner.cli", *map(str, args)], capture_output=True, text=True, env=env, cwd=cwd
+        [sys.executable, "-m", "slamrun.cli", *map(str, args)], capture_output=True, text=True, env=env, cwd=cwd
     )
 
 
@@ -139,7 +139,7 @@ class NVMLError(Exception):
 
 
 class FakeNvml:
-    """The part of pynvml that runner.backends.monitor.Gpu calls, over a list of devices; a device's `samples` is a
+    """The part of pynvml that slamrun.backends.monitor.Gpu calls, over a list of devices; a device's `samples` is a
     list of (pid, timestamp_us, sm %) or an NVML error code; `procs(handle)` may be replaced by a callable."""
 
     NVMLError = NVMLError
@@ -352,7 +352,7 @@ def test_gpu_check_until_its_gpu_steps_in_a_fresh_venv(tmp_path, wheels):
     steps = re.findall(r"^\[\d\d:\d\d:\d\d \+\s*\d+s\] step (\w+):", res.stdout, re.M)
     assert steps == ["preflight", "install", "eigen", "synth", "unpack"], res.stdout
     assert "stopped before the GPU steps" in res.stdout
-    check = "import pydantic, methods, runner; print(pydantic.__file__); print(runner.__file__)"
+    check = "import pydantic, slamrun.methods; print(pydantic.__file__); print(slamrun.__file__)"
     where = subprocess.run([python, "-c", check], capture_output=True, text=True, cwd=tmp_path).stdout.split()
     assert where[0].startswith(str(venv)) and where[1].startswith(str(tree))  # the wheel's pydantic, the tree's slamrun
     assert len(list(zip_names(work / "data" / "room" / "images.zip"))) == 40
@@ -393,7 +393,7 @@ def zip_names(path: Path):
 
 
 def test_summary_is_one_page_from_what_the_script_leaves(tmp_path):
-    from runner.engine.export import COLUMNS
+    from slamrun.engine.export import COLUMNS
 
     row = dict.fromkeys(COLUMNS, "")
     rows = [
@@ -444,8 +444,8 @@ def test_podman_before_5_4_is_refused_for_a_gpu_method_before_any_run(tmp_path, 
 
 def test_the_gpu_request_is_the_engines_own():
     import docker
-    from runner.backends.docker import DockerBackend
-    from runner.backends.podman import PodmanBackend
+    from slamrun.backends.docker import DockerBackend
+    from slamrun.backends.podman import PodmanBackend
 
     (nvidia,) = DockerBackend.gpu_requests()  # Docker: the nvidia runtime's `gpu` capability, every GPU
     assert nvidia == docker.types.DeviceRequest(count=-1, capabilities=[["gpu"]])

@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import pytest
 
-from runner.core.trajectory import read_tum
-from runner.datasets.layouts import open_sequence
-from runner.datasets.synth import generate
-from runner.errors import DatasetError, TrajectoryFormatError
+from slamrun.core.trajectory import read_tum
+from slamrun.datasets.layouts import open_sequence
+from slamrun.datasets.synth import generate
+from slamrun.errors import DatasetError, TrajectoryFormatError
 
 
 def corrupt_rows(path, every: int, value: str = "nan") -> int:
@@ -55,7 +55,7 @@ def test_validate_names_it_before_any_run(tmp_path):
             }
         )
     )
-    out = subprocess.run([sys.executable, "-m", "runner.cli", "validate", str(spec)], capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-m", "slamrun.cli", "validate", str(spec)], capture_output=True, text=True)
     assert out.returncode != 0 and "Traceback" not in out.stderr
     assert f"{folder / 'groundtruth.txt'}:" in out.stderr + out.stdout and "infinite" in out.stderr + out.stdout
 

@@ -20,12 +20,12 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.core import metrics
-from runner.core.trajectory import Trajectory, read_tum
-from runner.datasets import icl_nuim, tartanair
-from runner.datasets.layouts import detect, open_sequence
-from runner.datasets.synth import Synth
-from runner.errors import DatasetError
+from slamrun.core import metrics
+from slamrun.core.trajectory import Trajectory, read_tum
+from slamrun.datasets import icl_nuim, tartanair
+from slamrun.datasets.layouts import detect, open_sequence
+from slamrun.datasets.synth import Synth
+from slamrun.errors import DatasetError
 
 ROOT = Path(__file__).resolve().parents[1]
 FRAMES = 60
@@ -36,7 +36,7 @@ LOOP_M = 2 * np.pi * 2.1  # about the synthetic loop's length
 
 def slamrun(*args, env: dict | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "runner.cli", *map(str, args)],
+        [sys.executable, "-m", "slamrun.cli", *map(str, args)],
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -251,8 +251,8 @@ HALF_S = {"delta": 0.5, "unit": "s"}
 @pytest.fixture(scope="module")
 def campaign(sequences, tmp_path_factory) -> tuple[Path, pd.DataFrame]:
     """reference_vo and colmap, forward and backward, on both sequences."""
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import write_spec
 
     root = tmp_path_factory.mktemp("campaign")
@@ -352,7 +352,7 @@ def tgz(folder: Path, top: str | None) -> bytes:
 def test_icl_nuim_downloads_by_the_sites_archive_names(sequences, tmp_path):
     """living_room_trajK_frei_png.tar.gz and (the office) trajK_frei_png.tar.gz, members at the archive's top as the
     site packs them, under a mirror given with --url; names as papers give them (lr_kt0, of_kt2) or the folders'."""
-    from runner.cli import main
+    from slamrun.cli import main
     from tests.conftest import loopback_server
 
     data = tgz(sequences["icl-nuim"], None)
@@ -372,7 +372,7 @@ def test_icl_nuim_downloads_by_the_sites_archive_names(sequences, tmp_path):
 
 
 def test_icl_nuim_downloads_the_studys_eight_by_default():
-    from runner.datasets.download import remote_archives
+    from slamrun.datasets.download import remote_archives
 
     names = icl_nuim.LAYOUT.download.names(None)
     expected = [f"living_room_traj{k}_frei_png" for k in range(4)] + [f"traj{k}_frei_png" for k in range(4)]
@@ -386,11 +386,11 @@ def test_synth_names_an_unknown_layout(tmp_path):
 
 @pytest.mark.parametrize("name", ["icl-tartanair-demo.yaml", "icl-nuim.yaml"])
 def test_the_example_specs_load(name):
-    import methods
-    from runner.engine.spec import load_spec
+    import slamrun.methods
+    from slamrun.engine.spec import load_spec
 
     spec = load_spec(ROOT / "configs" / name, check_files=False)
     assert [d.layout for d in spec.datasets] == ["icl-nuim", "tartanair"]
     assert all(d.metrics == ["ate", "rpe"] for d in spec.datasets)
     for m in spec.methods:
-        methods.get(m.name)(m.params)  # their parameters are the methods' own
+        slamrun.methods.get(m.name)(m.params)  # their parameters are the methods' own

@@ -214,7 +214,7 @@ def test_fetch_checks_the_checksum(tmp_path, weights_server):
 
 
 def test_images_and_what_their_builds_take():
-    from runner.images.build import buildable, pypi_files_of, sources_of
+    from slamrun.images.build import buildable, pypi_files_of, sources_of
 
     wheel = "tensorflow_cpu-2.21.0-cp311-cp311-manylinux_2_27_x86_64.whl"
     assert pypi_files_of(DOCKER / "cnn_dso" / "Dockerfile") == [wheel]

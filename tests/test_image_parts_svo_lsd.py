@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 import yaml
 
-import methods
-from runner.datasets.view import Direction, PreparedView
+import slamrun.methods
+from slamrun.datasets.view import Direction, PreparedView
 from tests.conftest import unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -82,17 +82,21 @@ def test_svo_parameters_are_read_by_the_real_tree_and_the_driver(tmp_path, tmp_p
     svo = unpack_upstream("svo", tmp_path)
     read = set(GET_PARAM.findall((svo / "svo/src/config.cpp").read_text()))
     read |= set(GET_PARAM.findall((DOCKER / "svo/svo_offline.cpp").read_text()))
-    view = PreparedView(Path("/data"), "s", Direction.forward, methods.get("svo").profile, 10, 1.0, 1.3, 640, 480, None)
-    params = yaml.safe_load(methods.get("svo")({}).configure(view, Path("/work"))["svo_params.yaml"])
+    view = PreparedView(
+        Path("/data"), "s", Direction.forward, slamrun.methods.get("svo").profile, 10, 1.0, 1.3, 640, 480, None
+    )
+    params = yaml.safe_load(slamrun.methods.get("svo")({}).configure(view, Path("/work"))["svo_params.yaml"])
     assert set(params) <= read, set(params) - read
     assert {"svo/init_min_disparity", "svo/max_fts", "svo/grid_size"} <= set(params)
     cnn = unpack_upstream("cnn_svo", tmp_path_factory.mktemp("cnn"))
     read = set(GET_PARAM.findall((DOCKER / "cnn_svo/cnn_svo_offline.cpp").read_text()))
     for f in (cnn / "rpg_svo/svo/src").glob("*.cpp"):
         read |= set(GET_PARAM.findall(f.read_text(errors="ignore")))
-    rect = PreparedView(Path("/data"), "s", Direction.forward, methods.get("cnn_svo").profile, 10, 1.0, 1.3, 640, 480,
-                        (320.0, 320.0, 319.5, 239.5))  # fmt: skip
-    params = yaml.safe_load(methods.get("cnn_svo")({}).configure(rect, Path("/work"))["svo_params.yaml"])
+    profile = slamrun.methods.get("cnn_svo").profile
+    rect = PreparedView(
+        Path("/data"), "s", Direction.forward, profile, 10, 1.0, 1.3, 640, 480, (320.0, 320.0, 319.5, 239.5)
+    )
+    params = yaml.safe_load(slamrun.methods.get("cnn_svo")({}).configure(rect, Path("/work"))["svo_params.yaml"])
     assert set(params) <= read, set(params) - read
     # the authors' vo_kitti.yaml: every setting (not its paths or the viewer's marker sizes), with its value
     kitti = yaml.safe_load((cnn / "rpg_svo/svo_ros/param/vo_kitti.yaml").read_text())
@@ -106,7 +110,7 @@ def test_the_svo_driver_restarts_a_paused_system():
     loop = driver[driver.index("vo->addImage(img, frames[i].t);") :]
     assert loop.index("STAGE_PAUSED") < loop.index("vo->start();")
     assert "return n_poses > 0 ? 0 : 3;" in driver
-    assert methods.get("svo").no_pose_exit == 3
+    assert slamrun.methods.get("svo").no_pose_exit == 3
 
 
 # ---------------------------------------------------------------- LSD-SLAM
@@ -216,7 +220,7 @@ def test_svo_output_of_the_built_image(direction):
     view, folder = fixture_run("svo", direction)
     raw = np.loadtxt(folder / "traj_estimate.txt", ndmin=2)
     assert 20 <= len(raw) <= view.n_frames and np.all(np.diff(raw[:, 0]) > 0)  # view time increases
-    traj = methods.get("svo")({}).read_trajectory(folder, view)
+    traj = slamrun.methods.get("svo")({}).read_trajectory(folder, view)
     expected = expected_original_times(view, raw[:, 0])
     np.testing.assert_array_equal(np.sort(expected), traj.timestamps)  # the original timestamps, exactly
     assert set(traj.timestamps) <= set(view.original_timestamps())
@@ -238,7 +242,7 @@ def test_lsd_slam_output_of_the_built_image(direction):
     index = raw[:, 0].astype(int)
     assert index[0] == 0 and np.all(np.diff(index) > 0) and len(raw) >= 20  # frame 0 included
     np.testing.assert_allclose(raw[0, 1:], [0, 0, 0, 0, 0, 0, 1], atol=1e-9)  # the world's origin
-    traj = methods.get("lsd_slam")({}).read_trajectory(folder, view)
+    traj = slamrun.methods.get("lsd_slam")({}).read_trajectory(folder, view)
     originals = view.original_timestamps()
     expected = originals[index] if direction == "forward" else originals[view.n_frames - 1 - index]
     np.testing.assert_array_equal(np.sort(expected), traj.timestamps)  # exact original timestamps

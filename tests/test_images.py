@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from runner.errors import InfraError, SlamRunError
-from runner.images.build import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
-from runner.images.sources import SOURCES
+from slamrun.errors import InfraError, SlamRunError
+from slamrun.images.build import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
+from slamrun.images.sources import SOURCES
 from tests.conftest import UPSTREAM, require_upstream
 from tests.test_docker import engine_with_base
 
@@ -138,7 +138,7 @@ def _run(client, tag: str, cmd: str) -> str:
 
 
 def test_the_network_an_image_holds_is_given_a_stand_in_or_a_clear_error(tmp_path):
-    from runner.images.build import model_choice
+    from slamrun.images.build import model_choice
 
     assert model_choice("dso", BuildOptions()) == ("none", "")
     with pytest.raises(SlamRunError) as err:
@@ -157,18 +157,18 @@ def test_the_network_an_image_holds_is_given_a_stand_in_or_a_clear_error(tmp_pat
 def test_every_pypi_file_of_a_continued_copy_is_found(tmp_path):
     """A COPY continued over several lines names a wheel on each: every one goes into the build context (the
     reference VO's image copies three)."""
-    from runner.images.build import pypi_files_of
+    from slamrun.images.build import pypi_files_of
 
     dockerfile = tmp_path / "Dockerfile"
     dockerfile.write_text("FROM x\nCOPY pypi/a-1-py3-none-any.whl \\\n     pypi/b-2-py3-none-any.whl /tmp/\nRUN true\n")
     assert pypi_files_of(dockerfile) == ["a-1-py3-none-any.whl", "b-2-py3-none-any.whl"]
-    from runner.images.build import ROOT
+    from slamrun.images.build import ROOT
 
     assert len(pypi_files_of(ROOT / "docker" / "reference_vo" / "Dockerfile")) == 3
 
 
 def test_each_recipe_names_the_debian_base_slamrun_makes_when_missing():
-    from runner.images.build import buildable, debian_bases
+    from slamrun.images.build import buildable, debian_bases
 
     bases = {name: debian_bases(dockerfile) for name, (_, dockerfile) in buildable().items()}
     assert bases.pop("dynaslam") == {"debian:bullseye-slim"}  # Python 2.7 for its embedded Mask R-CNN

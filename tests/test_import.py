@@ -13,9 +13,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.cli import main
-from runner.datasets.synth import generate
-from runner.engine.ledger import Ledger
+from slamrun.cli import main
+from slamrun.datasets.synth import generate
+from slamrun.engine.ledger import Ledger
 
 SEQUENCES = ("47", "48", "49")
 
@@ -48,8 +48,8 @@ def campaign(shared_data, tmp_path_factory) -> Path:
     """A campaign (one fake method, forward) on sequences 47-49 at the study files' frame times."""
     import yaml
 
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import fake_method
 
     root = tmp_path_factory.mktemp("import")
@@ -120,7 +120,7 @@ def test_the_studys_files_import_as_runs_evaluated_by_the_campaigns_code(campaig
     assert labels["study:dso"] == 3 and labels["study:all"] == 12 and labels["dso"] == 3
     dsm = [r for r in rows_of(campaign, "study:all") if r["sequence"] == "sequence_47"]
     assert len(dsm) == 4  # dsm_bw 6, 7, 8 and dso_bw 9
-    from runner.analysis.report import write_report
+    from slamrun.analysis.report import write_report
 
     html = write_report(campaign).read_text()
     assert "study:dso" in html and "Reproduction" in html
@@ -182,8 +182,8 @@ def test_bad_input_is_named_and_nothing_is_imported_halfway(campaign, shared_dat
 
 
 def test_imported_runs_survive_a_resumed_campaign_and_a_lost_ledger(campaign, shared_data, tmp_path):
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
 
     study = shared_data / "study_trajectories"
     assert main(["import", str(study), "--campaign", str(campaign), "--as", "study:keep"]) == 0

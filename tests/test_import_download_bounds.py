@@ -25,7 +25,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from runner.cli import main
+from slamrun.cli import main
 from tests.conftest import loopback_server
 from tests.test_import import campaign, rows_of, split_archives  # noqa: F401 - the module's campaign fixture
 
@@ -121,7 +121,7 @@ def test_the_archives_written_here_are_real(tmp_path):
 LIMITED = """
 import resource, sys
 resource.setrlimit(resource.RLIMIT_AS, (int(sys.argv[1]), resource.RLIM_INFINITY))
-from runner.cli import main
+from slamrun.cli import main
 sys.exit(main(sys.argv[2:]))
 """
 
@@ -403,8 +403,8 @@ def json_source(row: dict) -> str:
 def test_imported_labels_never_meet_a_method_the_spec_runs(campaign, shared_data, tmp_path, capsys):  # noqa: F811
     """An imported label is SOURCE:NAME and a spec's label holds no ':', so an import and a spec never pool
     their runs in one row (was: `--as reference_vo` accepted, a spec label `study:dso` accepted)."""
-    from runner.engine.spec import validate_spec
-    from runner.errors import SpecError
+    from slamrun.engine.spec import validate_spec
+    from slamrun.errors import SpecError
 
     study = shared_data / "study_trajectories"
     files = tmp_path / "files"

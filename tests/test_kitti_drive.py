@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from runner.datasets.kitti import drive
-from runner.datasets.synth import Synth, generate, lap_length
+from slamrun.datasets.kitti import drive
+from slamrun.datasets.synth import Synth, generate, lap_length
 
 
 def test_the_drive_grows_with_the_frames_and_never_faster_than_a_lap_per_100_frames():
@@ -28,9 +28,9 @@ def test_kittis_synthetic_drive_has_segments_at_the_default_frame_count(tmp_path
     """300 frames (SynthSpec's default): two or three laps of the courtyard, 120 m or more, so KITTI's default
     metric gets a finite value through a real campaign; 60 frames drive one lap (under 100 m): no segment, and the
     report says so in one line instead of dropping the column silently."""
-    from runner.analysis.report import write_report
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.analysis.report import write_report
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import fake_method, write_spec
 
     data = tmp_path / "dataset" / "sequences"

@@ -11,14 +11,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # lower layers never import higher ones; a layer may import itself
 LAYERS = [
-    ("runner.errors", "runner.results"),
-    ("runner.core",),
-    ("runner.datasets",),
-    ("methods", "runner.backends"),
-    ("runner.engine",),
-    ("runner.analysis", "runner.images"),
-    ("runner.serve",),
-    ("runner.cli",),
+    ("slamrun.errors", "slamrun.results"),
+    ("slamrun.core",),
+    ("slamrun.datasets",),
+    ("slamrun.methods", "slamrun.backends"),
+    ("slamrun.engine",),
+    ("slamrun.analysis", "slamrun.images"),
+    ("slamrun.serve",),
+    ("slamrun.cli",),
 ]
 
 
@@ -31,11 +31,11 @@ def layer(module: str) -> int | None:
 
 def modules() -> dict[str, Path]:
     out = {}
-    for top in ("runner", "methods"):
+    for top in ("slamrun",):
         for path in (ROOT / top).rglob("*.py"):
             parts = path.relative_to(ROOT).with_suffix("").parts
             out[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
-    out.pop("runner")  # the empty root package
+    out.pop("slamrun")  # the empty root package
     return out
 
 
@@ -94,9 +94,9 @@ def test_module_graph_has_no_cycle():
 
 def test_reading_results_imports_neither_methods_nor_opencv():
     code = (
-        "import sys; import runner.analysis.load, runner.analysis.summary, runner.analysis.stats; "
+        "import sys; import slamrun.analysis.load, slamrun.analysis.summary, slamrun.analysis.stats; "
         "print(sorted(m for m in sys.modules "
-        "if m.split('.')[0] in ('methods', 'cv2') or m.startswith('runner.engine')))"
+        "if m.split('.')[0] == 'cv2' or m.startswith(('slamrun.methods', 'slamrun.engine'))))"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True).stdout
     assert out.strip() == "[]", out
@@ -105,10 +105,10 @@ def test_reading_results_imports_neither_methods_nor_opencv():
 def test_backends_provide_the_whole_protocol():
     """Every backend has every call the Backend protocol declares (optional ones through Defaults), so the
     campaign never probes with hasattr."""
-    from runner.backends.base import Backend
-    from runner.backends.dask import DaskBackend
-    from runner.backends.docker import DockerBackend
-    from runner.backends.local import LocalBackend
+    from slamrun.backends.base import Backend
+    from slamrun.backends.dask import DaskBackend
+    from slamrun.backends.docker import DockerBackend
+    from slamrun.backends.local import LocalBackend
 
     declared = {n for n in vars(Backend) if not n.startswith("_")} | set(Backend.__annotations__)
     for cls in (LocalBackend, DockerBackend, DaskBackend):

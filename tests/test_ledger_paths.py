@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from runner.engine.ledger import Ledger
+from slamrun.engine.ledger import Ledger
 
 
 @pytest.mark.parametrize("name", ["a#b", "run?x=1", "100%", "pct%41", "sp ace&semi;colon"])
@@ -28,8 +28,8 @@ def test_a_campaign_and_status_in_such_a_folder(tiny_dataset, tmp_path):
     import subprocess
     import sys
 
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import fake_method, one_sequence, write_spec
 
     results = tmp_path / "res#1?x%41"
@@ -39,7 +39,7 @@ def test_a_campaign_and_status_in_such_a_folder(tiny_dataset, tmp_path):
     res = run_campaign(load_spec(spec), log=lambda *a: None)
     assert res.results == results
     out = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "status", str(results), "--json"], capture_output=True, text=True
+        [sys.executable, "-m", "slamrun.cli", "status", str(results), "--json"], capture_output=True, text=True
     )
     assert out.returncode == 0, out.stderr
     assert json.loads(out.stdout)["done"] == 2  # the one sequence, forward and backward

@@ -9,11 +9,11 @@ import sys
 import time
 from pathlib import Path
 
-from runner.engine.ledger import Ledger
+from slamrun.engine.ledger import Ledger
 
 WRITER = """
 import sys, time
-from runner.engine.ledger import Ledger
+from slamrun.engine.ledger import Ledger
 path, until = sys.argv[1], time.monotonic() + float(sys.argv[2])
 i = 0
 while time.monotonic() < until:

@@ -3,7 +3,7 @@ and writes nothing more (tests/test_docker.py: real containers' streams slowed, 
 
 import threading
 
-from runner.backends.logcap import CappedLog, Tap
+from slamrun.backends.logcap import CappedLog, Tap
 
 
 def _reader(log: CappedLog | Tap, release: threading.Event) -> threading.Thread:

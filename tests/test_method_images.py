@@ -13,11 +13,11 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from runner.datasets.synth import generate
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
-from runner.images.build import BuildOptions, build
-from runner.images.verify import scene_extent
+from slamrun.datasets.synth import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
+from slamrun.images.build import BuildOptions, build
+from slamrun.images.verify import scene_extent
 from tests.conftest import UPSTREAM, require_upstream, write_spec
 from tests.test_docker import IN_CI, engine_with_base
 
@@ -82,7 +82,7 @@ def test_real_dso_on_the_euroc_and_kitti_layouts_through_docker(dso_image, tmp_p
     radial-tangential camera) and a KITTI one (pinhole, poses without timestamps), forward: every run done, ATE
     under 2 % of the path's length. (Backward views of every layout are tested with reference_vo in
     test_dataset_layouts.py, and DSO backward through Docker above: a view is the same whoever runs it.)"""
-    from runner.datasets.layouts import open_sequence
+    from slamrun.datasets.layouts import open_sequence
 
     euroc = generate(tmp_path / "euroc" / "V1_synth", frames=200, seed=5, layout="euroc")
     kitti = generate(tmp_path / "kitti" / "sequences" / "07", frames=200, seed=6, layout="kitti")

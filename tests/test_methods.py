@@ -16,12 +16,12 @@ import pytest
 import yaml
 from pydantic import ValidationError
 
-import methods
-from methods.base import Method
-from runner.datasets.view import Direction, PreparedView, Profile
-from runner.errors import MethodFailure, TrajectoryFormatError
-from runner.images.build import sources_of
-from runner.images.sources import SOURCES
+import slamrun.methods
+from slamrun.datasets.view import Direction, PreparedView, Profile
+from slamrun.errors import MethodFailure, TrajectoryFormatError
+from slamrun.images.build import sources_of
+from slamrun.images.sources import SOURCES
+from slamrun.methods.base import Method
 
 ROOT = Path(__file__).resolve().parents[1]
 # upstream commits, as methods.md pins them
@@ -60,7 +60,7 @@ def views(tmp_path):
 
 
 def instance(name: str, **params) -> Method:
-    return methods.get(name)(params)
+    return slamrun.methods.get(name)(params)
 
 
 # ---------------------------------------------------------------- configure and command
@@ -132,7 +132,7 @@ def test_svo_family_parameters_parse_back(views):
     assert params["svo/cam_model"] == "ATAN" and params["svo/camera_file"] == "/data/camera.txt"
     assert params["svo/dataset_directory"] == "/data" and params["svo/output_file"] == "/work/traj_estimate.txt"
     assert params["svo/trace_dir"] == "/work" and params["svo/max_fts"] == 150
-    assert params["svo/init_min_disparity"] == 10.0  # lower than SVO's 50 px: see methods/svo.py
+    assert params["svo/init_min_disparity"] == 10.0  # lower than SVO's 50 px: see slamrun/methods/svo.py
     assert m.command(v, Path("/work")) == ["/opt/svo/bin/svo_offline", "/work/svo_params.yaml"]
     assert m.accepts_exit(3, Path("/work")) and not m.accepts_exit(1, Path("/work"))  # 3: no pose written
     assert m.failure_from_log("slamrun: never initialised\n") == "not_initialized"
@@ -306,8 +306,8 @@ def test_failure_cases(tmp_path, views):
 
 
 def test_local_backend_needs_a_local_build(tiny_dataset, tmp_path):
-    from runner.engine.spec import validate_spec
-    from runner.errors import SpecError
+    from slamrun.engine.spec import validate_spec
+    from slamrun.errors import SpecError
 
     build = tmp_path / "mono_tum"  # a local build: a program that exists
     build.write_text("#!/bin/sh\n")
@@ -341,7 +341,7 @@ def test_local_backend_needs_a_local_build(tiny_dataset, tmp_path):
 
 def test_every_module_is_registered_and_every_image_has_a_folder():
     classes = set()
-    for mod in pkgutil.walk_packages(methods.__path__, "methods."):
+    for mod in pkgutil.walk_packages(slamrun.methods.__path__, "slamrun.methods."):
         if mod.name.endswith("__main__") or mod.name.endswith("colmap_process"):
             continue
         module = importlib.import_module(mod.name)
@@ -353,8 +353,8 @@ def test_every_module_is_registered_and_every_image_has_a_folder():
                 and getattr(obj, "name", None)
             ):
                 classes.add(obj)
-    assert classes == set(methods.REGISTRY.values())
-    for name, cls in methods.REGISTRY.items():
+    assert classes == set(slamrun.methods.REGISTRY.values())
+    for name, cls in slamrun.methods.REGISTRY.items():
         assert cls.native or (ROOT / "docker" / name / "Dockerfile").exists(), name
 
 
@@ -386,15 +386,15 @@ def test_commits_match_methods_md():
 
 @pytest.mark.parametrize("name", sorted(COMMITS))
 def test_loop_closure_switch_where_the_study_used_one(name):
-    cls = methods.get(name)
+    cls = slamrun.methods.get(name)
     if name in STUDY_NO_LOOP:
         assert cls.loop_closure_switch, name
         assert cls.Params().loop_closure is False  # off by default, as in the study
 
 
 def test_paper_spec_is_the_full_study():
-    from runner.engine.plan import plan
-    from runner.engine.spec import load_spec
+    from slamrun.engine.plan import plan
+    from slamrun.engine.spec import load_spec
 
     spec = load_spec(ROOT / "configs" / "paper.yaml", check_files=False)
     runs = plan(spec)
@@ -419,25 +419,25 @@ def test_paper_spec_turns_loop_closure_off_where_the_study_did():
     """The study disabled loop closure in ORB-SLAM2, DF-ORB-SLAM, DynaSLAM, LDSO and DSM only (shared/docs/
     study.md); LSD-SLAM ran with its own default, global mapping on (`_doSLAM` true), so the paper spec asks
     for it. slamrun's own default stays off for every method that has a switch."""
-    from runner.engine.spec import load_spec
+    from slamrun.engine.spec import load_spec
 
     for name in ("paper.yaml", "paper-timing.yaml"):
         spec = load_spec(ROOT / "configs" / name, check_files=False)
-        built = [methods.get(m.name)(m.params) for m in spec.methods]
+        built = [slamrun.methods.get(m.name)(m.params) for m in spec.methods]
         closing = {m.name: m.params.loop_closure for m in built if m.loop_closure_switch}
         assert closing == STUDY_LOOP_CLOSURE, name
-    assert not methods.get("lsd_slam")({}).params.loop_closure
+    assert not slamrun.methods.get("lsd_slam")({}).params.loop_closure
 
 
 def test_pure_modules_import_in_one_direction():
     """Trajectory, alignment, evaluation and statistics never import the scheduler, Docker or the CLI."""
-    banned = ("runner.engine.scheduler", "runner.backends", "runner.cli", "runner.engine.campaign", "docker")
+    banned = ("slamrun.engine.scheduler", "slamrun.backends", "slamrun.cli", "slamrun.engine.campaign", "docker")
     for rel in (
-        "runner/core/trajectory.py",
-        "runner/core/alignment.py",
-        "runner/core/evaluation.py",
-        "runner/analysis/stats.py",
-        "runner/core/camera.py",
+        "slamrun/core/trajectory.py",
+        "slamrun/core/alignment.py",
+        "slamrun/core/evaluation.py",
+        "slamrun/analysis/stats.py",
+        "slamrun/core/camera.py",
     ):
         tree = ast.parse((ROOT / rel).read_text())
         for node in ast.walk(tree):
@@ -471,11 +471,11 @@ def test_list_methods_names_every_method():
     import subprocess
     import sys
 
-    import methods
+    import slamrun.methods
 
     out = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "list-methods"], capture_output=True, text=True, env={"COLUMNS": "200"}
+        [sys.executable, "-m", "slamrun.cli", "list-methods"], capture_output=True, text=True, env={"COLUMNS": "200"}
     )
     assert out.returncode == 0, out.stderr
-    for name in methods.REGISTRY:
+    for name in slamrun.methods.REGISTRY:
         assert name in out.stdout

@@ -9,9 +9,9 @@ import copy
 import numpy as np
 import pytest
 
-from runner.core.metrics import Alignment, associate, ate, coverage, kitti, rpe
-from runner.core.trajectory import Trajectory, from_matrices, read_euroc_csv, read_kitti, read_times, read_tum
-from runner.errors import MetricError, TrajectoryFormatError
+from slamrun.core.metrics import Alignment, associate, ate, coverage, kitti, rpe
+from slamrun.core.trajectory import Trajectory, from_matrices, read_euroc_csv, read_kitti, read_times, read_tum
+from slamrun.errors import MetricError, TrajectoryFormatError
 from tests.conftest import SHARED_DATA
 
 EVO = SHARED_DATA / "evo_test_data"
@@ -253,7 +253,7 @@ def test_the_command_line_gives_the_library_figures_on_every_core(evo):
     args += ["--est-format", "kitti", "--times", str(times), "--json", "--jobs", "2"]
     files = [str(EVO / e) for e in KITTI_ESTIMATES]
     out = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "evaluate", *args, *files], capture_output=True, text=True, check=True
+        [sys.executable, "-m", "slamrun.cli", "evaluate", *args, *files], capture_output=True, text=True, check=True
     )
     rows = [json.loads(line) for line in out.stdout.splitlines()]
     gt = read_kitti(EVO / "KITTI_00_gt.txt", read_times(times))
@@ -261,7 +261,7 @@ def test_the_command_line_gives_the_library_figures_on_every_core(evo):
         assert row["file"] == f and row["status"] == "ok"
         assert row["kitti_t_pct"] == kitti(gt, read_kitti(f, read_times(times)), alignment="none").t_pct
     bad = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "evaluate", "--metric", "kitti", "--gt", str(EVO / "KITTI_00_gt.txt")]
+        [sys.executable, "-m", "slamrun.cli", "evaluate", "--metric", "kitti", "--gt", str(EVO / "KITTI_00_gt.txt")]
         + ["--gt-format", "kitti", files[0]],
         capture_output=True,
         text=True,
@@ -272,7 +272,7 @@ def test_the_command_line_gives_the_library_figures_on_every_core(evo):
 def test_an_alignment_over_more_poses_than_pair_is_refused_not_fitted_on_all():
     """first:N with fewer than N associated poses: the campaign and `slamrun evaluate` alike say so (the fit
     used to take every pose silently, a figure that is not the one asked for)."""
-    from runner.core.metrics import Alignment
+    from slamrun.core.metrics import Alignment
 
     rng = np.random.default_rng(0)
     pts = rng.normal(size=(60, 3))

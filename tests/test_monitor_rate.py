@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from runner.backends import docker as docker_backend
+from slamrun.backends import docker as docker_backend
 
 
 class Clock:

@@ -10,9 +10,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.datasets.synth import generate
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
+from slamrun.datasets.synth import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
 from tests.conftest import one_sequence, write_spec
 
 
@@ -62,7 +62,7 @@ def _vo(tmp_path, images: list[np.ndarray]) -> subprocess.CompletedProcess:
         [
             sys.executable,
             "-m",
-            "methods.reference_vo",
+            "slamrun.methods.reference_vo",
             "--images",
             str(folder),
             "--times",
@@ -86,7 +86,7 @@ def test_reference_vo_says_not_initialized(tmp_path):
 
 
 def test_reference_vo_says_lost(tmp_path, vo_dataset):
-    from runner.datasets.tum_mono import open_sequence
+    from slamrun.datasets.tum_mono import open_sequence
 
     frames = [f for _, f in zip(range(60), open_sequence(vo_dataset / "seq_a").frames(), strict=False)]
     frames += [np.full((480, 640), 128, np.uint8)] * 10  # the camera goes blind

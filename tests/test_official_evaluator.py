@@ -10,8 +10,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from bench import official
-from runner.core.evaluation import tum_mono_file
-from runner.core.trajectory import Trajectory, read_tum
+from slamrun.core.evaluation import tum_mono_file
+from slamrun.core.trajectory import Trajectory, read_tum
 from tests.conftest import UPSTREAM, require_upstream
 
 
@@ -62,7 +62,7 @@ def test_slamrun_equals_the_official_tum_mono_evaluator(tmp_path):
 def test_a_repeated_timestamp_counts_every_row_as_the_official_evaluator_does(tmp_path):
     """An estimate that repeats two of its times with other poses (and one written backward): the official code
     sorts the rows and keeps every one, so slamrun's figures and pose count take every row too."""
-    from runner.core.evaluation import tum_mono_many
+    from slamrun.core.evaluation import tum_mono_many
 
     require_upstream(UPSTREAM / official.SOURCES["mono_dataset_code"].filename)
     gt_path, files = sequences(tmp_path, n_estimates=2)

@@ -19,11 +19,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-import methods
-from methods.orb_slam3 import INDEX, MapsReport
-from runner.core.trajectory import read_tum
-from runner.datasets.view import Direction, Profile
-from runner.errors import MethodFailure
+import slamrun.methods
+from slamrun.core.trajectory import read_tum
+from slamrun.datasets.view import Direction, Profile
+from slamrun.errors import MethodFailure
+from slamrun.methods.orb_slam3 import INDEX, MapsReport
 from tests.conftest import unpack_upstream
 from tests.test_methods import make_view
 
@@ -95,8 +95,8 @@ def test_a_moved_anchor_fails_the_orb_slam3_build_naming_the_file(tmp_path):
 
 
 def test_the_recipe_builds_from_the_pinned_archive_and_states_its_vocabulary(tmp_path):
-    from runner.images.build import BuildOptions, buildable, sources_of, vocabulary_choice
-    from runner.images.sources import SOURCES, obtain
+    from slamrun.images.build import BuildOptions, buildable, sources_of, vocabulary_choice
+    from slamrun.images.sources import SOURCES, obtain
     from tests.conftest import UPSTREAM, require_upstream
 
     dockerfile = buildable()["orb_slam3"][1]
@@ -118,7 +118,7 @@ def test_the_recipe_builds_from_the_pinned_archive_and_states_its_vocabulary(tmp
 
 def test_settings_parse_back_with_the_types_orb_slam3_checks(tmp_path):
     view = make_view(tmp_path / "v", 1000.0 + np.arange(200) / 30.0, Profile.rectified)
-    m = methods.get("orb_slam3")({"n_features": 1500})
+    m = slamrun.methods.get("orb_slam3")({"n_features": 1500})
     path = tmp_path / "settings.yaml"
     path.write_text(m.configure(view, Path("/work"))["settings.yaml"])
     fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
@@ -132,7 +132,7 @@ def test_settings_parse_back_with_the_types_orb_slam3_checks(tmp_path):
     for key, value in {"Camera.width": 640, "Camera.fps": 30, "ORBextractor.nFeatures": 1500, "loopClosing": 0}.items():
         assert fs.getNode(key).isInt() and int(fs.getNode(key).real()) == value, key
     assert fs.getNode("Camera1.k1").empty()  # rectified: no distortion applied
-    on = methods.get("orb_slam3")({"loop_closure": True}).configure(view, Path("/work"))["settings.yaml"]
+    on = slamrun.methods.get("orb_slam3")({"loop_closure": True}).configure(view, Path("/work"))["settings.yaml"]
     assert "\nloopClosing: 1\n" in on
     argv = m.command(view.at("/data"), Path("/work"))
     assert argv == [
@@ -141,7 +141,7 @@ def test_settings_parse_back_with_the_types_orb_slam3_checks(tmp_path):
         "/work/settings.yaml",
         "/data",
     ]
-    assert m.environment() == {} and methods.get("orb_slam3").loop_closure_switch
+    assert m.environment() == {} and slamrun.methods.get("orb_slam3").loop_closure_switch
 
 
 # ------------------------------------------------------------------------------------------ outputs
@@ -171,7 +171,7 @@ def test_one_map_every_frame_at_its_original_time_forward_and_backward(tmp_path)
         tracked = view_times[10:]  # the first frames before initialisation have no pose
         write_map(work, 0, tracked, np.c_[np.arange(len(tracked)), np.zeros((len(tracked), 2))])
         write_index(work, [(0, len(tracked), 12)])
-        m = methods.get("orb_slam3")({})
+        m = slamrun.methods.get("orb_slam3")({})
         traj = m.read_trajectory(work, view)
         assert len(traj) == 110 and set(traj.timestamps) <= set(original)
         expected = original[10:] if direction is Direction.forward else original[:110]
@@ -189,7 +189,7 @@ def test_several_maps_evaluate_the_largest_stated_or_are_refused(tmp_path):
     write_map(work, 1, t[140:290], np.ones((150, 3)))  # the larger: a new map after a loss
     write_map(work, 3, t[292:298], np.ones((6, 3)))
     write_index(work, [(0, 95, 20), (1, 150, 31), (3, 6, 2)])
-    m = methods.get("orb_slam3")({})
+    m = slamrun.methods.get("orb_slam3")({})
     traj = m.read_trajectory(work, view)
     np.testing.assert_array_equal(traj.timestamps, t[140:290])
     assert traj.report.n_maps == 3 and traj.report.evaluated_map == 1
@@ -200,7 +200,7 @@ def test_several_maps_evaluate_the_largest_stated_or_are_refused(tmp_path):
     assert m.failure_from_log(log) == "lost"
     assert m.failure_from_log("slamrun: 12 map(s) with frame poses: ...\n") == "lost"
     with pytest.raises(MethodFailure, match=r"3 maps \(map 0: 95 frames.*maps: refuse") as exc:
-        methods.get("orb_slam3")({"maps": "refuse"}).read_trajectory(work, view)
+        slamrun.methods.get("orb_slam3")({"maps": "refuse"}).read_trajectory(work, view)
     assert exc.value.kind == "lost"
     # a tie: the earlier map
     write_index(work, [(0, 95, 20), (1, 150, 31), (3, 6, 2), (4, 150, 9)])
@@ -211,7 +211,7 @@ def test_several_maps_evaluate_the_largest_stated_or_are_refused(tmp_path):
 def test_missing_partial_or_inconsistent_output_is_a_named_failure(tmp_path):
     t = 1000.0 + np.arange(50) / 30.0
     view = make_view(tmp_path / "v", t, Profile.rectified)
-    m = methods.get("orb_slam3")({})
+    m = slamrun.methods.get("orb_slam3")({})
 
     def failure(work: Path) -> MethodFailure:
         with pytest.raises(MethodFailure) as exc:
@@ -237,7 +237,7 @@ def test_missing_partial_or_inconsistent_output_is_a_named_failure(tmp_path):
 
 
 def test_a_crash_after_the_index_keeps_the_run(tmp_path):
-    m = methods.get("orb_slam3")({})
+    m = slamrun.methods.get("orb_slam3")({})
     assert m.accepts_exit(0, tmp_path) and not m.accepts_exit(139, tmp_path)
     write_index(tmp_path, [])
     assert m.accepts_exit(139, tmp_path) and m.accepts_exit(-6, tmp_path) and not m.accepts_exit(1, tmp_path)
@@ -286,10 +286,10 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
     ORB-SLAM3 is lost for good and starts a new map (forward: a first map of 10 keyframes or fewer would be reset
     instead; 130 textured frames make more, and both directions split in every run so far), and the run says so
     (the maps in run.json, the largest evaluated, the run marked lost)."""
-    from runner.datasets.synth import generate
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
-    from runner.images.verify import scene_extent
+    from slamrun.datasets.synth import generate
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
+    from slamrun.images.verify import scene_extent
     from tests.conftest import write_spec
 
     image_or_skip()

@@ -13,9 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from runner.core import jsonio
+from slamrun.core import jsonio
 
-SLAMRUN = [sys.executable, "-m", "runner.cli"]
+SLAMRUN = [sys.executable, "-m", "slamrun.cli"]
 
 
 def strict_json(text: str):

@@ -17,11 +17,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.cli import main
-from runner.datasets.synth import generate
+from slamrun.cli import main
+from slamrun.datasets.synth import generate
 from tests.conftest import fake_method, write_spec
 
-SLAMRUN = [sys.executable, "-m", "runner.cli"]
+SLAMRUN = [sys.executable, "-m", "slamrun.cli"]
 DATASETS = ("euroc", "kitti")
 TRIALS = 3
 

@@ -11,13 +11,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from runner.core.trajectory import Trajectory
-from runner.datasets import layouts, plugin_checks
-from runner.datasets.layouts import _adopt, open_sequence
-from runner.datasets.protocol import Layout
-from runner.datasets.sequence import Sequence
-from runner.datasets.synth import generate
-from runner.errors import DatasetError
+from slamrun.core.trajectory import Trajectory
+from slamrun.datasets import layouts, plugin_checks
+from slamrun.datasets.layouts import _adopt, open_sequence
+from slamrun.datasets.protocol import Layout
+from slamrun.datasets.sequence import Sequence
+from slamrun.datasets.synth import generate
+from slamrun.errors import DatasetError
 
 WHO = "plug-in layout lab (lab-datasets 1.0)"
 
@@ -50,7 +50,7 @@ BAD_SEQUENCES = {
     "no frames": (lambda s: replace(s, frame_names=(), timestamps=np.array([])), "no frames"),
     "beyond 1e10 s": (lambda s: replace(s, timestamps=s.timestamps + 2e10), "beyond 1e+10 s"),
     "bad exposures": (lambda s: replace(s, exposures_ms=np.zeros(20)), "not a positive time"),
-    "no camera": (lambda s: replace(s, camera=None), "not a runner.core.camera.CameraFile"),
+    "no camera": (lambda s: replace(s, camera=None), "not a slamrun.core.camera.CameraFile"),
 }
 
 
@@ -98,7 +98,7 @@ BAD_GROUNDTRUTH = {
     "scaled quaternion": (lambda gt: Trajectory(gt.timestamps, gt.positions, 2 * gt.quaternions), "norm 2; expected 1"),
     "fewer poses": (lambda gt: Trajectory(gt.timestamps[:5], gt.positions[:5], gt.quaternions[:5]), "5 poses for 20"),
     "other times": (lambda gt: Trajectory(gt.timestamps + 100, gt.positions, gt.quaternions), "not at the frames'"),
-    "not a trajectory": (lambda gt: gt.positions, "ndarray, not a runner.core.trajectory.Trajectory"),
+    "not a trajectory": (lambda gt: gt.positions, "ndarray, not a slamrun.core.trajectory.Trajectory"),
     "reader raises": (raises, "reading the ground truth"),
 }
 
@@ -154,7 +154,7 @@ def test_a_plugin_whose_recognise_raises_never_breaks_another_plugins_folders(re
 
 def test_a_writer_places_only_the_files_it_declares(tmp_path, monkeypatch):
     """A plug-in writer that staged a file it had not declared in synth_outside replaced a user's data/notes.txt."""
-    from runner.datasets import synth as synth_module
+    from slamrun.datasets import synth as synth_module
 
     notes = tmp_path / "notes.txt"
     notes.write_text("a user's notes\n")

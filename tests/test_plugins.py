@@ -36,7 +36,7 @@ def installed(tmp_path):
     )
     wrapper = pkg / "bin" / "mymethod"
     wrapper.parent.mkdir()
-    vo = f"{sys.executable} -m methods.reference_vo"
+    vo = f"{sys.executable} -m slamrun.methods.reference_vo"
     wrapper.write_text(f'#!/bin/sh\nexec {vo} --images "$1" --times "$2" --camera "$3" --out "$4"\n')
     wrapper.chmod(0o755)
     pyproject = pkg / "pyproject.toml"  # and an entry point that cannot load, as a broken package would have
@@ -52,7 +52,7 @@ def installed(tmp_path):
 
 
 def test_a_plugin_method_registers_runs_and_verifies(installed, tmp_path):
-    from runner.datasets.synth import generate
+    from slamrun.datasets.synth import generate
 
     pkg, wrapper = installed
     generate(tmp_path / "data" / "room", frames=90, seed=2)
@@ -125,7 +125,7 @@ def test_new_package_doors_say_one_line_not_a_traceback(tmp_path, args, said):
 
     (tmp_path / "dangling").symlink_to(tmp_path / "nowhere" / "x")
     (tmp_path / "afile").write_text("mine\n")
-    out = subprocess.run([sys.executable, "-m", "runner.cli", *args], capture_output=True, text=True, cwd=tmp_path)
+    out = subprocess.run([sys.executable, "-m", "slamrun.cli", *args], capture_output=True, text=True, cwd=tmp_path)
     assert out.returncode != 0 and "Traceback" not in out.stderr, out.stderr
     assert said in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "dangling"]  # nothing written

@@ -8,9 +8,9 @@ import threading
 import time
 from pathlib import Path
 
-import runner.engine.preparer as preparer_module
-from runner.datasets.view import Direction, Profile
-from runner.engine.preparer import ViewPreparer
+import slamrun.engine.preparer as preparer_module
+from slamrun.datasets.view import Direction, Profile
+from slamrun.engine.preparer import ViewPreparer
 
 
 def test_views_are_prepared_one_at_a_time_the_idle_lanes_first_views_with_every_core(tmp_path, monkeypatch):

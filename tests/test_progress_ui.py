@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from runner.engine.progress import Tracker, eta, figures
+from slamrun.engine.progress import Tracker, eta, figures
 from tests.conftest import fake_method, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -28,7 +28,7 @@ def run_in_pty(args: list[str], timeout: float = 240) -> tuple[int, str]:
     master, slave = pty.openpty()
     env = {**os.environ, "COLUMNS": "200", "LINES": "50", "TERM": "xterm"}
     proc = subprocess.Popen(
-        [sys.executable, "-m", "runner.cli", *args], stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, env=env
+        [sys.executable, "-m", "slamrun.cli", *args], stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, env=env
     )
     os.close(slave)
     chunks, deadline = [], time.monotonic() + timeout
@@ -172,7 +172,7 @@ def test_live_view_total_eta_resume_and_failed_runs(tmp_path, tiny_dataset):
 def test_plain_lines_carry_the_same_figures(tmp_path, tiny_dataset):
     """The headline every few runs, and each run's line with its main figure whatever the dataset's metrics:
     TUM-Mono's e_align, EuRoC's ATE RMSE (it showed none for an ATE dataset)."""
-    from runner.datasets.synth import generate
+    from slamrun.datasets.synth import generate
 
     euroc = generate(tmp_path / "euroc" / "V1_tiny", frames=40, seed=1, size=(160, 120), layout="euroc")
     datasets = [
@@ -181,7 +181,7 @@ def test_plain_lines_carry_the_same_figures(tmp_path, tiny_dataset):
     ]
     spec = write_spec(tmp_path, tiny_dataset, [fake_method()], datasets=datasets, trials=2, lanes=1, report=False)
     proc = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], capture_output=True, text=True, timeout=240
+        [sys.executable, "-m", "slamrun.cli", "campaign", str(spec)], capture_output=True, text=True, timeout=240
     )
     assert proc.returncode == 0, proc.stdout + proc.stderr
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("progress:")]
@@ -198,7 +198,7 @@ def test_plain_lines_carry_the_same_figures(tmp_path, tiny_dataset):
 
 
 def _dry(capsys, spec: Path, tmp_path: Path) -> str:
-    from runner.cli import main
+    from slamrun.cli import main
 
     before = snapshot(tmp_path)
     assert main(["campaign", str(spec), "--dry-run"]) == 0
@@ -216,8 +216,8 @@ def _counts(out: str) -> dict[tuple[str, str], list[int]]:
 
 
 def test_dry_run_counts_are_exact(tmp_path, tiny_dataset, capsys):
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
 
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(label="m")], trials=2, lanes=1, report=False)
     out = _dry(capsys, spec, tmp_path)  # new
@@ -256,7 +256,7 @@ def test_status_watch_and_json_while_a_campaign_runs(tmp_path, tiny_dataset):
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=1.5)], trials=2, lanes=1, report=False)
     results = tmp_path / "results"
     campaign = subprocess.Popen(
-        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        [sys.executable, "-m", "slamrun.cli", "campaign", str(spec)], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
     )
     try:
         deadline = time.monotonic() + 60
@@ -265,7 +265,7 @@ def test_status_watch_and_json_while_a_campaign_runs(tmp_path, tiny_dataset):
         seen = []
         while time.monotonic() < deadline:
             res = subprocess.run(
-                [sys.executable, "-m", "runner.cli", "status", str(results), "--json"], capture_output=True, text=True
+                [sys.executable, "-m", "slamrun.cli", "status", str(results), "--json"], capture_output=True, text=True
             )
             assert res.returncode == 0, res.stderr
             f = json.loads(res.stdout)
@@ -284,14 +284,14 @@ def test_status_watch_and_json_while_a_campaign_runs(tmp_path, tiny_dataset):
     assert campaign.returncode == 0, campaign.stderr.read()
     final = json.loads(
         subprocess.run(
-            [sys.executable, "-m", "runner.cli", "status", str(results), "--json"], capture_output=True, text=True
+            [sys.executable, "-m", "slamrun.cli", "status", str(results), "--json"], capture_output=True, text=True
         ).stdout
     )
     assert final["done"] == 8 and not final["active"] and final["occupancy"] > 0.5
 
 
 def test_every_argument_has_help_and_there_is_a_version():
-    from runner.cli import _parser
+    from slamrun.cli import _parser
 
     def check(parser, name: str) -> None:
         for action in parser._actions:
@@ -302,16 +302,16 @@ def test_every_argument_has_help_and_there_is_a_version():
                 assert action.help, f"{name}: {action.dest} has no help line"
 
     check(_parser(), "slamrun")
-    res = subprocess.run([sys.executable, "-m", "runner.cli", "--version"], capture_output=True, text=True)
+    res = subprocess.run([sys.executable, "-m", "slamrun.cli", "--version"], capture_output=True, text=True)
     assert res.returncode == 0 and res.stdout.startswith("slamrun ")
 
 
 def test_the_tracker_equals_the_figures_of_the_same_rows_after_every_change():
-    """The live view's figures are kept from events at a constant cost per run (runner.engine.progress.Tracker):
+    """The live view's figures are kept from events at a constant cost per run (slamrun.engine.progress.Tracker):
     after any sequence of changes they equal the figures computed from the ledger's rows."""
     import random
 
-    from runner.engine.progress import Tracker, figures
+    from slamrun.engine.progress import Tracker, figures
 
     rng = random.Random(3)
     rows = [
@@ -356,7 +356,7 @@ def test_the_tracker_equals_the_figures_of_the_same_rows_after_every_change():
 
 def test_the_eta_counts_the_runners_own_time_per_run():
     """Runs of 0.1 s that take 0.5 s of a lane each (starting, collecting): the estimate uses 0.5 s a run, not 0.1."""
-    from runner.engine.progress import figures
+    from slamrun.engine.progress import figures
 
     rows = [
         {"key": f"k{i}", "label": "m", "direction": "forward", "state": "done", "failure": None, "wall_s": 0.1,
@@ -378,7 +378,7 @@ def test_wall_times_give_the_medians_of_the_runs_they_hold_after_adds_and_remove
     import random
     import statistics
 
-    from runner.engine.progress import WallTimes
+    from slamrun.engine.progress import WallTimes
 
     rng = random.Random(7)
     groups = [(m, f"d/s{s}") for m in ("a", "b") for s in range(3)]
@@ -406,8 +406,8 @@ def test_wall_times_give_the_medians_of_the_runs_they_hold_after_adds_and_remove
 
 def test_status_reads_only_the_columns_the_figures_use(tmp_path):
     """`slamrun status` reads the progress columns, not whole rows; the figures are the same."""
-    from runner.engine.ledger import Ledger
-    from runner.engine.progress import Tracker
+    from slamrun.engine.ledger import Ledger
+    from slamrun.engine.progress import Tracker
 
     ledger = Ledger(tmp_path / "ledger.sqlite")
     rows = [

@@ -14,12 +14,12 @@ import pandas as pd
 import psutil
 import pytest
 
-from runner.analysis.load import evaluated
-from runner.analysis.summary import method_summary
-from runner.datasets.synth import generate
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
-from runner.errors import DatasetError, SlamRunError
+from slamrun.analysis.load import evaluated
+from slamrun.analysis.summary import method_summary
+from slamrun.datasets.synth import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
+from slamrun.errors import DatasetError, SlamRunError
 from tests.conftest import fake_method, one_sequence, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -97,7 +97,7 @@ def bad_copy(tiny_dataset: Path, tmp_path: Path, name: str = "seq_a") -> Path:
 
 
 def test_binary_camera_txt_is_a_named_dataset_error(tmp_path, tiny_dataset):
-    from runner.datasets.tum_mono import open_sequence
+    from slamrun.datasets.tum_mono import open_sequence
 
     root = bad_copy(tiny_dataset, tmp_path)
     (root / "seq_a" / "camera.txt").write_bytes(bytes(range(256)) * 4)
@@ -107,7 +107,7 @@ def test_binary_camera_txt_is_a_named_dataset_error(tmp_path, tiny_dataset):
 
 
 def test_non_finite_calibration_is_refused(tmp_path, tiny_dataset):
-    from runner.datasets.tum_mono import open_sequence
+    from slamrun.datasets.tum_mono import open_sequence
 
     root = bad_copy(tiny_dataset, tmp_path)
     cam = root / "seq_a" / "camera.txt"
@@ -119,7 +119,7 @@ def test_non_finite_calibration_is_refused(tmp_path, tiny_dataset):
 
 
 def test_validate_opens_the_sequences_as_the_campaign_does(tmp_path, tiny_dataset):
-    from runner.cli import main
+    from slamrun.cli import main
 
     root = tmp_path / "data"
     for name in ("seq_a", "seq_b"):
@@ -303,7 +303,7 @@ def test_campaign_and_backends_import_in_one_direction():
     for path in root.glob("*.py"):
         tree = ast.parse(path.read_text())
         imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
-        assert "runner.engine.campaign" not in imported, f"{path.name} imports runner.campaign"
+        assert "slamrun.engine.campaign" not in imported, f"{path.name} imports slamrun.campaign"
 
 
 # ------------------------------------------------------------ a method's environment reaches its process
@@ -328,8 +328,8 @@ def test_a_run_clears_its_own_half_written_attempts_and_leaves_its_siblings(tmp_
     """Before attempt n, attempts 1..n of the same run are removed (one check each, not a listing of a folder of
     thousands of runs); another run's attempt and a later-numbered leftover stay; recovery (no number) clears
     every attempt of the run it finds."""
-    from runner.engine.paths import RunPaths
-    from runner.engine.plan import plan
+    from slamrun.engine.paths import RunPaths
+    from slamrun.engine.plan import plan
 
     spec = write_spec(
         tmp_path, tiny_dataset, [fake_method()], datasets=one_sequence(tiny_dataset), directions=["forward"], trials=2

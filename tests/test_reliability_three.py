@@ -5,8 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
 from tests.conftest import fake_method, one_sequence, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -45,8 +45,8 @@ def test_reading_refuses_fifos_devices_and_oversized_files_without_blocking(tmp_
 
     import pytest
 
-    from runner.core.inputs import read_bounded
-    from runner.errors import DatasetError
+    from slamrun.core.inputs import read_bounded
+    from slamrun.errors import DatasetError
 
     fifo = tmp_path / "frame.png"
     os.mkfifo(fifo)  # nobody writes it: a plain open() would block for ever
@@ -80,8 +80,8 @@ def test_yaml_alias_bombs_and_deep_nesting_are_refused_before_anything_is_built(
     code = """
 import resource, sys
 resource.setrlimit(resource.RLIMIT_AS, (2**30, resource.RLIM_INFINITY))
-from runner.core.inputs import load_yaml_file
-from runner.errors import DatasetError
+from slamrun.core.inputs import load_yaml_file
+from slamrun.errors import DatasetError
 for path in sys.argv[1:]:
     try:
         load_yaml_file(path, "calibration", DatasetError)
@@ -100,7 +100,7 @@ def test_a_spec_that_is_a_fifo_is_refused_at_once(tmp_path):
 
     import pytest
 
-    from runner.errors import SpecError
+    from slamrun.errors import SpecError
 
     spec = tmp_path / "spec.yaml"
     os.mkfifo(spec)

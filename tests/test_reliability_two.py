@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
-from runner.errors import SpecError
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
+from slamrun.errors import SpecError
 from tests.conftest import fake_method, mount_tmpfs, one_sequence, write_spec
 from tests.test_campaign import ledger_rows
 
@@ -42,7 +42,7 @@ def snapshot(root: Path) -> dict[str, tuple[str, int, bytes | str]]:
 def cli(*args: str) -> tuple[int, str]:
     """Run slamrun in a process of its own; exit code and stderr+stdout."""
     res = subprocess.run(
-        [sys.executable, "-m", "runner.cli", *args], capture_output=True, text=True, stdin=subprocess.DEVNULL
+        [sys.executable, "-m", "slamrun.cli", *args], capture_output=True, text=True, stdin=subprocess.DEVNULL
     )
     return res.returncode, res.stdout + res.stderr
 
@@ -151,10 +151,10 @@ def test_names_that_would_leave_their_folder_are_refused_all_at_once(tmp_path, t
 
 
 def test_derived_run_paths_stay_under_the_results(tmp_path):
-    from runner.datasets.view import Direction
-    from runner.engine.paths import RunPaths
-    from runner.engine.plan import RunKey
-    from runner.errors import SlamRunError
+    from slamrun.datasets.view import Direction
+    from slamrun.engine.paths import RunPaths
+    from slamrun.engine.plan import RunKey
+    from slamrun.errors import SlamRunError
 
     with pytest.raises(SlamRunError, match="outside"):
         RunPaths(tmp_path / "results", RunKey("../../x", "seq", Direction.forward, 0, "abc"))
@@ -236,7 +236,7 @@ def test_two_campaigns_started_together_on_an_ungenerated_sequence(tmp_path):
         spec = synth_spec(folder, data, ["sequence_01"], name=f"c{k}")
         procs.append(
             subprocess.Popen(
-                [sys.executable, "-m", "runner.cli", "campaign", str(spec)],
+                [sys.executable, "-m", "slamrun.cli", "campaign", str(spec)],
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
                 text=True,
@@ -340,7 +340,7 @@ def test_a_results_folder_that_turns_read_only_stops_the_campaign_cleanly(tmp_pa
     results = disk / "results"
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=0.5)], trials=3, results=str(results))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        [sys.executable, "-m", "slamrun.cli", "campaign", str(spec)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
     try:
         deadline = time.monotonic() + 120
@@ -422,9 +422,9 @@ def dask_cluster(tmp_path):
 def test_a_hung_dask_worker_gets_no_more_runs_and_the_campaign_finishes(
     tmp_path, tiny_dataset, dask_cluster, monkeypatch
 ):
-    import runner.backends.dask
+    import slamrun.backends.dask
 
-    monkeypatch.setattr(runner.backends.dask, "WORKER_SILENCE_S", 8.0)  # 20 s in use: the test waits less
+    monkeypatch.setattr(slamrun.backends.dask, "WORKER_SILENCE_S", 8.0)  # 20 s in use: the test waits less
     address, pids, _ = dask_cluster
     marker = tmp_path / "starts.txt"
     spec = write_spec(
@@ -469,7 +469,7 @@ def test_a_lost_dask_scheduler_stops_the_campaign_with_one_message(tmp_path, tin
     )
     results = tmp_path / "results"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "runner.cli", "campaign", str(spec)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
+        [sys.executable, "-m", "slamrun.cli", "campaign", str(spec)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
     deadline = time.monotonic() + 120
     while sum(r["state"] == "done" for r in ledger_rows(results)) < 2 and time.monotonic() < deadline:
@@ -507,7 +507,7 @@ def test_a_campaign_with_hostile_names_writes_only_into_results_cache_and_datase
     (scratch / "spec.yaml").write_text(yaml.safe_dump(spec, allow_unicode=True))
     outside = {k: v for k, v in snapshot(tmp_path).items() if not k.startswith(("scratch/out", "scratch/data"))}
     res = subprocess.run(
-        [sys.executable, "-m", "runner.cli", "campaign", "../spec.yaml"],
+        [sys.executable, "-m", "slamrun.cli", "campaign", "../spec.yaml"],
         cwd=scratch / "mine",  # a relative path that escaped would land here
         capture_output=True,
         text=True,

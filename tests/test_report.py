@@ -15,9 +15,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.analysis import figures
-from runner.analysis.report import write_report
-from runner.cli import main
+from slamrun.analysis import figures
+from slamrun.analysis.report import write_report
+from slamrun.cli import main
 
 
 def fake_results(tmp_path, n_methods=3, n_seq=4, trials=5) -> pd.DataFrame:
@@ -165,8 +165,8 @@ def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tin
     report has their table with letters and, per sequence, each method's best, median and worst path over the
     ground truth (axes labelled with their units, equal aspect, a legend of what is drawn), rendered in a real
     browser."""
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import fake_method, write_spec
 
     datasets = [

@@ -29,7 +29,7 @@ import pytest
 from tests.conftest import fake_method, write_spec
 from tests.test_report import CHROMIUM_FLAGS, chromium_or_skip
 
-SLAMRUN = [sys.executable, "-m", "runner.cli"]
+SLAMRUN = [sys.executable, "-m", "slamrun.cli"]
 WIDTH = 1400
 
 

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from runner.core.metrics import NoPairs, RpeInterval, poses_at, rpe
-from runner.core.trajectory import Trajectory, read_euroc_csv, read_tum
-from runner.datasets.synth import generate
-from runner.errors import MetricError
+from slamrun.core.metrics import NoPairs, RpeInterval, poses_at, rpe
+from slamrun.core.trajectory import Trajectory, read_euroc_csv, read_tum
+from slamrun.datasets.synth import generate
+from slamrun.errors import MetricError
 from tests.conftest import SHARED_DATA
 
 EVO = SHARED_DATA / "evo_test_data"
@@ -118,8 +118,8 @@ def test_a_campaign_records_its_interval_and_pairs_and_evaluate_reproduces_them(
 
     import pandas as pd
 
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import write_spec
 
     data = tmp_path / "data"
@@ -141,7 +141,7 @@ def test_a_campaign_records_its_interval_and_pairs_and_evaluate_reproduces_them(
     n = df.loc["every2", "n_poses"]
     assert df.loc["every2", "rpe_pairs"] == n - 2 and df.loc["default", "rpe_pairs"] > 0
     traj = f"{df.loc['every2', 'run_dir']}/trajectory.txt"
-    args = [sys.executable, "-m", "runner.cli", "evaluate", "--gt", str(data / "seq_a"), "--metric", "rpe"]
+    args = [sys.executable, "-m", "slamrun.cli", "evaluate", "--gt", str(data / "seq_a"), "--metric", "rpe"]
     out = subprocess.run(
         [*args, "--delta", "2", "--delta-unit", "frames", "--json", traj], capture_output=True, text=True
     )
@@ -152,8 +152,8 @@ def test_a_campaign_records_its_interval_and_pairs_and_evaluate_reproduces_them(
 
 
 def test_a_bad_rpe_key_in_a_spec_is_named(tiny_dataset, tmp_path):
-    from runner.engine.spec import load_spec
-    from runner.errors import SpecError
+    from slamrun.engine.spec import load_spec
+    from slamrun.errors import SpecError
     from tests.conftest import write_spec
 
     ds = [{"name": "s", "path": str(tiny_dataset), "sequences": ["seq_a"], "rpe": {"delta": 0.5, "unit": "frames"}}]

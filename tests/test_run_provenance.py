@@ -12,9 +12,9 @@ from importlib.metadata import version
 import pandas as pd
 import pytest
 
-from runner.datasets.synth import generate
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
+from slamrun.datasets.synth import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
 from tests.conftest import write_spec
 
 
@@ -45,7 +45,7 @@ def test_each_run_records_its_machine_and_packages(campaign):
 
 
 def test_the_reports_provenance_names_hosts_and_packages(campaign):
-    from runner.analysis.provenance import provenance
+    from slamrun.analysis.provenance import provenance
 
     _, res = campaign
     p = provenance(res.results, pd.read_csv(res.results_csv))
@@ -54,7 +54,7 @@ def test_the_reports_provenance_names_hosts_and_packages(campaign):
 
 
 def test_a_resume_with_nothing_to_run_keeps_the_span(campaign):
-    from runner.engine.session import read_figures
+    from slamrun.engine.session import read_figures
 
     spec, res = campaign
     before = read_figures(res.results)

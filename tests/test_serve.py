@@ -26,7 +26,7 @@ import pytest
 from tests.conftest import fake_method, one_sequence, write_spec
 from tests.test_report_page import chromium_page
 
-SLAMRUN = [sys.executable, "-m", "runner.cli"]
+SLAMRUN = [sys.executable, "-m", "slamrun.cli"]
 
 
 def slamrun(*args, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -265,7 +265,7 @@ def test_the_page_comes_with_its_first_state_and_a_headless_browser_settles_on_i
 
 
 def test_the_first_state_escapes_every_text_it_shows():
-    from runner.serve.firstpaint import campaign_body, embedded
+    from slamrun.serve.firstpaint import campaign_body, embedded
 
     hostile = "</script><script>alert(1)</script>"
     progress = {"total": 1, "finished": 1, "done": 0, "failed": 1, "infra": 0, "active": False, "per_group": []}
@@ -289,8 +289,8 @@ def test_the_box_plot_keeps_each_methods_colour_and_labels_its_log_axis_with_who
     """A method's colour on the page came from the order its first result arrived (it changed when another method's
     first result came), and the log axis labelled one decade only ("3 4 5 ... 0.01 2 3": "3" meant 0.003 on the left
     and 0.03 on the right), with no unit. Now: the campaign's colours (the report's), whole values, units."""
-    from runner.analysis.colours import TAB10, method_colours
-    from runner.core.ticks import log_ticks
+    from slamrun.analysis.colours import TAB10, method_colours
+    from slamrun.core.ticks import log_ticks
 
     with serving(finished) as base:
         state = json.loads(get(base, "/c/results/api/state")[1])
@@ -324,8 +324,8 @@ def test_the_reports_curves_take_the_campaigns_colours():
     """A dataset where only one of the campaign's two methods has results draws it in its campaign colour."""
     import pandas as pd
 
-    from runner.analysis import figures
-    from runner.analysis.colours import TAB10, TAB20, method_colours
+    from slamrun.analysis import figures
+    from slamrun.analysis.colours import TAB10, TAB20, method_colours
 
     df = pd.DataFrame({"method": ["steady"] * 3, "e_align": [0.01, 0.02, 0.03]})
     fig = figures.cumulative_figure(df, "e_align", colours=method_colours(["broken", "steady"]))
@@ -551,7 +551,7 @@ def test_only_loopback_names_and_reads(finished):
 def test_a_token_is_asked_of_every_request_when_one_is_set(finished):
     from aiohttp.test_utils import TestClient, TestServer
 
-    from runner.serve.app import make_app
+    from slamrun.serve.app import make_app
 
     token = "t" * 24
 
@@ -608,7 +608,7 @@ def test_a_wildcard_host_prints_the_machines_names_not_the_wildcard():
     machine's name and each address beyond loopback (computed here; no test listens beyond loopback)."""
     import socket as sockets
 
-    from runner.serve.server import machine_names, urls
+    from slamrun.serve.server import machine_names, urls
 
     names = machine_names("0.0.0.0")
     assert names[0] == sockets.gethostname() and "0.0.0.0" not in names and "127.0.0.1" not in names
@@ -749,7 +749,7 @@ def test_a_token_mode_redirect_keeps_the_token(finished):
     (the next page is answered), as the page itself does."""
     from aiohttp.test_utils import TestClient, TestServer
 
-    from runner.serve.app import make_app
+    from slamrun.serve.app import make_app
 
     token = "r" * 24
 

@@ -14,11 +14,11 @@ from pathlib import Path
 import psutil
 import pytest
 
-from runner.backends.jobqueue import job_name
-from runner.datasets.synth import generate
-from runner.engine.campaign import run_campaign
-from runner.engine.spec import load_spec
-from runner.errors import InfraError, SpecError
+from slamrun.backends.jobqueue import job_name
+from slamrun.datasets.synth import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.spec import load_spec
+from slamrun.errors import InfraError, SpecError
 from tests import slurm_cluster
 from tests.conftest import fake_method, write_spec
 from tests.test_campaign import ledger_rows
@@ -245,7 +245,7 @@ def test_ctrl_c_cancels_the_jobs(tmp_path, rooms, slurm):
     path = slurm_spec(tmp_path, rooms, min_workers=1, max_workers=1)
     results = load_spec(path).results
     proc = subprocess.Popen(
-        [sys.executable, "-m", "runner.cli", "campaign", str(path)],
+        [sys.executable, "-m", "slamrun.cli", "campaign", str(path)],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         env={**os.environ, **slurm.env},

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from runner.images import sources as src
-from runner.images.sources import SOURCES, SourceError, check_archive, obtain
+from slamrun.images import sources as src
+from slamrun.images.sources import SOURCES, SourceError, check_archive, obtain
 from tests.conftest import loopback_server, require_upstream
 
 
@@ -169,7 +169,7 @@ def test_an_unreachable_server_names_the_address_and_the_folder_option(archive_s
 
 
 def test_a_pypi_file_from_a_folder_the_cache_or_the_index(tmp_path):
-    from runner.images.sources import PypiFile, obtain_pypi
+    from slamrun.images.sources import PypiFile, obtain_pypi
 
     data = b"not really a wheel " * 5000
     sha = src.hashlib.sha256(data).hexdigest()
@@ -197,7 +197,7 @@ def test_a_pypi_file_from_a_folder_the_cache_or_the_index(tmp_path):
 
 
 def test_weights_by_address_need_and_get_their_checksum(tmp_path):
-    from runner.images.sources import obtain_url
+    from slamrun.images.sources import obtain_url
 
     data = b"weights" * 1000
     sha = src.hashlib.sha256(data).hexdigest()
@@ -213,7 +213,7 @@ def test_weights_by_address_need_and_get_their_checksum(tmp_path):
 def test_a_pypi_file_from_a_mirror_with_only_the_project_index_and_relative_addresses(tmp_path):
     """A PyPI mirror (as the registry this project is tested behind) may serve /pypi/<project>/json only, with file
     addresses relative to it: the file is still found there."""
-    from runner.images.sources import PypiFile, obtain_pypi
+    from slamrun.images.sources import PypiFile, obtain_pypi
 
     data = b"a wheel from a mirror " * 3000
     f = PypiFile("demo-1.0-py3-none-any.whl", "demo", "1.0", src.hashlib.sha256(data).hexdigest())

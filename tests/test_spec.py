@@ -5,10 +5,10 @@ import json
 import pytest
 import yaml
 
-from runner.cli import main
-from runner.engine.plan import plan
-from runner.engine.spec import load_spec
-from runner.errors import SpecError
+from slamrun.cli import main
+from slamrun.engine.plan import plan
+from slamrun.engine.spec import load_spec
+from slamrun.errors import SpecError
 from tests.conftest import fake_method, write_spec
 
 

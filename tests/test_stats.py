@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.analysis.stats import adjust_p, compact_letters, study_statistics
+from slamrun.analysis.stats import adjust_p, compact_letters, study_statistics
 
 METRICS = ["e_t", "e_r", "e_s", "e_start", "e_end", "e_rmse"]
 

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 from scipy import stats as scipy_stats
 
-from runner.analysis.stats import distinct_runs, levene, study_statistics, wilcoxon_rank_sum_p
+from slamrun.analysis.stats import distinct_runs, levene, study_statistics, wilcoxon_rank_sum_p
 
 
 def runs(method: str, values: dict[tuple[str, str], list[float]]) -> list[dict]:
@@ -95,9 +95,9 @@ def test_mahalanobis_needs_more_runs_than_metrics():
 def test_a_campaign_with_a_deterministic_method_says_so(tmp_path):
     """reference_vo is deterministic: its two trials on a real synthetic sequence give the same figures; stats
     counts them once and says which method that is, in text and JSON."""
-    from runner.datasets.synth import generate
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
+    from slamrun.datasets.synth import generate
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
     from tests.conftest import write_spec
 
     data = tmp_path / "data"
@@ -107,7 +107,7 @@ def test_a_campaign_with_a_deterministic_method_says_so(tmp_path):
     res = run_campaign(load_spec(spec), log=lambda *a: None)
     df = pd.read_csv(res.results_csv)
     assert (df.status == "done").all() and df.ate_rmse.nunique() == 1
-    base = [sys.executable, "-m", "runner.cli", "stats", str(tmp_path / "results")]
+    base = [sys.executable, "-m", "slamrun.cli", "stats", str(tmp_path / "results")]
     out = json.loads(subprocess.run([*base, "--json"], capture_output=True, text=True, check=True).stdout)
     block = out["datasets"]["e"]
     assert block["counted"]["reference_vo"] == {"runs": 2, "distinct": 1, "deterministic": True}

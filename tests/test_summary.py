@@ -6,10 +6,10 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from runner.analysis.report import write_report
-from runner.analysis.summary import method_summary
-from runner.engine.progress import figures
-from runner.results.summary import tally
+from slamrun.analysis.report import write_report
+from slamrun.analysis.summary import method_summary
+from slamrun.engine.progress import figures
+from slamrun.results.summary import tally
 
 # 6 done, 2 lost, 2 infra, 1 pending: the method's results are the 8 done or lost runs
 STATES = [("done", None, "ok")] * 6 + [("failed", "lost", None)] * 2 + [("failed", "infra", None)] * 2

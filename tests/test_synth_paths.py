@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from runner.datasets.synth import (
+from slamrun.datasets.synth import (
     MOTION_SLACK,
     PathShape,
     Synth,
@@ -61,7 +61,7 @@ def test_a_seeds_loop_closes_and_keeps_the_boxes_in_view(seed):
 
 def test_the_plain_loop_is_the_one_every_sequence_had_before():
     """PathShape.plain(): radii 2.3 and 1.9 m at 1.3 m, anticlockwise from +x; a scene made without a path has it."""
-    from runner.datasets.synth import make_scene
+    from slamrun.datasets.synth import make_scene
 
     scene = make_scene("indoor", np.random.default_rng(0))
     assert scene.path == PathShape.plain()

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.core.camera import FovCamera, rectified_pinhole
-from runner.datasets.synth import Renderer, camera_path, fov_rays, make_scene, make_texture, pinhole_rays
+from slamrun.core.camera import FovCamera, rectified_pinhole
+from slamrun.datasets.synth import Renderer, camera_path, fov_rays, make_scene, make_texture, pinhole_rays
 
 
 def reference_faces_and_points(scene, rays_cam: np.ndarray, rot: np.ndarray, pos: np.ndarray):

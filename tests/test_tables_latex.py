@@ -13,8 +13,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from runner.analysis.stats import study_statistics
-from runner.analysis.tables import medians_with_letters, write_all
+from slamrun.analysis.stats import study_statistics
+from slamrun.analysis.tables import medians_with_letters, write_all
 
 
 def stats_of_three_methods():

@@ -2,7 +2,7 @@
 
 import math
 
-from runner.core.ticks import log_steps, log_ticks
+from slamrun.core.ticks import log_steps, log_ticks
 
 
 def test_ticks_are_whole_values_from_the_tick_below_the_least_to_the_one_above_the_greatest():

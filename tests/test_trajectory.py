@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from runner.core.trajectory import (
+from slamrun.core.trajectory import (
     from_arrays,
     read_4x4_matrices,
     read_kitti,
@@ -13,7 +13,7 @@ from runner.core.trajectory import (
     rotmat_to_quat,
     write_tum,
 )
-from runner.errors import TrajectoryFormatError
+from slamrun.errors import TrajectoryFormatError
 from tests.conftest import SHARED_DATA as DATA
 
 # the study's TUM files (evo_test_data beside them holds KITTI poses and other datasets' formats)
@@ -161,9 +161,9 @@ def test_real_file_facts(shared_data):
 def test_read_tum_many_matches_read_tum_file_by_file(tmp_path, monkeypatch, reader):
     """Batched reading gives each file exactly what read_tum gives it, errors included, in order; by the
     compiled reader, and by Arrow's where that is not built."""
-    from runner.core import trajectory
-    from runner.core.trajectory import read_tum_many, write_tum
-    from runner.errors import TrajectoryFormatError
+    from slamrun.core import trajectory
+    from slamrun.core.trajectory import read_tum_many, write_tum
+    from slamrun.errors import TrajectoryFormatError
 
     if reader == "arrow":
         monkeypatch.setattr(trajectory, "_tumparse", None)
@@ -238,10 +238,10 @@ def need_compiled_reader():
     """The compiled reader of plain tables; skipped with the reason where it is not built (failed under CI)."""
     import os
 
-    from runner.core import trajectory
+    from slamrun.core import trajectory
 
     if trajectory._tumparse is None:
-        why = "runner.core._tumparse is not built (a C compiler and `pip install -e .`, as `make install` does)"
+        why = "slamrun.core._tumparse is not built (a C compiler and `pip install -e .`, as `make install` does)"
         if os.environ.get("CI") == "true":
             pytest.fail(why)
         pytest.skip(reason=why)
@@ -251,7 +251,7 @@ def need_compiled_reader():
 def test_compiled_reader_reads_numbers_exactly_as_python_does():
     """Every number as Python's float() (correctly rounded) reads it, bit for bit, whatever the format; a text
     that is not rows of single-space-separated numbers is refused (-1), never misread."""
-    from runner.core import trajectory
+    from slamrun.core import trajectory
 
     tumparse = need_compiled_reader()
     rng = np.random.default_rng(0)
@@ -300,7 +300,7 @@ def test_compiled_reader_reads_numbers_exactly_as_python_does():
 
 def test_compiled_reader_agrees_with_arrow_on_real_files(shared_data, monkeypatch):
     """The study's trajectory files, read by the compiled reader and by Arrow's: the same arrays and reports."""
-    from runner.core import trajectory
+    from slamrun.core import trajectory
 
     need_compiled_reader()
     files = sorted((DATA / "study_trajectories").glob("*.txt")) + sorted((DATA / "dso_tum_mono_examples").glob("*.txt"))

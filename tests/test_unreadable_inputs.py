@@ -14,7 +14,7 @@ from tests.conftest import SHARED_DATA
 
 
 def slamrun(*args) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "runner.cli", *map(str, args)], capture_output=True, text=True)
+    return subprocess.run([sys.executable, "-m", "slamrun.cli", *map(str, args)], capture_output=True, text=True)
 
 
 def test_evaluate_names_a_file_whose_read_fails(shared_data):

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from runner.datasets.synth import generate
-from runner.images.verify import VerifyRow, holds_standin_network, markdown_table, merged, scene_extent
+from slamrun.datasets.synth import generate
+from slamrun.images.verify import VerifyRow, holds_standin_network, markdown_table, merged, scene_extent
 
 
 def test_scene_extent_is_the_camera_paths_bounding_box_diagonal(tmp_path):
@@ -64,7 +64,7 @@ def test_an_image_with_a_standin_network_is_judged_on_its_plumbing_only():
 
 
 def test_a_run_that_ended_done_without_metrics_says_why():
-    from runner.images.verify import _why_not_ok
+    from slamrun.images.verify import _why_not_ok
 
     assert _why_not_ok({"failure": None, "state": "done", "eval_status": "incomplete"}) == "not evaluated (incomplete)"
     assert _why_not_ok({"failure": "lost", "state": "failed", "eval_status": "incomplete"}) == "lost"
@@ -73,7 +73,7 @@ def test_a_run_that_ended_done_without_metrics_says_why():
 def test_segment_errors_are_taken_in_the_order_the_method_processed_them():
     """A backward run meets the end segment first: its first-processed segment is e_end, its last e_start. The
     medians are relative to each sequence's extent, so a start-up transient shows whatever the direction."""
-    from runner.images.verify import processed_segments
+    from slamrun.images.verify import processed_segments
 
     extents = {"a": 2.0, "b": 4.0}
     runs = [
@@ -95,11 +95,11 @@ def test_the_settled_error_leaves_out_the_segment_the_run_processed_first(tmp_pa
     the other end changes it."""
     import pandas as pd
 
-    from runner.core.trajectory import read_tum, write_tum
-    from runner.datasets.synth import generate
-    from runner.engine.campaign import run_campaign
-    from runner.engine.spec import load_spec
-    from runner.images.verify import settled_error
+    from slamrun.core.trajectory import read_tum, write_tum
+    from slamrun.datasets.synth import generate
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec import load_spec
+    from slamrun.images.verify import settled_error
     from tests.conftest import write_spec
 
     data = tmp_path / "data"

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The image's network, /opt/dpvo/weights/dpvo.pth, and its record /opt/dpvo/build.json (what
-# methods/dpvo_process.py reads: the tree, the weights file and what it is).
+# slamrun/methods/dpvo_process.py reads: the tree, the weights file and what it is).
 # MODEL: given = inputs/weights/dpvo.pth (`slamrun images --weights dpvo.pth=FILE` or =URL#sha256=HEX); standin = an
 # untrained stand-in from a fixed seed (docker/dpvo/standin_model.py, as `slamrun native-build dpvo --standin-model`;
 # plumbing only, accuracy meaningless); anything else: the build stops naming the file and where it is published.

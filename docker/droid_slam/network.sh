@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The image's network, /opt/droid_slam/weights/droid.pth, and its record /opt/droid_slam/build.json (what
-# methods/droid_slam_process.py reads: the tree, the weights file and what it is).
+# slamrun/methods/droid_slam_process.py reads: the tree, the weights file and what it is).
 # MODEL: given = inputs/weights/droid.pth (`slamrun images --weights droid.pth=FILE` or =URL#sha256=HEX); standin = an
 # untrained stand-in from a fixed seed (docker/droid_slam/standin_model.py, as `slamrun native-build droid_slam
 # --standin-model`; plumbing only, accuracy meaningless); anything else: the build stops naming the file and where it

@@ -1,0 +1,336 @@
+"""The study's figures from DataFrames (matplotlib, headless): PNG and SVG files, fit for a paper: no text over
+another, every value axis with at least three labelled ticks, every axis labelled with its unit."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+from matplotlib.colors import ListedColormap, LogNorm, Normalize  # noqa: E402
+from matplotlib.lines import Line2D  # noqa: E402
+from matplotlib.patches import Patch, Rectangle  # noqa: E402
+
+from slamrun.analysis.colours import method_colours  # noqa: E402
+from slamrun.analysis.paths import SequencePaths  # noqa: E402
+from slamrun.analysis.stats import StudyStats  # noqa: E402
+from slamrun.core.ticks import log_steps  # noqa: E402
+from slamrun.results.vocabulary import INFRA, LABELS  # noqa: E402
+
+# best, median and worst run: told apart by colour and by line style (colour-blind safe, also in grey print)
+PICK_STYLES = {"best": ("#1b9e77", "-", 1.6), "median": ("#7570b3", "--", 1.3), "worst": ("#d95f02", ":", 1.6)}
+
+
+# horizontal boxes: `orientation` since matplotlib 3.10, `vert` before
+HORIZONTAL = (
+    {"orientation": "horizontal"}
+    if tuple(int(x) for x in matplotlib.__version__.split(".")[:2]) >= (3, 10)
+    else {"vert": False}
+)
+
+
+def save(fig, folder: Path, name: str) -> Path:
+    folder.mkdir(parents=True, exist_ok=True)
+    fig.savefig(folder / f"{name}.png", dpi=110, bbox_inches="tight")
+    if fig.get_layout_engine() is not None:
+        fig.set_layout_engine("none")  # laid out for the PNG: the SVG keeps that layout, not computed again
+    fig.savefig(folder / f"{name}.svg", bbox_inches="tight")
+    plt.close(fig)
+    return folder / f"{name}.png"
+
+
+def _labelled(label: str, title: str) -> str:
+    """A figure's title headed by its dataset, where it has one."""
+    return f"{label}: {title}" if label else title
+
+
+def _number(x: float, _pos=None) -> str:
+    """A tick's value as a reader writes it: 0.2, 5, 1e-05."""
+    return f"{x:g}"
+
+
+def use_log_scale(values: np.ndarray) -> bool:
+    """Whether positive values span a decade or more (a log axis then reads better than a linear one)."""
+    v = np.asarray(values, float)
+    v = v[np.isfinite(v) & (v > 0)]
+    return len(v) > 1 and v.max() / v.min() >= 10
+
+
+def readable_log_ticks(axis, lo: float, hi: float) -> None:
+    """Ticks of a log axis from lo to hi that a reader can read values off (slamrun.core.ticks: the live page's
+    rule), each labelled with its whole value."""
+    axis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=log_steps(lo, hi), numticks=40))
+    axis.set_major_formatter(matplotlib.ticker.FuncFormatter(_number))
+    axis.set_minor_locator(matplotlib.ticker.LogLocator(base=10, subs=np.arange(1, 10), numticks=40))
+    axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+
+
+def cumulative(
+    df: pd.DataFrame,
+    metric: str,
+    folder: Path,
+    name: str | None = None,
+    bold_all: bool = False,
+    label: str = "",
+    colours: dict[str, str] | None = None,
+) -> Path:
+    """The cumulative figure of `metric` (cumulative_figure), saved in `folder`."""
+    return save(cumulative_figure(df, metric, bold_all, label, colours), folder, name or f"cumulative_{metric}")
+
+
+def cumulative_figure(
+    df: pd.DataFrame, metric: str, bold_all: bool = False, label: str = "", colours: dict[str, str] | None = None
+) -> plt.Figure:
+    """Runs (y, whole numbers) whose error is below x, one curve per method: best methods reach the top left; x is
+    logarithmic where the values span a decade or more, else linear; `label` (the dataset) heads the title; the
+    legend beside the axes, never over a curve; `colours`: the campaign's (method_colours), else these methods'."""
+    fig, ax = plt.subplots(figsize=(7.4, 4.2), layout="constrained")
+    methods = sorted(df.method.unique())
+    colors = {**method_colours(methods), **(colours or {})}
+    log = use_log_scale(df[metric].to_numpy(float))
+    for m in methods:
+        g = df[df.method == m]
+        if bold_all and "direction" in g:
+            for direction, style in (("forward", ":"), ("backward", "--")):
+                v = _sorted(g.loc[g.direction == direction, metric], log)
+                if len(v):
+                    ax.step(v, np.arange(1, len(v) + 1), where="post", ls=style, lw=1, color=colors[m])
+        v = _sorted(g[metric], log)
+        if len(v):
+            ax.step(v, np.arange(1, len(v) + 1), where="post", lw=2.2 if bold_all else 1.6, color=colors[m], label=m)
+    if log:
+        v = df[metric].to_numpy(float)
+        v = v[np.isfinite(v) & (v > 0)]
+        ax.set_xscale("log")
+        readable_log_ticks(ax.xaxis, v.min(), v.max())
+    ax.set_xlabel(LABELS.get(metric, metric) + (" (log scale)" if log else ""))
+    ax.set_ylabel("number of runs with a smaller error")
+    ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts: 1, 2, 3, never 1.5
+    ax.set_title(_labelled(label, f"cumulative {LABELS.get(metric, metric)}"), fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    handles, labels = ax.get_legend_handles_labels()
+    if bold_all:  # the line styles, as drawn
+        for style, lw, what in (("-", 2.2, "both directions"), (":", 1, "forward"), ("--", 1, "backward")):
+            handles.append(Line2D([], [], color="0.3", ls=style, lw=lw))
+            labels.append(what)
+    if handles:
+        fig.legend(handles, labels, fontsize=8, loc="outside right upper", frameon=False)
+    return fig
+
+
+def _sorted(values: pd.Series, log: bool) -> np.ndarray:
+    v = np.sort(values.dropna().to_numpy(float))
+    return v[v > 0] if log else v
+
+
+# the heat-map's cells that hold no value: what they are, how they are drawn
+FAILED, NO_VALUE, NOT_PLANNED = 1, 2, 3
+CELL_KINDS = {
+    FAILED: ("#b2182b", "failed (the method's failure)"),
+    NO_VALUE: ("0.78", "no value (pending, infrastructure failure or not evaluable)"),
+    NOT_PLANNED: ("white", "not planned (no such run)"),
+}
+
+
+def heatmap_cells(
+    df: pd.DataFrame, metric: str
+) -> tuple[list[str], list[tuple[str, str, str]], np.ndarray, np.ndarray]:
+    """Methods (rows), columns (sequence, direction, trial; forward first, trials in order), each cell's value
+    (NaN where none) and kind (0 value, FAILED, NO_VALUE, NOT_PLANNED: no row of the table is that run)."""
+    d = df.assign(
+        sequence=df.sequence.astype(str),
+        direction=df.direction.astype(str),
+        trial=df.trial.map(lambda t: str(int(t)) if isinstance(t, int | float | np.number) and t == t else str(t)),
+    )
+    methods = sorted(d.method.astype(str).unique())
+
+    def order(c: tuple[str, str, str]):
+        seq, direction, trial = c
+        return seq, {"forward": 0, "backward": 1}.get(direction, 2), direction, int(trial) if trial.isdigit() else 0
+
+    cols = sorted(set(zip(d.sequence, d.direction, d.trial, strict=True)), key=order)
+    where = {c: i for i, c in enumerate(cols)}
+    values = np.full((len(methods), len(cols)), np.nan)
+    kinds = np.full((len(methods), len(cols)), NOT_PLANNED)
+    status = d["status"] if "status" in d.columns else pd.Series("done", index=d.index)
+    failure = d["failure"] if "failure" in d.columns else pd.Series(None, index=d.index)
+    for method, seq, direction, trial, value, st, why in zip(
+        d.method.astype(str), d.sequence, d.direction, d.trial, d[metric], status, failure, strict=True
+    ):
+        i, j = methods.index(method), where[(seq, direction, trial)]
+        if st == "done" and np.isfinite(value):
+            values[i, j], kinds[i, j] = value, 0
+        elif st == "failed" and why != INFRA:
+            kinds[i, j] = FAILED
+        else:
+            kinds[i, j] = NO_VALUE
+    return methods, cols, values, kinds
+
+
+def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "") -> Path:
+    """The heat map of `metric` (heatmap_figure), saved in `folder`."""
+    return save(heatmap_figure(df, metric, label), folder, f"heatmap_{metric}")
+
+
+def colour_norm(finite: np.ndarray) -> Normalize:
+    """The heat map's colour scale. Values spanning a decade or more: logarithmic, from the least to the greatest.
+    Otherwise linear from zero (an error's origin) to the greatest, so that colours differ as much as the values'
+    ratio does: 0.0282 and 0.0300 are two close colours, not the scale's two ends (a min-max scale made a 6 %
+    difference look like the whole range). Values below zero: linear from the least."""
+    if not len(finite):
+        return Normalize(0, 1)
+    if use_log_scale(finite):
+        return LogNorm(finite.min(), finite.max())
+    low = min(0.0, float(finite.min()))
+    return Normalize(low, max(float(finite.max()), low + 1e-12))
+
+
+def heatmap_figure(df: pd.DataFrame, metric: str = "e_align", label: str = "") -> plt.Figure:
+    """Colour-coded error per method (rows) and run (columns: sequence at the top, direction and trial below);
+    failed runs, runs without a value and runs never planned (a method with fewer trials or directions) each drawn
+    apart and named in the legend; the colour scale as colour_norm says."""
+    methods, cols, values, kinds = heatmap_cells(df, metric)
+    col_pt = 9.0 if len(cols) <= 130 else max(1.0, 1100 / len(cols))  # room for one label per column when few
+    width = min(18.0, max(5.5, 2.8 + len(cols) * col_pt / 72))
+    fig, ax = plt.subplots(figsize=(width, 2.6 + 0.32 * len(methods)), layout="constrained")
+    finite = values[np.isfinite(values)]
+    norm = colour_norm(finite)
+    log = isinstance(norm, LogNorm)
+    im = ax.imshow(np.ma.masked_invalid(values), aspect="auto", cmap="viridis", norm=norm, interpolation="nearest")
+    colours = [CELL_KINDS[k][0] for k in (FAILED, NO_VALUE, NOT_PLANNED)]
+    empty = np.ma.masked_where(kinds == 0, kinds)
+    ax.imshow(empty, aspect="auto", cmap=ListedColormap(colours), vmin=0.5, vmax=3.5, interpolation="nearest")
+    for i in range(len(methods)):  # not planned: hatched, one rectangle per stretch of such cells
+        j = 0
+        while j < len(cols):
+            if kinds[i, j] == NOT_PLANNED:
+                k = j
+                while k < len(cols) and kinds[i, k] == NOT_PLANNED:
+                    k += 1
+                ax.add_patch(Rectangle((j - 0.5, i - 0.5), k - j, 1, fill=False, hatch="///", ec="0.6", lw=0))
+                j = k
+            else:
+                j += 1
+    ax.set_yticks(range(len(methods)), methods)
+    _heatmap_columns(ax, cols, col_pt)
+    cbar = fig.colorbar(im, ax=ax, label=LABELS.get(metric, metric) + (" (log scale)" if log else ""))
+    if log:
+        readable_log_ticks(cbar.ax.yaxis, finite.min(), finite.max())
+    handles = [Patch(fc=CELL_KINDS[k][0], ec="0.5", label=CELL_KINDS[k][1]) for k in (FAILED, NO_VALUE)]
+    handles.append(Patch(fc="white", ec="0.6", hatch="///", label=CELL_KINDS[NOT_PLANNED][1]))
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
+    ax.set_title(_labelled(label, f"{LABELS.get(metric, metric)} of each run"), fontsize=9)
+    return fig
+
+
+def _heatmap_columns(ax, cols: list[tuple[str, str, str]], col_pt: float) -> None:
+    """Column labels: each run's direction and trial below (f0, b2; where they fit, else each direction's block),
+    each sequence at the top, lines between sequences and between directions."""
+    seqs = [c[0] for c in cols]
+    starts = [i for i, s in enumerate(seqs) if i == 0 or s != seqs[i - 1]]
+    blocks = [i for i, c in enumerate(cols) if i == 0 or c[:2] != cols[i - 1][:2]]
+    for i in blocks[1:]:
+        ax.axvline(i - 0.5, color="white", lw=2.0 if i in starts else 0.8)
+    if col_pt >= 7:
+        ax.set_xticks(range(len(cols)), [f"{c[1][:1]}{c[2]}" for c in cols], rotation=90, fontsize=6)
+        what = "each column one run: direction (f forward, b backward) and trial"
+    else:
+        ends = [*blocks[1:], len(cols)]
+        wide = [(a, b) for a, b in zip(blocks, ends, strict=True) if (b - a) * col_pt >= 8]
+        short = {"forward": "fw", "backward": "bw"}
+        names = [short.get(cols[a][1], cols[a][1]) for a, _ in wide]
+        ax.set_xticks([(a + b - 1) / 2 for a, b in wide], names, rotation=90, fontsize=6)
+        what = "runs by direction (fw forward, bw backward), trials in order"
+    ax.set_xlabel(what + "; sequences at the top", fontsize=7)
+    ends = [*starts[1:], len(cols)]
+    step = max(1, math.ceil(8 / max(col_pt * min(b - a for a, b in zip(starts, ends, strict=True)), 1e-9)))
+    top = ax.secondary_xaxis("top")
+    shown = starts[::step]
+    top.set_xticks([(a + ends[starts.index(a)] - 1) / 2 for a in shown], [seqs[a] for a in shown], rotation=90)
+    top.tick_params(labelsize=6, length=0)
+
+
+def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "", adjust: str = "holm", alpha: float = 0.05):
+    """Box plots of a metric per method (outliers removed; best median at the top), each method's letter group in a
+    column inside the axes at the right, beside its box (methods sharing a letter do not differ); the title holds
+    Kruskal-Wallis' chi-square, df and p."""
+    s = st.metrics[metric]
+    methods = sorted(s.medians, key=lambda m: s.medians[m])
+    data = [st.kept.loc[st.kept.method == m, metric].to_numpy(float) for m in methods]
+    fig, ax = plt.subplots(figsize=(6.4, 1.7 + 0.42 * len(methods)), layout="constrained")
+    positions = list(range(len(methods), 0, -1))
+    parts = ax.boxplot(data, positions=positions, showfliers=False, widths=0.55, **HORIZONTAL)
+    ends = np.concatenate([w.get_xdata() for w in parts["whiskers"]] or [np.zeros(1)])
+    lo, hi = float(np.nanmin(ends)), float(np.nanmax(ends))
+    span = hi - lo or abs(hi) or 1.0
+    ax.set_xlim(lo - 0.05 * span, hi + 0.16 * span + 0.02 * span * max(len(v) for v in s.letters.values() or [""]))
+
+    def tick(m: str, values: np.ndarray) -> str:
+        cov = st.coverage.get(m)
+        return f"{m} (n={len(values)}" + (f", coverage {100 * cov:.0f} %)" if cov is not None and cov == cov else ")")
+
+    ax.set_yticks(positions, [tick(m, v) for m, v in zip(methods, data, strict=True)])
+    for pos, m in zip(positions, methods, strict=True):
+        ax.annotate(
+            s.letters.get(m, ""),
+            xy=(1, pos),
+            xycoords=("axes fraction", "data"),
+            xytext=(-5, 0),
+            textcoords="offset points",
+            ha="right",
+            va="center",
+            fontsize=10,
+            fontweight="bold",
+        )
+    ax.set_xlabel(LABELS.get(metric, metric))
+    ax.grid(True, axis="x", alpha=0.3)
+    test = f"Kruskal-Wallis chi2 = {s.kruskal_chi2:.4g}, df = {s.kruskal_df}, p = {s.kruskal_p:.3g}"
+    groups = f"letters (right): Wilcoxon rank-sum, {adjust}, alpha {alpha:g}"
+    ax.set_title(_labelled(label, LABELS.get(metric, metric)) + f"\n{test}; {groups}", fontsize=8)
+    return save(fig, folder, f"box_{metric}")
+
+
+def trajectories(paths: SequencePaths, folder: Path, label: str = "") -> Path:
+    """Top view of each method's best, median and worst run (by the paths' metric) over the ground truth, one panel
+    per method: the ground truth's two most spread coordinates, equal aspect, in the ground truth's units; the
+    start and the end of the ground truth marked; one legend for what the panels draw."""
+    methods = list(dict.fromkeys(r.method for r in paths.runs))
+    ncols = min(3, len(methods))
+    nrows = math.ceil(len(methods) / ncols)
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(4.0 * ncols + 0.6, 3.9 * nrows + 1.0), squeeze=False, layout="constrained"
+    )
+    a, b = paths.plane()
+    names = "xyz"
+    for ax in axes.flat[len(methods) :]:
+        ax.set_visible(False)
+    for ax, method in zip(axes.flat, methods, strict=False):
+        if paths.full is not None:
+            ax.plot(paths.full[:, a], paths.full[:, b], "-", color="0.86", lw=5, label="ground truth, whole path")
+        ax.plot(paths.gt[:, a], paths.gt[:, b], "-", color="0.55", lw=3, label=paths.gt_label())
+        for run in paths.runs:
+            if run.method == method:
+                color, style, lw = PICK_STYLES[run.which]
+                ax.plot(run.positions[:, a], run.positions[:, b], style, color=color, lw=lw, label=f"{run.which} run")
+        start, end = paths.ends()  # the start drawn over the end: a loop's two markers both show
+        ax.plot(*end[[a, b]], marker="s", mfc="white", mec="black", ms=10, ls="none", label="end (ground truth)")
+        ax.plot(*start[[a, b]], marker="^", color="black", ms=6, ls="none", label="start (ground truth)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(f"{names[a]} ({paths.units})")
+        ax.set_ylabel(f"{names[b]} ({paths.units})")
+        ax.set_title(method, fontsize=9)
+        ax.grid(True, alpha=0.25)
+    handles: dict[str, object] = {}
+    for ax in axes.flat[: len(methods)]:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            handles.setdefault(lab, h)
+    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=min(4, len(handles)), fontsize=8)
+    title = f"{paths.sequence}: best, median and worst run of each method by {paths.metric}, {paths.aligned_by()}"
+    fig.suptitle(_labelled(label, title), fontsize=9)
+    return save(fig, folder, f"trajectories_{paths.sequence}")

@@ -1,0 +1,120 @@
+"""The paths of a sequence's runs over its ground truth, aligned as their metric aligns them: each method's best,
+median and worst evaluated run, for the report's static trajectory figures and its interactive views."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from slamrun.errors import SlamRunError
+
+
+@dataclass(frozen=True)
+class RunPath:
+    method: str
+    which: str  # best, median or worst (by the metric)
+    value: float  # the run's value of the metric
+    trial: str
+    direction: str
+    positions: np.ndarray  # (n, 3), aligned to the ground truth
+
+
+@dataclass(frozen=True)
+class SequencePaths:
+    sequence: str
+    metric: str  # ate_rmse (a Sim(3) over every pose) or e_align (the start segment's Sim(3))
+    units: str  # the ground truth's: m, or "ground-truth units" (TUM-Mono: arbitrary scale)
+    layout: str  # the sequence's dataset layout (kitti: camera frame, y down)
+    gt: np.ndarray  # (n, 3); NaN rows where the ground truth has no pose (TUM-Mono between its segments)
+    full: np.ndarray | None  # the whole path where the sequence has one (groundtruth_full.txt)
+    runs: list[RunPath]
+
+    def plane(self) -> tuple[int, int]:
+        """The two coordinates in which the ground truth spreads most, in axis order: the top view's axes."""
+        pts = self.gt[np.isfinite(self.gt).all(axis=1)]
+        if self.full is not None:
+            pts = np.vstack([pts, self.full])
+        spread = np.ptp(pts, axis=0) if len(pts) else np.ones(3)
+        a, b = sorted(np.argsort(-spread)[:2])
+        return int(a), int(b)
+
+    def up(self) -> tuple[int, int]:
+        """The vertical coordinate (the one the top view leaves out) and its sign: KITTI's camera frame has y down."""
+        third = ({0, 1, 2} - set(self.plane())).pop()
+        return third, -1 if self.layout == "kitti" else 1
+
+    def ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """The ground truth's first and last pose with a position."""
+        pts = self.gt[np.isfinite(self.gt).all(axis=1)]
+        return pts[0], pts[-1]
+
+    def gt_label(self) -> str:
+        finite = np.isfinite(self.gt).all(axis=1)
+        return "ground truth" if finite.all() else "ground truth (start and end segments)"
+
+    def aligned_by(self) -> str:
+        return (
+            "aligned by a Sim(3) over all poses (ATE)"
+            if self.metric != "e_align"
+            else "aligned by the start segment's Sim(3)"
+        )
+
+
+def sequence_paths(df: pd.DataFrame, sequence: str, metric: str) -> SequencePaths | None:
+    """The best, median and worst evaluated run by `metric` of each method on `sequence`, read from their run
+    folders and aligned to the ground truth; None where none could be read (run folders moved, no ground truth)."""
+    from slamrun.core.trajectory import read_tum
+    from slamrun.datasets.layouts import open_sequence
+
+    ok = df[(df.sequence.astype(str) == sequence)].dropna(subset=[metric])
+    if "status" in ok.columns:
+        ok = ok[ok.status == "done"]
+    gt, full, layout, runs = None, None, None, []
+    for method, g in ok.groupby("method", sort=True):
+        g = g.sort_values(metric)
+        picks = {"best": g.iloc[0], "median": g.iloc[(len(g) - 1) // 2], "worst": g.iloc[-1]}
+        drawn = set()
+        for which, row in picks.items():
+            if not isinstance(row.run_dir, str) or not row.run_dir or row.run_dir in drawn:
+                continue  # no run folder (a table from elsewhere), or a run already drawn (one or two runs)
+            drawn.add(row.run_dir)
+            run_dir = Path(row.run_dir)
+            try:
+                if gt is None:
+                    folder = Path(json.loads((run_dir / "run.json").read_text())["sequence_dir"])
+                    seq = open_sequence(folder)
+                    gt, layout = seq.groundtruth(), seq.layout
+                    full_path = folder / "groundtruth_full.txt"
+                    full = read_tum(full_path).positions if full_path.is_file() else None
+                traj = read_tum(run_dir / "trajectory.txt")
+            except (OSError, KeyError, ValueError, TypeError, SlamRunError):
+                continue
+            positions = aligned(traj, gt, metric)
+            if positions is not None:
+                trial = str(row.trial) if "trial" in row.index else ""
+                direction = str(row.direction) if "direction" in row.index else ""
+                runs.append(RunPath(str(method), which, float(row[metric]), trial, direction, positions))
+    if gt is None or not runs:
+        return None
+    units = "ground-truth units" if layout == "tum-mono" else "m"
+    return SequencePaths(sequence, metric, units, layout, gt.positions, full, runs)
+
+
+def aligned(traj, gt, metric: str) -> np.ndarray | None:
+    """A run's positions in the ground truth's frame: a Sim(3) over every associated pose (ATE), or over the start
+    segment's (e_align); None under three associated poses."""
+    from slamrun.core.alignment import align_sim3
+    from slamrun.core.evaluation import associate
+
+    valid = np.isfinite(gt.positions).all(axis=1)
+    match = associate(gt.timestamps, traj.timestamps)
+    use = (match >= 0) & valid[np.maximum(match, 0)]
+    if metric == "e_align":
+        use &= match < len(gt) // 2
+    if use.sum() < 3:
+        return None
+    return align_sim3(traj.positions[use], gt.positions[match[use]]).apply(traj.positions)

@@ -1,0 +1,461 @@
+"""The report of a campaign: statistics, tables (CSV, Markdown, LaTeX), figures (PNG, SVG) and interactive
+trajectory views, gathered in report/index.html; within each dataset (report/datasets/<name>/ when a campaign has
+several). The page opens with the provenance of the results and links every file it shows; it works offline (its
+one script library, plotly.js, is written beside it)."""
+
+from __future__ import annotations
+
+import fcntl
+import re
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from slamrun.analysis import figures, interactive, page, tables
+from slamrun.analysis.colours import method_colours
+from slamrun.analysis.load import NO_DATASET, by_dataset, evaluated, load_results, main_metric, metrics_for
+from slamrun.analysis.paths import sequence_paths
+from slamrun.analysis.provenance import provenance
+from slamrun.analysis.stats import study_statistics
+from slamrun.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
+from slamrun.core import jsonio
+from slamrun.engine.folders import REPORT, claim_output_folder
+from slamrun.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS, UNDER_MIN_COVERAGE
+
+RUNS_COLUMNS = {
+    "runs": "runs",
+    "done": "done",
+    "failed": "failed (method)",
+    "infra": "infra",
+    "pending": "pending",
+    "success_pct": "success %",
+    "failure_pct": "failure %",
+    "evaluated": "evaluated",
+    "not_evaluable": "not evaluable",
+}
+RUNS_CAPTION = (
+    "Counts of runs per method; success and failure rates over the method's results (infrastructure failures and "
+    "unfinished runs left out); then each kind of the method's failures."
+)
+
+
+def runs_table(df: pd.DataFrame) -> pd.DataFrame:
+    """The report's runs-and-failures table: the per-method summary's counts and rates (rates over the
+    method's results: infrastructure failures and unfinished runs are left out), and each failure kind."""
+    s = method_summary(df)
+    if s.empty:
+        return s
+    out = s[["method", *RUNS_COLUMNS, *METHOD_FAILURES]].rename(columns=RUNS_COLUMNS)
+    return out.round({"success %": 1, "failure %": 1})
+
+
+@dataclass
+class Section:
+    """A part of the page: its heading, its content (HTML) and the parts under it."""
+
+    title: str
+    html: str = ""
+    parts: list[Section] = field(default_factory=list)
+
+
+def write_report(
+    results: Path, level: float = 0.999, adjust: str = "holm", alpha: float = 0.05, trajectory_sequences: int = 2
+) -> Path:
+    """report/index.html with its tables, figures and views. Every statistic, table and figure is of one dataset: a
+    campaign of several datasets gets one section (and folder report/datasets/<name>/) per dataset, after the views
+    that are sound to pool (counts, success rates, ranks within sequences), labelled as pooled."""
+    results = Path(results)
+    df = load_results(results)  # first: results that cannot be read leave no report folder behind
+    out = results / "report"
+    claim_output_folder(out, REPORT)  # its marker is also the lock below
+    with one_at_a_time(out / REPORT.marker):
+        return _write_report(df, results, out, level, adjust, alpha, trajectory_sequences)
+
+
+@contextmanager
+def one_at_a_time(marker: Path) -> Iterator[None]:
+    """An exclusive lock on the report folder's marker while a report is written: two reports of one campaign at
+    once (a user's and the campaign's end) are written one after the other, never one clearing the other's files."""
+    with open(marker, "a") as fh:  # "a": the marker's content stays
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        yield
+
+
+def _write_report(
+    df: pd.DataFrame, results: Path, out: Path, level: float, adjust: str, alpha: float, trajectory_sequences: int
+) -> Path:
+    clear_previous(out)
+    out.mkdir(parents=True, exist_ok=True)
+    groups = by_dataset(df)
+    options = {"level": level, "adjust": adjust, "alpha": alpha, "trajectory_sequences": trajectory_sequences}
+    options["colours"] = method_colours(df.method) if "method" in df.columns else None
+    prov = provenance(results, df)
+    sections = [Section("Provenance", page.provenance_html(prov, out, results))]
+    if len(groups) == 1:
+        name, part = next(iter(groups.items()))
+        label = name if name != NO_DATASET else ""
+        body = dataset_report(part, out, out, label, **options)
+        intro = Section(f"Dataset {name}" if label else "Results", "", body)
+        sections.append(intro)
+    else:
+        sections.append(Section("All datasets (pooled)", "", pooled_report(df, out)))
+        for name, folder in _folders(groups).items():
+            body = dataset_report(groups[name], out / "datasets" / folder, out, name, **options)
+            sections.append(Section(f"Dataset {name}", "", body))
+    views = any(page.has_view(s.html) for s in _walk(sections))
+    if views:
+        interactive.write_library(out)
+    index = out / "index.html"
+    index.write_text(page.document(f"Campaign {prov.campaign}", sections, views))
+    return index
+
+
+GENERATED = {"tables": (".csv", ".md", ".tex"), "figures": (".png", ".svg"), "views": (".js",)}
+
+
+def clear_previous(out: Path) -> None:
+    """Remove what an earlier report wrote into `out` (its tables, figures, views, statistics and plotly.js, also
+    those of datasets no longer in the results), so that no file of another content or name stays beside the new
+    ones; files of other kinds are left alone."""
+    levels = [out, *((out / "datasets").iterdir() if (out / "datasets").is_dir() else [])]
+    for level in levels:
+        if not level.is_dir() or level.is_symlink():
+            continue
+        for sub, suffixes in GENERATED.items():
+            folder = level / sub
+            if folder.is_dir() and not folder.is_symlink():
+                for f in folder.iterdir():
+                    if f.suffix in suffixes and (f.is_symlink() or f.is_file()):
+                        f.unlink()
+                _remove_if_empty(folder)
+        for f in level.glob("statistics*.json"):
+            if f.is_symlink() or f.is_file():
+                f.unlink()
+        if level != out:
+            _remove_if_empty(level)
+    library = out / interactive.PLOTLY_JS
+    if library.is_symlink() or library.is_file():
+        library.unlink()  # written again where the new report has a view
+
+
+def _remove_if_empty(folder: Path) -> None:
+    if not any(folder.iterdir()):
+        folder.rmdir()
+
+
+def _walk(sections: list[Section]):
+    for s in sections:
+        yield s
+        yield from _walk(s.parts)
+
+
+def pooled_report(df: pd.DataFrame, out: Path) -> list[Section]:
+    """The sections of a campaign of several datasets that pool them, where pooling is sound: the runs and
+    failures per method (counts and rates) and the mean rank of each method within the sequences."""
+    tab_dir = out / "tables"
+    fails = runs_table(df)
+    title = "Runs and failures per method, all datasets (pooled)"
+    sections = [Section(title, page.table(fails, tab_dir, out, "failures", title, RUNS_CAPTION))]
+    ranks = pooled_summary(df)[["method", "mean_rank", "sequences_ranked"]]
+    ranks = ranks.rename(columns={"mean_rank": "mean rank", "sequences_ranked": "sequences"}).round({"mean rank": 2})
+    by = ", ".join(f"{d}: {m}" for d, m in ranked_by(df).items())
+    title = "Mean rank within sequences, all datasets (pooled)"
+    note = (
+        f"Each sequence ranks its methods by their median ({by}; 1 best, ties share the mean rank; a method with "
+        "results but no evaluated run shares the last rank); a method's mean rank is over the sequences it ran. "
+        "Every other table and figure of this report is within one dataset: values in metres of different datasets "
+        "are not one population."
+    )
+    html = page.table(ranks, tab_dir, out, "pooled_ranks", f"{title}; ranked by {by}", note)
+    seq = sequence_ranks(df)
+    html += page.table(seq, tab_dir, out, "sequence_ranks", "Each method's rank within each sequence", "", show=False)
+    sections.append(Section(title, html))
+    return sections
+
+
+def trajectory_title(metrics: list[str]) -> str:
+    """What a table of ATE, RPE and KITTI's figures holds, by the metrics it has: "ATE and RPE", ..."""
+    names = [
+        name
+        for name, prefix in (("ATE", "ate_"), ("RPE", "rpe_"), ("KITTI's errors", "kitti_"))
+        if any(m.startswith(prefix) for m in metrics)
+    ]
+    if len(names) < 2:
+        return "".join(names) or "Trajectory metrics"
+    return ", ".join(names[:-1]) + " and " + names[-1]
+
+
+def dataset_report(
+    df: pd.DataFrame,
+    out: Path,
+    root: Path,
+    dataset: str = "",
+    level: float = 0.999,
+    adjust: str = "holm",
+    alpha: float = 0.05,
+    trajectory_sequences: int = 2,
+    colours: dict[str, str] | None = None,
+) -> list[Section]:
+    """The study's report of one dataset's runs into `out` (statistics*.json, tables/, figures/, views/): its
+    sections, their links relative to `root` (the folder of index.html). `dataset` labels captions and titles."""
+    fig_dir, tab_dir = out / "figures", out / "tables"
+    where = f" ({dataset})" if dataset else ""
+    metrics = metrics_for(df)
+    ok = evaluated(df, metrics)
+    sections = []
+
+    fails = runs_table(df)
+    title = "Runs and failures per method"
+    html_fails = page.table(fails, tab_dir, root, "failures", title + where, RUNS_CAPTION)
+    notes = [coverage_note(df), *missing_metric_notes(df)]
+    sections.append(Section(title, html_fails + "".join(f"<p>{page.esc(n)}</p>" for n in notes)))
+
+    st = None
+    if ok.method.nunique() >= 2 and len(ok) > len(metrics) + 1:
+        st = study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha)
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "statistics.json").write_text(jsonio.dumps(st.to_json(), indent=1))
+        sections.append(_statistics(st, ok, metrics, out, root, where, level, adjust, alpha))
+    else:
+        sections.append(
+            Section("Statistics", "<p>Fewer than two methods with evaluated runs: no group comparison.</p>")
+        )
+
+    res = tables.resources_table(df[df.status.isin(["done", "failed"])]) if "status" in df else pd.DataFrame()
+    if not res.empty:
+        title = "Resources: means per run (Table 2 layout)"
+        caption = "Means over each method's finished runs (done or failed) of the resources the runner measured."
+        sections.append(Section(title, page.table(res, tab_dir, root, "table2_resources", title + where, caption)))
+    # the campaign's accuracy figure per run: TUM-Mono's e_align, else ATE (datasets without TUM-Mono's metrics)
+    main = main_metric(df)
+    if main is not None and "direction" in df.columns:
+        sections += _per_run_tables(df, main, tab_dir, root, where)
+
+    figs = []
+    if not ok.empty:
+        for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "ate_rmse", "rpe_t_rmse"):
+            if m in metrics:
+                figs.append(figures.cumulative(ok, m, fig_dir, label=dataset, colours=colours))
+        if main is not None:
+            figs.append(
+                figures.cumulative(
+                    ok, main, fig_dir, f"cumulative_{main}_motion_bias", bold_all=True, label=dataset, colours=colours
+                )
+            )
+            figs.append(figures.heatmap(df, fig_dir, main, label=dataset))
+    if st is not None:
+        for m in metrics:
+            figs.append(figures.boxplot(st, m, fig_dir, label=dataset, adjust=adjust, alpha=alpha))
+    if figs:
+        sections.append(Section("Figures", "".join(page.figure(f, root, _caption(f, dataset)) for f in figs)))
+    traj = _trajectories(df, out, root, trajectory_sequences, dataset)
+    if traj is not None:
+        sections.append(traj)
+    return sections
+
+
+METRIC_NAMES = {"kitti": ("kitti_t_pct", "KITTI's segment errors"), "rpe": ("rpe_t_rmse", "RPE")}
+
+
+def missing_metric_notes(df: pd.DataFrame) -> list[str]:
+    """For each metric the dataset asked for that no run has a value of (its runs' messages say why), one line
+    with the reason: a column a report leaves out is never left out without a word."""
+    if "message" not in df.columns or "status" not in df.columns:
+        return []
+    done = df[df.status == "done"]
+    out = []
+    for name, (column, title) in METRIC_NAMES.items():
+        if column in df.columns and df[column].notna().any():
+            continue
+        reasons = done["message"].dropna().astype(str)
+        reasons = reasons[reasons.str.contains(f"{name}: ", regex=False)]
+        if reasons.empty:
+            continue
+        why = reasons.iloc[0].split(f"{name}: ", 1)[1].split("; ")[0]
+        out.append(f"{title}: no value in this dataset's {len(done)} done run(s), so no column or figure of it: {why}.")
+    return out
+
+
+def coverage_note(df: pd.DataFrame) -> str:
+    """What the dataset's coverage threshold did, in one sentence: the runs lost under `min_coverage`, or that there
+    was none (coverage then stands beside every figure)."""
+    messages = df["message"].fillna("").astype(str) if "message" in df.columns else pd.Series(dtype=str)
+    under = messages[messages.str.contains(UNDER_MIN_COVERAGE, regex=False)]
+    if under.empty:
+        return (
+            "No coverage threshold (min_coverage) excluded a run: every done run's figures are tested, and each "
+            "table and box plot gives the methods' median coverage (the share of the sequence's frames with a pose)."
+        )
+    least = sorted({m.rsplit(" ", 1)[-1] for m in under})
+    return (
+        f"{len(under)} run(s) gave poses for fewer than min_coverage {', '.join(least)} of the sequence's frames: "
+        "counted as lost (a tracking failure), their figures left out of the statistics."
+    )
+
+
+def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Section:
+    """The statistics' sections: what was done, the medians with letters, every test with its p-value, the
+    pairwise tests, and the same per direction."""
+    tab_dir = out / "tables"
+    acc = [m for m in ("e_t", "e_r", "e_s_sym", "e_s") if m in metrics][:3]
+    seg = [m for m in ("e_start", "e_end", "e_rmse") if m in metrics]
+    trajectory = [m for m in TRAJECTORY_STATS_METRICS if m in metrics]
+    outliers = st.outlier_note or (
+        f"{st.n_outliers} multivariate outliers removed (squared Mahalanobis distance over {len(metrics)} metrics "
+        f"above {st.cutoff:.4f}, the chi-square {level} quantile)"
+    )
+    counting = f" Of these, {st.counting_note()}." if st.counting_note() else ""
+    note = (
+        f"{len(ok)} evaluated runs{where}; {outliers}.{counting} "
+        f"Letters: pairwise Wilcoxon rank-sum tests, {adjust} adjustment, alpha {alpha}; methods that share a letter "
+        "do not differ significantly."
+    )
+    html = f"<p>{page.esc(note)}</p>" + page.links({"statistics (JSON)": out / "statistics.json"}, root)
+    parts = []
+    what = (
+        "Per method: the runs counted (outliers removed, copies once), their median coverage (share of the "
+        "sequence's frames with a pose), and per metric the median over those runs and its letter groups (LaTeX: "
+        "superscripts; the best median in bold). Last rows: Kruskal-Wallis chi-square, its degrees of freedom and "
+        "p-value."
+    )
+    for chosen, name, title in (
+        (acc, "table3_drift", "Drift: medians with letter groups (Table 3 layout)"),
+        (seg, "table4_segments", "Segment alignment errors: medians with letter groups (Table 4 layout)"),
+        (trajectory, "trajectory_metrics", f"{trajectory_title(trajectory)}: medians with letter groups"),
+    ):
+        if chosen:
+            table = tables.medians_with_letters(st, chosen)
+            html_table = page.table(table, tab_dir, root, name, title + where, what, lower_is_better=tuple(chosen))
+            parts.append(Section(title, html_table))
+    title = "Tests of each metric"
+    caption = (
+        "Kruskal-Wallis rank-sum test across the methods (chi-square, df, p); Levene's test of equal variances "
+        "(median-centred: F, p); Lilliefors' normality test per method (p; none under five runs or without spread)."
+    )
+    parts.append(Section(title, page.table(tables.tests_table(st), tab_dir, root, "tests", title + where, caption)))
+    title = "Pairwise Wilcoxon rank-sum tests"
+    caption = f"Each pair of methods: p adjusted ({adjust}) and unadjusted; different when the adjusted p < {alpha}."
+    pairs = tables.pairwise_table(st, adjust, alpha)
+    parts.append(Section(title, page.table(pairs, tab_dir, root, "pairwise", title + where, caption)))
+    # the same procedure per direction: motion bias can change the ranking
+    chosen, name = (acc, "table3_drift") if acc else (trajectory, "trajectory_metrics")
+    what_dir = "Drift" if acc else trajectory_title(trajectory)
+    skipped = []
+    for direction in ("forward", "backward"):
+        part = ok[ok.direction == direction] if "direction" in ok.columns else ok.iloc[0:0]
+        if not chosen or part.method.nunique() < 2 or len(part) <= len(metrics) + 1:
+            why = (
+                "fewer than two methods with evaluated runs"
+                if part.method.nunique() < 2
+                else f"{len(part)} evaluated runs, the outlier test over {len(metrics)} metrics needs more"
+            )
+            skipped.append(f"{direction} runs only: {why}" if chosen else f"{direction} runs only: no metric")
+            continue
+        sd = study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha)
+        (out / f"statistics_{direction}.json").write_text(jsonio.dumps(sd.to_json(), indent=1))
+        td = tables.medians_with_letters(sd, chosen)
+        title = f"{what_dir}: medians with letter groups, {direction} runs only"
+        html_dir = page.table(
+            td, tab_dir, root, f"{name}_{direction}", title + where, what, lower_is_better=tuple(chosen)
+        )
+        html_dir += page.links({f"statistics, {direction} runs (JSON)": out / f"statistics_{direction}.json"}, root)
+        parts.append(Section(title, html_dir))
+    if skipped:
+        text = "".join(f"<li>{page.esc(s)}</li>" for s in skipped)
+        parts.append(Section("Statistics per direction left out", f"<ul>{text}</ul>"))
+    return Section("Statistics", html, parts)
+
+
+def _per_run_tables(df: pd.DataFrame, main: str, tab_dir: Path, root: Path, where: str) -> list[Section]:
+    """Motion bias, reproduction and per-sequence tables of the accuracy figure `main`."""
+    label = LABELS.get(main, main)
+    out = []
+    mb = tables.motion_bias_table(df, main)
+    title = f"Motion bias: forward vs backward {main}"
+    caption = (
+        f"Per method, the number of evaluated runs per direction, the median {label} of each direction, and the "
+        "p-value of a Wilcoxon rank-sum test between the directions."
+    )
+    out.append(
+        Section(title, page.table(mb, tab_dir, root, "motion_bias", f"Forward vs backward {main}{where}", caption))
+    )
+    repro = tables.reproduction_table(df[df.status == "done"] if "status" in df else df, main)
+    if not repro.empty:
+        title = "Reproduction: new runs vs published"
+        caption = (
+            f"Imported runs (SOURCE:method) beside the campaign's own runs of that method: the median {label} of "
+            "each, how many runs, and the p-value of a Wilcoxon rank-sum test between them."
+        )
+        full = f"Reproduction: new runs vs published, {main}{where}"
+        out.append(Section(title, page.table(repro, tab_dir, root, "reproduction", full, caption)))
+    seq = tables.per_sequence_table(df, main)
+    if not seq.empty:
+        title = f"Median {main} per sequence"
+        caption = f"The median {label} of each method's evaluated runs on each sequence (rows: methods)."
+        full = f"Median {main} per method and sequence{where}"
+        out.append(Section(title, page.table(seq, tab_dir, root, f"{main}_per_sequence", full, caption)))
+    return out
+
+
+def _caption(f: Path, dataset: str) -> str:
+    stem = f.stem
+    kind, _, rest = stem.partition("_")
+    what = {
+        "cumulative": "cumulative distribution",
+        "box": "box plots with letter groups",
+        "heatmap": "every run's value (heat map)",
+    }.get(kind, kind)
+    metric = rest.removesuffix("_motion_bias")
+    text = f"{what} of {LABELS.get(metric, metric)}"
+    if stem.endswith("_motion_bias"):
+        text += ", forward and backward runs apart"
+    return (f"{dataset}: " if dataset else "") + text
+
+
+def _trajectories(df: pd.DataFrame, out: Path, root: Path, n_static: int, dataset: str) -> Section | None:
+    """Per sequence, an interactive 3D view of each method's best, median and worst run over the ground truth
+    (by ATE where the campaign has it, else e_align); a static top view (PNG, SVG) of the first `n_static`."""
+    metric = next((m for m in ("ate_rmse", "e_align") if m in df.columns and df[m].notna().any()), None)
+    if "run_dir" not in df.columns or metric is None:
+        return None
+    parts = []
+    files = _folders({str(s): None for s in sorted(df.sequence.dropna().astype(str).unique())})
+    opened = False
+    for sequence, file in files.items():
+        paths = sequence_paths(df, sequence, metric)
+        if paths is None:
+            continue
+        html = ""
+        if len(parts) < n_static:
+            png = figures.trajectories(paths, out / "figures", label=dataset)
+            html += page.figure(png, root, (f"{dataset}: " if dataset else "") + f"{sequence}, top view")
+        element = "view-" + re.sub(r"[^A-Za-z0-9_-]", "_", f"{out.relative_to(root).as_posix()}-{file}")
+        script = interactive.write_view(
+            paths, out / "views" / f"{file}.js", element, f"{sequence}: {paths.aligned_by()}"
+        )
+        html += page.view(script, root, element, sequence, paths, open_=not opened)
+        opened = True
+        parts.append(Section(sequence, html))
+    if not parts:
+        return None
+    note = (
+        f"Each method's best, median and worst evaluated run by {metric} over the ground truth, aligned as the "
+        "metric aligns them. The views are interactive: drag to rotate, scroll to zoom, click a legend entry to "
+        "hide or show a run (double-click to show it alone)."
+    )
+    return Section("Trajectories", f"<p>{page.esc(note)}</p>", parts)
+
+
+def _folders(groups: dict) -> dict[str, str]:
+    """A folder (or file) name per name: its letters, digits, '.', '-' and '_' (others '_'), unique."""
+    out: dict[str, str] = {}
+    for name in groups:
+        base = re.sub(r"[^A-Za-z0-9._-]", "_", name).strip(".") or "dataset"
+        folder, k = base, 2
+        while folder in out.values():
+            folder, k = f"{base}_{k}", k + 1
+        out[name] = folder
+    return out

@@ -1,0 +1,3 @@
+from slamrun.cli import main
+
+raise SystemExit(main())

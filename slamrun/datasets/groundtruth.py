@@ -1,0 +1,221 @@
+"""The ground truth `slamrun evaluate` compares estimates with, and its defaults.
+
+A sequence folder of any layout gives the campaign's ground truth: the layout's own reader (`open_sequence`), in
+the camera's frame at the frames' times (EuRoC's body poses carried to the camera with T_BS and interpolated), with
+the layout's default metrics. A ground-truth file is read as it is (TUM-Mono's groundtruthSync.txt, TUM, an
+EuRoC/ASL state csv, KITTI poses with their times); where that file is in another frame than the camera's, a note
+says so and names the folder form.
+"""
+
+from __future__ import annotations
+
+import io
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from slamrun.core.batch_eval import MAX_FILE_BYTES, file_problem
+from slamrun.core.inputs import read_text_bounded
+from slamrun.core.metrics import RpeInterval
+from slamrun.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_times, read_tum
+from slamrun.datasets.euroc import EUROC_GT, asl_file_note, asl_folder
+from slamrun.datasets.layouts import (
+    BUILT_IN,
+    DEFAULT_METRICS,
+    DEFAULT_RPE,
+    GROUNDTRUTH_FILES,
+    detect,
+    names,
+    open_sequence,
+)
+from slamrun.datasets.tum_vi import TUMVI_GT
+from slamrun.errors import DatasetError
+
+FILE_FORMATS = ("tum-mono", "tum", "euroc", "kitti")
+FORMAT_NAMES = {
+    "tum-mono": "a TUM-Mono groundtruthSync.txt ('timestamp tx ty tz qx qy qz qw' rows, NaN rows kept)",
+    "tum": "a TUM trajectory ('timestamp tx ty tz qx qy qz qw' rows)",
+    "euroc": "an EuRoC/ASL state csv (#timestamp [ns], p_RS_R xyz, q_RS wxyz, ...)",
+    "kitti": "KITTI poses (12 numbers a row: the 3x4 pose, one row per frame of --times)",
+}
+# the metrics a ground-truth file is evaluated with when --metric is not given: its dataset's
+FILE_DEFAULT_METRICS = {
+    "tum-mono": ("tum-mono",),
+    "tum": DEFAULT_METRICS["tum-rgbd"],
+    "euroc": DEFAULT_METRICS["euroc"],
+    "kitti": DEFAULT_METRICS["kitti"],
+}
+
+
+@dataclass(frozen=True, eq=False)
+class GroundTruth:
+    """A ground truth and how to evaluate against it: its metrics by default, the frame times of its sequence
+    (a folder's: the rows of KITTI estimates), and what a user should know (said on stderr)."""
+
+    trajectory: Trajectory
+    source: Path
+    layout: str | None  # the sequence's layout; None for a file read as it is
+    default_metrics: tuple[str, ...]
+    frame_times: np.ndarray | None = None
+    notes: tuple[str, ...] = ()
+    default_rpe: RpeInterval = RpeInterval()  # its dataset's RPE interval
+
+    @property
+    def is_folder(self) -> bool:
+        return self.layout is not None
+
+
+def open_groundtruth(
+    path: Path, fmt: str | None = None, metrics: tuple[str, ...] | None = None, times: Path | None = None
+) -> GroundTruth:
+    """The ground truth at `path`: a sequence folder of any layout, or a file of format `fmt` (default: recognised
+    from its first row). `metrics` are the ones asked for (checked against the file's format); `times`, the frame
+    times of KITTI poses. DatasetError naming the file and what was expected."""
+    path = Path(path)
+    if path.is_dir():
+        return sequence_groundtruth(path)
+    if problem := file_problem(path, MAX_FILE_BYTES, "the ground truth (a file or a sequence folder)"):
+        raise DatasetError(problem)
+    fmt = fmt or sniff_format(path, metrics)
+    if metrics and "tum-mono" in metrics and fmt != "tum-mono":
+        raise DatasetError(
+            f"{path}: read as {FORMAT_NAMES[fmt]}, but --metric tum-mono needs {FORMAT_NAMES['tum-mono']}; "
+            f"give the sequence folder (--gt {sequence_folder(path)}) to evaluate as a campaign does, or another "
+            "--metric"
+        )
+    if fmt == "kitti" and times is None:
+        raise DatasetError(f"{path}: KITTI poses carry no timestamps: give the sequence's times.txt with --times")
+    frame_times = read_frame_times(times) if times is not None else None
+    try:
+        traj = _read_file(path, fmt, frame_times)
+    except DatasetError as exc:
+        if (note := layout_note(path)) is None:
+            raise
+        raise DatasetError(f"{exc}. {note}") from None  # a layout's file in no format of evaluate's says so
+    notes = file_notes(path, fmt)
+    if not np.isfinite(traj.positions).all(axis=1).any():
+        raise DatasetError(f"{path}: no finite pose; expected {FORMAT_NAMES[fmt]}")
+    return GroundTruth(traj, path, None, FILE_DEFAULT_METRICS[fmt], frame_times, notes)
+
+
+def sequence_groundtruth(root: Path) -> GroundTruth:
+    """A sequence folder's ground truth as the campaign evaluates with it: its layout's reader, frame and times."""
+    layout = detect(root)
+    if layout is None:
+        raise DatasetError(
+            f"{root}: no sequence of a layout slamrun reads ({', '.join(names())}) in this folder (none of their "
+            "files: mav0/cam0/, image_0/, rgb.txt, associations.txt, image_left/, times.txt, ...); expected a "
+            "sequence folder or a ground-truth file"
+        )
+    seq = open_sequence(root, layout)
+    gt = seq.groundtruth()
+    if gt is None:
+        raise DatasetError(f"{root}: a {layout} sequence without its ground truth ({GROUNDTRUTH_FILES[layout]})")
+    return GroundTruth(gt, root, layout, DEFAULT_METRICS[layout], seq.timestamps, seq.notes, DEFAULT_RPE[layout])
+
+
+def sniff_format(path: Path, metrics: tuple[str, ...] | None) -> str:
+    """A ground-truth file's format from its first row: commas (an ASL csv), 12 numbers (KITTI poses), else TUM
+    (TUM-Mono's groundtruthSync.txt when TUM-Mono's metric is asked for, or no metric)."""
+    first = _first_row(path)
+    if "," in first:
+        return "euroc"
+    if len(first.split()) == 12:
+        return "kitti"
+    return "tum-mono" if not metrics or "tum-mono" in metrics else "tum"
+
+
+def layout_note(path: Path) -> str | None:
+    """A built-in layout's note on one of its ground-truth files (an ASL state csv of EuRoC or TUM-VI, ICL-NUIM's
+    *.gt.freiburg, TartanAir's pose_left.txt, ...), or None. Plug-ins are not loaded for a file (evaluating files
+    never pays for scanning the installed packages)."""
+    for layout in BUILT_IN:
+        if layout.file_note is not None and (note := layout.file_note(path)):
+            return note
+    return None
+
+
+def file_notes(path: Path, fmt: str) -> tuple[str, ...]:
+    """What a ground-truth file given as it is means for the figures, where it is in another frame (or at other
+    times) than a campaign evaluates in: its layout's note, or the note of any ASL state csv."""
+    if (note := layout_note(path)) is not None:
+        return (note,)
+    if fmt == "euroc":
+        return (asl_file_note(path, "the body (IMU) frame", "the camera's extrinsics"),)
+    return ()
+
+
+def sequence_folder(path: Path) -> str:
+    """The sequence folder an ASL csv lies in (SEQ/mav0/NAME/data.csv), or a placeholder."""
+    found = (asl_folder(path, rel) for rel in (EUROC_GT, TUMVI_GT))
+    return next((folder for folder in found if folder is not None), "SEQUENCE_FOLDER")
+
+
+def read_frame_times(path: Path) -> np.ndarray:
+    """Frame times (KITTI's times.txt or TUM-Mono's times.txt) from outside: a regular file within bounds, finite
+    and increasing times."""
+    if problem := file_problem(path, MAX_FILE_BYTES, "frame times (the sequence's times.txt)"):
+        raise DatasetError(problem)
+    times = read_times(path)
+    if not len(times):
+        raise DatasetError(f"{path}: no frame time; expected one time in seconds per line")
+    bad = np.flatnonzero(~np.isfinite(times))
+    if len(bad):
+        raise DatasetError(f"{path}: frame time {bad[0] + 1} is {times[bad[0]]}; expected finite times in seconds")
+    back = np.flatnonzero(np.diff(times) <= 0)
+    if len(back):
+        raise DatasetError(f"{path}: frame time {back[0] + 2} is not after the one before; expected increasing times")
+    return times
+
+
+def _first_row(path: Path) -> str:
+    with open(path, "rb") as f:  # a regular file (checked): its first 64 KiB hold the first row
+        head = f.read(65536).decode("utf-8", errors="replace")
+    return next((ln for ln in head.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
+
+
+def _read_file(path: Path, fmt: str, times: np.ndarray | None) -> Trajectory:
+    if fmt == "tum-mono":
+        return read_groundtruth_sync(path)
+    if fmt == "euroc":
+        return read_euroc_csv(path)
+    if fmt == "kitti":
+        assert times is not None
+        return read_kitti(path, times)
+    return read_tum(path)
+
+
+def read_groundtruth_sync(path: Path) -> Trajectory:
+    """A groundtruthSync.txt from outside, NaN rows kept (they split the benchmark's segments): bounded, each
+    problem named with its line."""
+    text = read_text_bounded(path, MAX_FILE_BYTES, "the ground truth", DatasetError)
+    expected = FORMAT_NAMES["tum-mono"]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # "input contained no data"
+            data = np.loadtxt(io.StringIO(text), comments="#", ndmin=2, dtype=float)
+    except ValueError:
+        data = None
+    if data is None or data.shape[1:] != (8,):
+        raise DatasetError(_first_bad_line(path, text, 8) + f"; expected {expected}")
+    if not len(data):
+        raise DatasetError(f"{path}: no pose row; expected {expected}")
+    if np.any(~np.isfinite(data[:, 0])) or np.any(np.diff(data[:, 0]) <= 0):
+        raise DatasetError(f"{path}: timestamps are not finite and strictly increasing; expected {expected}")
+    return Trajectory(data[:, 0], data[:, 1:4], data[:, 4:8])
+
+
+def _first_bad_line(path: Path, text: str, ncols: int) -> str:
+    for n, line in enumerate(text.splitlines(), start=1):
+        cells = line.split("#", 1)[0].split()
+        if not cells:
+            continue
+        if len(cells) != ncols:
+            return f"{path}:{n}: {len(cells)} values, not {ncols}: {line.strip()[:80]!r}"
+        try:
+            [float(c) for c in cells]
+        except ValueError:
+            return f"{path}:{n}: not a number in {line.strip()[:80]!r}"
+    return f"{path}: no pose row"

@@ -1,0 +1,202 @@
+"""TUM RGB-D sequences (`rgbd_dataset_freiburgN_...`): `rgb.txt` (`timestamp rgb/<timestamp>.png` rows after `#`
+comments), the colour frames in `rgb/`, and `groundtruth.txt` (TUM format, motion capture at 100 Hz). The camera is
+one of the three the benchmark publishes, chosen by `freiburg1`, `freiburg2` or `freiburg3` in the folder's name.
+Ground truth is associated with the frames as TUM's tools do: the nearest pose within 0.02 s. Written synthetically
+with the named camera, colour frames and a 100 Hz ground truth on its own clock; downloaded as the site's .tgz.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from slamrun.core.camera import CameraFile, FovCamera, PinholeCamera, RadTanCamera
+from slamrun.core.metrics import poses_at
+from slamrun.core.trajectory import Trajectory, read_tum
+from slamrun.datasets import frames
+from slamrun.datasets.protocol import Download, Layout, Placed
+from slamrun.datasets.sequence import (
+    IMAGE_SUFFIXES,
+    Sequence,
+    check_regular,
+    finite_groundtruth,
+    folder_sequence,
+    read_text,
+    time_problem,
+)
+from slamrun.errors import DatasetError, TrajectoryFormatError
+
+if TYPE_CHECKING:
+    from slamrun.datasets.synth import Synth
+
+ASSOCIATION_S = 0.02
+WIDTH, HEIGHT = 640, 480
+# The benchmark's published intrinsics (fx fy cx cy) and OpenCV distortion (k1 k2 p1 p2 k3) of the colour camera
+CAMERAS = {
+    "freiburg1": ((517.3, 516.5, 318.6, 255.3), (0.2624, -0.9531, -0.0054, 0.0026, 1.1633)),
+    "freiburg2": ((520.9, 521.0, 325.1, 249.7), (0.2312, -0.7849, -0.0033, -0.0001, 0.9172)),
+    "freiburg3": ((535.4, 539.2, 320.1, 247.6), (0.0, 0.0, 0.0, 0.0, 0.0)),
+}
+
+
+def camera_for(root: Path) -> CameraFile:
+    """The published camera of the sequence, by `freiburgN` in its folder's name."""
+    found = re.search(r"freiburg[123]", root.name)
+    if found is None:
+        raise DatasetError(
+            f"{root}: unknown TUM RGB-D camera; the folder's name must hold freiburg1, freiburg2 or freiburg3 "
+            "(as the benchmark's rgbd_dataset_freiburgN_... folders do) to choose its published calibration"
+        )
+    (fx, fy, cx, cy), k = CAMERAS[found.group(0)]
+    if not any(k):
+        return CameraFile(FovCamera(WIDTH, HEIGHT, fx, fy, cx, cy, 0.0), "none", WIDTH, HEIGHT)
+    return CameraFile(RadTanCamera(PinholeCamera(WIDTH, HEIGHT, fx, fy, cx, cy), *k), "crop", WIDTH, HEIGHT)
+
+
+def open_tum_rgbd(root: str | Path) -> Sequence:
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: sequence folder not found")
+    listing, gt_path = root / "rgb.txt", root / "groundtruth.txt"
+    problems = check_regular([listing, gt_path], {listing, gt_path})
+    if problems:
+        raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
+    camera = None
+    try:
+        camera = camera_for(root)
+    except DatasetError as exc:
+        problems.append(str(exc))
+    names, times = [], None
+    if not listing.is_file():
+        problems.append(f"{listing}: missing; expected 'timestamp rgb/<file>.png' rows")
+    else:
+        names, times = _read_listing(listing, problems)
+    if names:
+        missing = [n for n in names if not ((root / n).exists() or (root / n).is_symlink())]
+        if missing:
+            problems.append(f"{root}: {len(missing)} frame(s) listed in rgb.txt missing (e.g. {missing[0]})")
+        else:
+            frames.check_files(root, names, (WIDTH, HEIGHT), problems, "the TUM RGB-D camera")
+    if problems:
+        raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
+    assert camera is not None and times is not None
+
+    def groundtruth() -> Trajectory:
+        try:
+            gt = finite_groundtruth(read_tum(gt_path), gt_path)
+        except TrajectoryFormatError as exc:
+            raise DatasetError(str(exc)) from None
+        return poses_at(gt, times, ASSOCIATION_S)  # evo's association: a repeated time's rows kept
+
+    return folder_sequence(root, "tum-rgbd", names, times, camera, root, (listing,), gt_path, groundtruth)
+
+
+def _read_listing(path: Path, problems: list[str]) -> tuple[list[str], np.ndarray | None]:
+    names, stamps = [], []
+    for n, line in enumerate(read_text(path).splitlines(), start=1):
+        cells = line.split()
+        if not cells or cells[0].startswith("#"):
+            continue
+        if len(cells) != 2:
+            problems.append(f"{path}:{n}: {len(cells)} values; expected 'timestamp rgb/<file>.png'")
+            return [], None
+        try:
+            stamps.append(float(cells[0]))
+        except ValueError:
+            problems.append(f"{path}:{n}: {cells[0][:60]!r} is not a time in seconds")
+            return [], None
+        if problem := time_problem(path, n, cells[0][:60], stamps[-1]):
+            problems.append(problem)
+            return [], None
+        name = cells[1]
+        if (
+            not name.lower().endswith(IMAGE_SUFFIXES)
+            or ".." in Path(name).parts
+            or Path(name).is_absolute()
+            or not name.isprintable()
+        ):
+            problems.append(f"{path}:{n}: {name[:80]!r} is not an image path inside the sequence folder")
+            return [], None
+        names.append(name)
+    if not names:
+        problems.append(f"{path}: no frame listed")
+        return [], None
+    t = np.array(stamps)
+    bad = np.flatnonzero(np.diff(t) <= 0)
+    if len(bad):
+        problems.append(f"{path}: times not strictly increasing (frame {int(bad[0]) + 2})")
+        return [], None
+    return names, t
+
+
+# ---------------------------------------------------------------------------------------------------- the layout
+
+
+def recognise(root: Path) -> bool:
+    """rgb.txt (and no ICL-NUIM *.gt.freiburg: a TUM-compatible ICL-NUIM sequence given an rgb.txt is ICL-NUIM)."""
+    return (root / "rgb.txt").exists() and not any(root.glob("*.gt.freiburg"))
+
+
+def synth_name_problem(name: str) -> str | None:
+    """A synthetic TUM RGB-D sequence takes the published camera its name names."""
+    if re.search(r"freiburg[123]", name):
+        return None
+    return (
+        f"{name!r}: a synthetic TUM RGB-D sequence takes the camera of its name: name it with freiburg1, freiburg2 "
+        "or freiburg3 (e.g. rgbd_dataset_freiburg1_room)"
+    )
+
+
+def write_synthetic(tmp: Path, s: Synth) -> Placed:
+    """The sequence in TUM RGB-D's layout: colour PNGs named by their (slightly irregular) 30 Hz times, rgb.txt,
+    and the motion capture's poses at 100 Hz on its own clock ticks, 4 decimals as the benchmark writes them."""
+    import cv2
+
+    from slamrun.datasets.synth import loop_fraction, tum_rows
+
+    cam = camera_for(Path(s.name)).camera
+    rgb = tmp / "rgb"
+    rgb.mkdir()
+    t = 1305031102.175304 + np.arange(s.frames) / 30.0 + (np.arange(s.frames) % 4) * 0.0011
+    names = [f"rgb/{v:.6f}.png" for v in t]
+    for i, img in s.images(cam):
+        cv2.imwrite(str(tmp / names[i]), cv2.cvtColor(img, cv2.COLOR_GRAY2BGR))
+    (tmp / "rgb.txt").write_text(
+        f"# color images\n# file: '{s.name}.bag'\n# timestamp filename\n"
+        + "".join(f"{v:.6f} {n}\n" for v, n in zip(t, names, strict=True))
+    )
+    t_gt = np.arange(t[0] - 0.05 + 0.0043, t[-1] + 0.05, 0.01)  # motion capture at 100 Hz, its own clock ticks
+    frac = loop_fraction(t_gt, t)
+    rows = tum_rows(t_gt, s.poses_at(s.scene, frac))
+    (tmp / "groundtruth.txt").write_text(
+        f"# ground truth trajectory\n# file: '{s.name}.bag'\n# timestamp tx ty tz qx qy qz qw\n"
+        + "".join(f"{r[0]:.4f} " + " ".join(f"{v:.4f}" for v in r[1:]) + "\n" for r in rows)
+    )
+    return []
+
+
+URL = os.environ.get("SLAMRUN_TUM_RGBD_URL", "https://vision.in.tum.de/rgbd/dataset")
+
+
+def _archive(name: str, base: str) -> tuple[str, str] | None:
+    full = name if name.startswith("rgbd_dataset_") else f"rgbd_dataset_{name}"
+    found = re.fullmatch(r"rgbd_dataset_(freiburg[123])_[a-z0-9_]+", full)
+    return None if found is None else (full, f"{base}/{found.group(1)}/{full}.tgz")
+
+
+LAYOUT = Layout(
+    name="tum-rgbd",
+    title="TUM RGB-D (the colour camera; motion-capture ground truth)",
+    recognise=recognise,
+    frame_list="rgb.txt",
+    read=open_tum_rgbd,
+    groundtruth_file="groundtruth.txt",
+    synth=write_synthetic,
+    synth_name_problem=synth_name_problem,
+    fixed_size=(WIDTH, HEIGHT),
+    download=Download(URL, _archive, "rgbd_dataset_freiburg1_xyz, freiburg2_desk, ... (the benchmark's folder names)"),
+)

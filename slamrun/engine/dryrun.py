@@ -1,0 +1,154 @@
+"""`slamrun campaign SPEC --dry-run` / `slamrun plan SPEC`: what a campaign would do, doing nothing.
+
+Reads the spec, the sequences, the view cache and (read-only) the results folder's ledger; writes nothing,
+generates nothing, locks nothing.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from slamrun.datasets.cache import whole_mirror, whole_view
+from slamrun.datasets.layouts import holds_sequence, open_sequence
+from slamrun.datasets.view import Profile
+from slamrun.engine.ledger import Ledger
+from slamrun.engine.paths import RunPaths, finished_record
+from slamrun.engine.plan import plan
+from slamrun.engine.progress import eta, overhead_per_run, run_group, wall_times
+from slamrun.engine.spec import CampaignSpec
+from slamrun.errors import DatasetError
+from slamrun.results.vocabulary import is_infra
+
+
+@dataclass
+class DryRun:
+    total: int
+    done: int
+    failed: int  # method failures: results, not run again
+    infra: int  # infrastructure failures: run again
+    to_run: int
+    lanes: int
+    groups: list[dict] = field(default_factory=list)
+    views_to_prepare: int = 0
+    view_bytes: int = 0
+    views_unknown: int = 0  # of synthetic sequences not generated yet
+    sequences_unknown: int = 0  # those sequences
+    eta_s: float | None = None
+    eta_basis: str = "unknown"
+
+
+def dry_run(spec: CampaignSpec) -> DryRun:
+    runs = plan(spec)
+    rows: dict[str, dict] = {}
+    session: dict = {}
+    path = spec.results / "ledger.sqlite"
+    if path.exists() and path.stat().st_size:
+        ledger = Ledger(path, read_only=True)
+        try:
+            rows = {r["key"]: r for r in ledger.rows(active_only=False)}
+            session = ledger.meta("session") or {}
+        finally:
+            ledger.close()
+    counts: dict[tuple[str, str], Counter] = defaultdict(Counter)
+    todo_by_group: Counter = Counter()
+    todo_views = set()
+    for run in runs:
+        row = rows.get(run.key.id)
+        if row is None:
+            rec = finished_record(RunPaths(spec.results, run.key).final, run.key.id)  # imported at the start
+            state = "new" if rec is None else rec["state"]
+        elif is_infra(row["state"], row.get("failure")):
+            state = "infra"
+        elif row["state"] in ("pending", "running"):
+            state = "pending"
+        else:
+            state = row["state"]
+        counts[(run.key.label, run.key.direction.value)][state] += 1
+        if state in ("new", "pending", "infra"):
+            todo_by_group[
+                run_group({"label": run.key.label, "dataset": run.dataset, "sequence": run.key.sequence})
+            ] += 1
+            todo_views.add((run.sequence_dir, run.key.direction, run.profile))
+    groups = []
+    for (label, direction), c in sorted(counts.items()):
+        groups.append(
+            {
+                "method": label,
+                "direction": direction,
+                "runs": sum(c.values()),
+                "new": c["new"],
+                "pending": c["pending"] + c["infra"],
+                "done": c["done"],
+                "failed": c["failed"],
+            }
+        )
+    total = Counter()
+    for c in counts.values():
+        total.update(c)
+    lanes = 1 if spec.measurement == "exclusive" else spec.lanes
+    out = DryRun(
+        total=len(runs),
+        done=total["done"],
+        failed=total["failed"],
+        infra=total["infra"],
+        to_run=sum(todo_by_group.values()),
+        lanes=lanes,
+        groups=groups,
+    )
+    frames_counted: set[tuple[Path, Profile]] = set()  # a view's other direction links the same frames
+    ungenerated: set[Path] = set()
+    for seq_dir, direction, profile in sorted(todo_views, key=str):
+        size = _view_bytes_if_missing(seq_dir, direction, profile, spec)
+        if size is None:
+            out.views_unknown += 1
+            ungenerated.add(seq_dir)
+        elif size:
+            out.views_to_prepare += 1
+            out.view_bytes += 0 if (seq_dir, profile) in frames_counted else size
+            frames_counted.add((seq_dir, profile))
+    out.sequences_unknown = len(ungenerated)
+    overhead = last_session_overhead(list(rows.values()), session)
+    out.eta_s, out.eta_basis = eta(dict(todo_by_group), wall_times(rows.values()), lanes, overhead)
+    return out
+
+
+def last_session_overhead(rows: list[dict], session: dict) -> float:
+    """The runner's own lane time per run measured over the results folder's last session (0 without one)."""
+    start, end = session.get("runs_from"), session.get("runs_to")
+    if not start or not end:
+        return 0.0
+    mine = [
+        float(r["wall_s"] or 0.0)
+        for r in rows
+        if r.get("started_at") and start <= r["started_at"] <= end and r["state"] in ("done", "failed")
+    ]
+    return overhead_per_run(sum(mine), len(mine), int(session.get("lanes") or 1), end - start)
+
+
+def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: CampaignSpec) -> int | None:
+    """0 when the view is prepared and whole, its estimated size when it must be prepared (1 when its frames
+    will be links to its other direction's, prepared already), None when the sequence does not exist yet
+    (synthetic, generated on first use)."""
+    if not holds_sequence(seq_dir):
+        return None
+    try:
+        seq = open_sequence(seq_dir)
+    except DatasetError:
+        return None
+    if whole_view(spec.cache, seq, direction, profile, spec.frame_format) is not None:
+        return 0
+    if whole_mirror(spec.cache, seq, direction, profile, spec.frame_format) is not None:
+        return 1  # its frames are links to the other direction's: a few small files
+    if profile is Profile.rectified:
+        per_pixel = 1.0 if spec.frame_format == "pgm" else 0.5  # PNG level 1 on camera images: about half
+        return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * per_pixel)
+    if not seq.fov:  # its native view is rectified too
+        return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * 0.5)
+    if seq.zip_path is not None:
+        with zipfile.ZipFile(seq.zip_path) as zf:
+            return sum(i.file_size for i in zf.infolist())
+    assert seq.images_dir is not None
+    return sum((seq.images_dir / name).stat().st_size for name in seq.frame_names)

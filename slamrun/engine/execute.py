@@ -1,0 +1,402 @@
+"""One run, start to finish: configure, execute, read, evaluate, write, rename.
+
+A run's folder appears (by rename) only when all its files are written, so a half-finished run never
+looks complete. Method failures come back as data; infrastructure faults raise InfraError.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import slamrun.methods
+from slamrun.backends.base import Backend, ExecRequest, ExecResult, disk_reserve_bytes, folder_bytes
+from slamrun.backends.logcap import tail
+from slamrun.backends.machine import machine, package_versions, packages_text
+from slamrun.core import jsonio, metrics
+from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S, tum_mono
+from slamrun.core.trajectory import Trajectory, write_tum
+from slamrun.datasets.cache import verify_view
+from slamrun.datasets.view import PreparedView
+from slamrun.engine.paths import RunPaths, finished_record
+from slamrun.engine.plan import PlannedRun
+from slamrun.errors import (
+    BackendUnreachable,
+    InfraError,
+    MethodFailure,
+    MetricError,
+    StorageError,
+    TrajectoryFormatError,
+    storage_problem,
+)
+from slamrun.methods.base import Method
+from slamrun.results.vocabulary import TUM_MONO_METRICS, UNDER_MIN_COVERAGE, EvalStatus
+
+METHOD_ERROR = "method_error"  # in Launched.extra: (kind, message) of a method that failed before its process started
+
+
+@dataclass(frozen=True)
+class RunOutcome:
+    state: str  # done | failed | cancelled
+    values: dict  # ledger columns
+
+
+@dataclass(frozen=True)
+class Launched:
+    """A run whose process has ended (not cancelled): what finish_attempt needs next."""
+
+    result: ExecResult
+    started: float
+    extra: dict
+
+
+def launch_run(
+    run: PlannedRun,
+    method: Method,
+    view: PreparedView,
+    backend: Backend,
+    paths: RunPaths,
+    attempt: int,
+    cancel: threading.Event,
+    cpus: tuple[int, ...] | None = None,
+    memory_mb: int | None = None,
+    log_cap_bytes: int = 20 * 2**20,
+    max_output_bytes: int | None = None,
+    campaign: str = "",
+    on_start=None,
+    results_id: str = "",
+) -> Launched | RunOutcome:
+    """Configure the run and run its process to its end (a RunOutcome only when cancelled). A full disk
+    anywhere is a StorageError and any other OSError an InfraError (the machine's fault, not the method's);
+    the run's staging folder is removed either way, except when the Docker daemon went away mid-run (the
+    next start may collect the finished container)."""
+    with _os_errors_as_infra(run, paths, attempt):
+        paths.clear_staging(up_to=attempt)
+        stage = paths.staging(attempt)
+        raw = RunPaths.raw(stage)
+        raw.mkdir(parents=True)
+        started = time.time()
+        pview, pwork = backend.process_paths(view, raw)  # as the method's process sees them
+        try:  # the method's own calls: what they raise (a plug-in's bug too) is its failure, recorded as a result
+            for rel, content in config_files(method, pview, pwork):
+                target = raw / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                if isinstance(content, bytes):
+                    target.write_bytes(content)
+                else:
+                    target.write_text(content)
+            argv = method.command(pview, pwork)
+            env = method.environment()
+        except MethodFailure as exc:
+            RunPaths.log(stage).write_text(f"slamrun: the run was not started: {exc}\n")
+            failed = {"backend": backend.name, "engine": backend.engine, METHOD_ERROR: [exc.kind, str(exc)]}
+            return Launched(ExecResult(exit_code=None, wall_s=0.0), started, failed)
+        req = ExecRequest(
+            argv=argv,
+            workdir=raw,
+            view=view,
+            log_path=RunPaths.log(stage),
+            resources_path=RunPaths.resources(stage),
+            timeout_s=run.timeout_s,
+            cpus=cpus,
+            memory_mb=memory_mb,
+            log_cap_bytes=log_cap_bytes,
+            max_output_bytes=max_output_bytes,
+            image=method.image,
+            needs_gpu=method.needs_gpu,
+            modules=method.modules,
+            env=env,
+            labels={
+                "slamrun.campaign": campaign,
+                "slamrun.results": results_id,  # which results folder: another folder's run of the campaign is not ours
+                "slamrun.run": run.key.id,
+                "slamrun.attempt": str(attempt),
+            },
+            token=paths.token(attempt),
+        )
+        try:
+            result = backend.execute(req, cancel, on_start)
+        except BackendUnreachable:
+            raise  # the staging folder stays: the container may finish without the daemon
+        except InfraError:
+            shutil.rmtree(stage, ignore_errors=True)
+            raise
+        if result.cancelled:
+            shutil.rmtree(stage, ignore_errors=True)
+            return RunOutcome("cancelled", {})
+        extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
+        extra["engine"] = backend.engine
+        extra["machine"] = result.machine or machine()  # a Dask worker's own, else this one
+        if backend.name == "local" and method.modules:  # in an image, the image's labels say what it holds
+            versions = result.packages if result.packages is not None else package_versions(method.modules)
+            extra["package_versions"] = versions
+        if method.image and (image := backend.describe_image(method.image)) is not None:
+            extra["image"] = image  # its sources, vocabulary, weights
+        return Launched(result, started, extra)
+
+
+def finish_attempt(
+    run: PlannedRun,
+    method: Method,
+    view: PreparedView,
+    paths: RunPaths,
+    attempt: int,
+    result: ExecResult,
+    started: float,
+    groundtruth: Trajectory | None,
+    extra: dict,
+) -> RunOutcome:
+    """What a finished process left in its staging folder, read, evaluated, recorded in run.json and renamed
+    into place. Also used to collect a container that finished while the Docker daemon was away."""
+    with _os_errors_as_infra(run, paths, attempt):
+        stage = paths.staging(attempt)
+        raw = RunPaths.raw(stage)
+        log_tail = tail(RunPaths.log(stage))
+        extra = dict(extra)
+        if refused := extra.pop(METHOD_ERROR, None):  # the method failed before its process could start
+            failure, message, traj = refused[0], refused[1], None
+        else:
+            try:
+                failure, message, traj = _classify(result, method, raw, view, log_tail)
+            except MethodFailure as exc:  # a plug-in's accepts_exit or failure_from_log raised
+                failure, message, traj = exc.kind, str(exc), None
+        if failure and failure != "output_limit" and _out_of_space(raw, log_tail):
+            if (size := folder_bytes(raw)) >= disk_reserve_bytes(raw):  # it filled the disk itself
+                failure, message, traj = "output_limit", f"it filled the disk ({size / 2**20:.0f} MB written)", None
+        if failure == "output_limit":  # its output is removed: it may not keep the disk
+            shutil.rmtree(raw, ignore_errors=True)
+            raw.mkdir()
+        elif failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
+            shutil.rmtree(stage, ignore_errors=True)
+            raise StorageError(f"{run.key.id}: the disk is full ({failure}: {message})")
+        if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
+            damaged = verify_view(view.root, view.build_id)  # the build it started with, whole
+            if damaged:
+                shutil.rmtree(stage, ignore_errors=True)
+                raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
+        values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
+        values["host"] = (extra.get("machine") or {}).get("name")
+        values["packages"] = packages_text(extra.get("package_versions") or {})
+        if traj is None or not len(traj):
+            values["fps"] = None  # frames per second of processing: nothing was processed to a pose
+        if traj is not None and len(traj):
+            write_tum(RunPaths.trajectory(stage), traj)
+            values["n_poses"] = len(traj)
+            values["coverage"] = metrics.coverage(traj, view.original_timestamps())
+            if groundtruth is not None:
+                figures, detail = evaluate(
+                    groundtruth, traj, run.metrics, run.alignment, run.rpe, view.original_timestamps()
+                )
+                values.update(figures)
+                if detail and not values["message"]:
+                    values["message"] = detail
+        if failure is None and values.get("eval_status") == EvalStatus.incomplete.value:
+            failure = "lost"  # too few poses in a segment to evaluate: the method did not track the sequence
+            values.update(failure=failure, message=f"too few poses to evaluate ({values['message']})")
+        if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
+            recovered = values.get("eval_status") == EvalStatus.ok.value
+            failure = None if recovered else "lost"
+            values["failure"] = failure
+        share = values.get("coverage")
+        if failure is None and run.min_coverage and share is not None and share < run.min_coverage:
+            failure = "lost"  # it tracked too little of the sequence for its accuracy to be compared
+            message = f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {run.min_coverage:g}"
+            values.update(failure=failure, message=message)
+        if traj is not None and traj.report.n_nonfinite_dropped and not values["message"]:
+            values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the output dropped"
+        state = "failed" if failure else "done"
+        values["ended_at"] = time.time()
+        record = {
+            "key": run.key.id,
+            "label": run.key.label,
+            "method": run.method,
+            "dataset": run.dataset,
+            "sequence": run.key.sequence,
+            "data": run.key.data,
+            "direction": run.key.direction.value,
+            "trial": run.key.trial,
+            "settings": run.key.settings,
+            "params": method.params.model_dump(mode="json"),
+            "provider": slamrun.methods.provider_record(run.method),  # which package's implementation made this run
+            "state": state,
+            "attempt": attempt,
+            "started_at": started,
+            "view": str(view.root),
+            "sequence_dir": str(run.sequence_dir),
+            "timed_out": result.timed_out,
+            "oom": result.oom,
+            "log_truncated": result.log_truncated,
+            "trajectory_report": traj.report.__dict__ if traj is not None else None,
+            **extra,
+            **values,
+        }
+        RunPaths.run_json(stage).write_text(jsonio.dumps(record, indent=1))
+        final = paths.final
+        if final.exists():  # a finished run is never overwritten
+            earlier = finished_record(final, run.key.id)
+            if earlier is not None:  # it finished in an earlier attempt: that one stands, this one is dropped
+                shutil.rmtree(stage, ignore_errors=True)
+                return RunOutcome(earlier["state"], {**earlier, "run_dir": str(final)})
+            final.rename(final.with_name(f".{final.name}.incomplete-{int(time.time())}"))  # kept for a look
+        final.parent.mkdir(parents=True, exist_ok=True)
+        os.rename(stage, final)
+        values["run_dir"] = str(final)
+        return RunOutcome(state, values)
+
+
+def config_files(method: Method, view: PreparedView, workdir: Path) -> list[tuple[Path, str | bytes]]:
+    """The method's config files (`configure`), each checked before any is written: a path that is absolute or
+    leads out with '..' would be written outside the run's work folder, so it is refused as the method's failure
+    (MethodFailure 'crashed', naming the method, a plug-in with its package)."""
+    files = method.configure(view, workdir)
+    who = slamrun.methods.describe(method.name)
+    if not isinstance(files, dict):
+        raise MethodFailure("crashed", f"{who}: configure() returned a {type(files).__name__}, not {{path: content}}")
+    out = []
+    for rel, content in files.items():
+        if why := config_path_problem(rel):
+            raise MethodFailure("crashed", f"{who}: configure() returned the path {rel!r}: {why}; nothing was written")
+        if not isinstance(content, str | bytes):
+            raise MethodFailure(
+                "crashed", f"{who}: configure() gave {rel!r} a {type(content).__name__}, not text or bytes"
+            )
+        out.append((Path(rel), content))
+    return out
+
+
+def config_path_problem(rel) -> str | None:
+    """Why `rel` is not a file path inside a run's work folder, or None."""
+    if not isinstance(rel, str | os.PathLike):
+        return "not a path"
+    path = Path(rel)
+    if path.is_absolute():
+        return "an absolute path, outside the run's work folder"
+    if ".." in path.parts:
+        return "'..' leads outside the run's work folder"
+    if not path.parts:
+        return "no file name"
+    return None
+
+
+def evaluate(
+    gt: Trajectory,
+    traj: Trajectory,
+    wanted: tuple[str, ...],
+    alignment: str,
+    rpe: metrics.RpeInterval = metrics.RpeInterval(),
+    frame_times: np.ndarray | None = None,
+) -> tuple[dict, str]:
+    """A finished run's metrics (the dataset's `metrics:`, RPE at the interval `rpe` of the sequence whose frames
+    are at `frame_times`) and eval_status, and why a metric is missing. TUM-Mono's figures or ATE/RPE that cannot
+    be computed make the evaluation incomplete; a path shorter than RPE's interval or KITTI's 100 m is the data's
+    limit, only noted (coverage says how much of the sequence was tracked)."""
+    values: dict = {}
+    status, notes = EvalStatus.ok, []
+    if "tum-mono" in wanted:
+        ev = tum_mono(gt, traj)
+        status = ev.status
+        if ev.status is EvalStatus.ok:
+            values.update({k: getattr(ev, k) for k in TUM_MONO_METRICS} | {"e_s_sym": ev.e_s_sym})
+        else:
+            notes.append(f"evaluation {ev.status.value}: {ev.detail}")
+    for name in (m for m in wanted if m != "tum-mono"):
+        try:
+            if name == "ate":
+                a = metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).translation
+                values.update(ate_rmse=a.rmse, ate_mean=a.mean, ate_median=a.median, ate_max=a.max)
+            elif name == "rpe":
+                values["rpe_interval"] = str(rpe)
+                r = metrics.rpe(gt, traj, rpe.delta, rpe.unit, alignment, ASSOCIATION_TOLERANCE_S, frame_times)
+                values.update(rpe_t_rmse=r.translation.rmse, rpe_r_rmse=r.rotation_deg.rmse, rpe_pairs=r.pairs)
+            elif name == "kitti":
+                k = metrics.kitti(gt, traj, alignment, tolerance_s=ASSOCIATION_TOLERANCE_S)
+                values.update(kitti_t_pct=k.t_pct, kitti_r_deg_m=k.r_deg_per_m)
+        except MetricError as exc:
+            notes.append(f"{name}: {exc}")
+            if name != "kitti" and not isinstance(exc, metrics.NoPairs) and status is EvalStatus.ok:
+                status = EvalStatus.incomplete
+    values["eval_status"] = status.value
+    return values, "; ".join(notes)
+
+
+@contextmanager
+def _os_errors_as_infra(run: PlannedRun, paths: RunPaths, attempt: int) -> Iterator[None]:
+    try:
+        yield
+    except OSError as exc:
+        paths.clear_staging(up_to=attempt)
+        if why := storage_problem(exc):
+            raise StorageError(f"{run.key.id}: {why} ({exc})", why) from None
+        raise InfraError(f"{run.key.id}: {exc}") from None
+
+
+def _classify(
+    result, method: Method, raw: Path, view: PreparedView, log_tail: str
+) -> tuple[str | None, str | None, Trajectory | None]:
+    """(failure kind or None, message, trajectory or None) from what the process left behind."""
+    if result.output_exceeded:
+        return "output_limit", f"stopped: {result.output_exceeded}; its output was removed", None
+    if result.oom:
+        return "oom", "killed: out of memory", None
+    if result.timed_out:
+        traj = _try_read(method, raw, view)
+        return "timeout", f"killed at the timeout ({result.wall_s:.0f} s)", traj
+    if not method.accepts_exit(result.exit_code, raw):
+        kind = method.failure_from_log(log_tail) or "crashed"
+        last = " | ".join(line.strip() for line in log_tail.strip().splitlines()[-3:])
+        return kind, f"exit code {result.exit_code}: {last[-300:]}", _try_read(method, raw, view)
+    try:
+        traj = method.read_trajectory(raw, view)
+    except MethodFailure as exc:
+        return method.failure_from_log(log_tail) or exc.kind, str(exc), None
+    except TrajectoryFormatError as exc:
+        return "no_output", f"unreadable output: {exc}", None
+    foreign = foreign_timestamps(traj, view)
+    if foreign:
+        return "bad_timestamps", foreign, traj
+    if method.failure_from_log(log_tail) == "lost":
+        return "lost?", "the method reported it was lost", traj
+    return None, None, traj
+
+
+def foreign_timestamps(traj: Trajectory, view: PreparedView, tol_s: float = ASSOCIATION_TOLERANCE_S) -> str | None:
+    """Why a trajectory's poses are not at the sequence's frame times (more than `tol_s` from every frame of
+    times.txt), or None when each pose is at a frame."""
+    return foreign_timestamps_of(traj, view.original_timestamps(), tol_s)
+
+
+def foreign_timestamps_of(traj: Trajectory, frames: np.ndarray, tol_s: float = ASSOCIATION_TOLERANCE_S) -> str | None:
+    """Why a trajectory's poses are not at the frame times `frames` (increasing), or None when each pose is."""
+    if not len(traj) or not len(frames):
+        return None
+    t = traj.timestamps
+    idx = np.clip(np.searchsorted(frames, t), 1, len(frames) - 1)
+    distance = np.minimum(np.abs(frames[idx - 1] - t), np.abs(frames[idx] - t))
+    far = np.flatnonzero(distance > tol_s)
+    if not len(far):
+        return None
+    first = far[0]
+    return (
+        f"{len(far)} of {len(t)} poses are at times that are not frame times of the sequence's times.txt "
+        f"(first at t={float(t[first]):.6f}, {1000 * float(distance[first]):.1f} ms from the nearest frame)"
+    )
+
+
+def _out_of_space(folder: Path, log_tail: str) -> bool:
+    """The method's log says so, or its work folder's filesystem has (almost) no space left."""
+    return "No space left on device" in log_tail or shutil.disk_usage(folder).free < 2**20
+
+
+def _try_read(method: Method, raw: Path, view: PreparedView) -> Trajectory | None:
+    try:
+        return method.read_trajectory(raw, view)
+    except (MethodFailure, TrajectoryFormatError):
+        return None

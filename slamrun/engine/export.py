@@ -1,0 +1,61 @@
+"""Export the ledger to results.csv and results.parquet (one row per run)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pandas as pd
+
+from slamrun.engine.ledger import Ledger
+from slamrun.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, TEXT_METRIC_COLUMNS
+
+COLUMNS = (
+    "method",
+    "sequence",
+    "direction",
+    "trial",
+    "status",
+    "failure",
+    "eval_status",
+    *METRIC_COLUMNS,
+    *RESOURCE_COLUMNS,
+    "method_name",
+    "dataset",
+    "settings",
+    "attempts",
+    "exit_code",
+    "message",
+    "host",
+    "packages",
+    "run_dir",
+    "key",
+)
+
+
+def results_frame(ledger: Ledger) -> pd.DataFrame:
+    rows = ledger.rows(active_only=True)
+    df = pd.DataFrame(rows, columns=list(rows[0]) if rows else None)
+    if df.empty:
+        return pd.DataFrame(columns=list(COLUMNS))
+    df = df.rename(columns={"method": "method_name", "state": "status"}).rename(columns={"label": "method"})
+    for col in COLUMNS:  # a ledger read read-only from an earlier version lacks the newer columns
+        if col not in df.columns:
+            df[col] = None
+    for col in (c for c in METRIC_COLUMNS + RESOURCE_COLUMNS if c not in TEXT_METRIC_COLUMNS):
+        df[col] = pd.to_numeric(df[col], errors="coerce")
+    return df[list(COLUMNS)]
+
+
+def export(ledger: Ledger, results: Path) -> Path:
+    """Write results.csv and results.parquet atomically; returns the CSV path."""
+    df = results_frame(ledger)
+    csv_path = results / "results.csv"
+    tmp = csv_path.with_suffix(".csv.tmp")
+    df.to_csv(tmp, index=False)
+    os.replace(tmp, csv_path)
+    pq = results / "results.parquet"
+    tmp = pq.with_suffix(".parquet.tmp")
+    df.to_parquet(tmp, index=False)
+    os.replace(tmp, pq)
+    return csv_path

@@ -1,0 +1,238 @@
+"""The method contract: a small class with configure, command and read_trajectory."""
+
+from __future__ import annotations
+
+import functools
+import os
+import re
+import shutil
+import sys
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict
+
+from slamrun.core.trajectory import Trajectory, read_tum
+from slamrun.datasets.view import PreparedView, Profile
+from slamrun.errors import MethodFailure, TrajectoryFormatError, one_line
+
+MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (MAX_ARG_STRLEN)
+
+
+class NoParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class Method(ABC):
+    """One SLAM/VO method. Subclasses set the class attributes and implement `command`.
+
+    `configure` and `command` get paths as the method's process sees them (on the host for the local
+    backend, /data and /work inside a container); `read_trajectory` gets host paths, since the runner
+    reads the outputs.
+    """
+
+    name: ClassVar[str]
+    image: ClassVar[str | None] = None  # Docker tag; None for a method that only runs natively
+    profile: ClassVar[Profile] = Profile.native  # which prepared view it consumes
+    needs_gpu: ClassVar[bool] = False  # a GPU is requested for the run
+    gpu_capable: ClassVar[bool] = False  # can use a GPU when asked (params.gpu); runs on the CPU otherwise
+    loop_closure_switch: ClassVar[str | None] = None  # how the image turns loop closure off, if it has one
+    native: ClassVar[bool] = False  # runs as a local process without an image
+    # the Python modules whose versions decide its results when it runs natively (recorded with each run)
+    modules: ClassVar[tuple[str, ...]] = ()
+    Params: ClassVar[type[BaseModel]] = NoParams
+    output_file: ClassVar[str] = "trajectory.txt"
+    # Log lines that tell why a run produced nothing usable (case-insensitive regular expressions).
+    not_initialized_pattern: ClassVar[str | None] = None
+    lost_pattern: ClassVar[str | None] = None
+
+    def __init__(self, params: BaseModel | dict | None = None):
+        self.params = params if isinstance(params, BaseModel) else self.Params.model_validate(params or {})
+
+    def configure(self, view: PreparedView, workdir: Path) -> dict[str, str]:
+        """The method's own config files: {path relative to the work directory: content}.
+
+        Pure: the runner writes them, so the same call serves a local process and a container.
+        """
+        return {}
+
+    def for_backend(self, backend: str) -> Method:
+        """This method as run by a backend (`local` or `docker`); the interpreter may differ."""
+        return self
+
+    def environment(self) -> dict[str, str]:
+        """Environment variables of the method's process (e.g. a loop-closure switch)."""
+        return {}
+
+    def problems(self, backend: str) -> list[str]:
+        """Why this method cannot run on `backend` as configured ([] when it can); checked before any run."""
+        if backend == "local" and not self.native:
+            return [
+                f"{self.name} has no native build here: give params.executable (a local build) or use backend: docker"
+            ]
+        return []
+
+    def launch_problems(self) -> list[str]:
+        """Why no process could ever be started with this method's environment (a spec error, never an
+        infrastructure retry): Linux refuses an argument or variable of MAX_ARG_BYTES or more."""
+        out = []
+        for key, value in self.environment().items():
+            size = len(key.encode()) + len(value.encode()) + 1
+            if size >= MAX_ARG_BYTES:
+                out.append(
+                    f"environment variable {key}: {size} bytes; no process can be started with a variable of "
+                    f"{MAX_ARG_BYTES // 1024} KiB or more (pass a file instead)"
+                )
+        return out
+
+    def executable_problems(self, backend: str) -> list[str]:
+        """Why the program of `params.executable` (a local build) cannot be started by the local backend ([] when
+        it can, or when the method has no such parameter or runs in a container); checked before any run, so a
+        missing program is a spec error, never an infrastructure retry at every start."""
+        program = getattr(self.params, "executable", None)
+        if backend != "local" or not isinstance(program, str):
+            return []
+        why = executable_problem(program)
+        return [f"{self.name}: params.executable: {why}"] if why else []
+
+    @abstractmethod
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        """The argv that runs the method (never a shell string)."""
+
+    def read_trajectory(self, workdir: Path, view: PreparedView) -> Trajectory:
+        """The method's output as a trajectory with ORIGINAL timestamps; MethodFailure when unusable."""
+        return view.to_original(read_tum_output(workdir / self.output_file))
+
+    def accepts_exit(self, exit_code: int, workdir: Path) -> bool:
+        """Whether this exit code still means the output is complete (LDSO exits 139 after writing)."""
+        return exit_code == 0
+
+    def failure_from_log(self, log_tail: str) -> str | None:
+        """`not_initialized` or `lost` when the log says so."""
+        if self.not_initialized_pattern and re.search(self.not_initialized_pattern, log_tail, re.I | re.M):
+            return "not_initialized"
+        if self.lost_pattern and re.search(self.lost_pattern, log_tail, re.I | re.M):
+            return "lost"
+        return None
+
+
+def executable_problem(program: str) -> str | None:
+    """Why `program` cannot be started as a run's argv[0] (a run's working folder is its own work folder), or None:
+    a name is looked up on PATH; a path must be absolute, a file, and executable."""
+    if not program:
+        return "empty; give the program's full path"
+    if "/" not in program:
+        return None if shutil.which(program) else f"{program!r} is no program on PATH; give its full path"
+    path = Path(program)
+    if not path.is_absolute():
+        return (
+            f"{program!r} is a relative path, which a run would look up in its own work folder (it holds only the "
+            "method's config files); give the full path"
+        )
+    if not path.exists():
+        return f"{program} not found"
+    if not path.is_file():
+        return f"{program} is not a file"
+    if not os.access(path, os.X_OK):
+        return f"{program} is not executable (chmod +x it)"
+    return None
+
+
+def read_tum_output(path: Path) -> Trajectory:
+    """A method's TUM output, with the method-failure kinds for a missing or empty file."""
+    if not path.exists():
+        raise MethodFailure("no_output", f"the method wrote no {path.name}")
+    return require_poses(read_tum(path), path)
+
+
+def require_poses(traj: Trajectory, path: Path) -> Trajectory:
+    """The trajectory, unless it holds no pose: `no_output` when every row was NaN or infinite (the method
+    wrote garbage), `not_initialized` when the file was empty."""
+    if len(traj) == 0:
+        if traj.report.n_nonfinite_dropped:
+            raise MethodFailure("no_output", f"{path.name}: all {traj.report.n_rows} rows are NaN or infinite")
+        raise MethodFailure("not_initialized", f"{path.name} holds no pose")
+    return traj
+
+
+@dataclass(frozen=True)
+class Provider:
+    """The installed distribution a plug-in method comes from."""
+
+    distribution: str
+    version: str
+
+    def __str__(self) -> str:
+        return f"{self.distribution} {self.version}"
+
+
+GUARDED_CALLS = (
+    "__init__",
+    "configure",
+    "command",
+    "read_trajectory",
+    "environment",
+    "accepts_exit",
+    "failure_from_log",
+    "for_backend",
+    "problems",
+    "launch_problems",
+    "executable_problems",
+)
+
+
+def guarded(cls: type[Method], who: str) -> type[Method]:
+    """`cls` (someone else's method class) whose calls never raise anything but MethodFailure (and
+    TrajectoryFormatError from read_trajectory): any other exception, sys.exit() included (not Ctrl-C), becomes
+    MethodFailure('crashed') with one line naming `who`, the call and the exception. A plug-in's bug is then its own
+    failure, recorded as a result, never an infrastructure fault retried at every start nor a stopped slamrun."""
+
+    def wrap(attr: str):
+        inner = getattr(cls, attr)
+
+        @functools.wraps(inner)
+        def call(self, *args, **kwargs):
+            try:
+                value = inner(self, *args, **kwargs)
+            except (MethodFailure, TrajectoryFormatError, KeyboardInterrupt, GeneratorExit):
+                raise
+            except BaseException as exc:  # noqa: BLE001 - whatever a plug-in raises is its own failure
+                raise MethodFailure("crashed", f"{who}: {cls.__name__}.{attr}() raised {one_line(exc)}") from None
+            if attr == "read_trajectory" and (why := not_a_trajectory(value)):
+                raise MethodFailure("crashed", f"{who}: {cls.__name__}.read_trajectory() returned {why}")
+            return value
+
+        return call
+
+    namespace = {attr: wrap(attr) for attr in GUARDED_CALLS}
+    namespace.update(__module__=cls.__module__, __qualname__=cls.__qualname__, __doc__=cls.__doc__)
+    return type(cls.__name__, (cls,), namespace)
+
+
+def not_a_trajectory(value) -> str | None:
+    """What `value` is when it is not a usable Trajectory (a plug-in's read_trajectory returned it), else None."""
+    if not isinstance(value, Trajectory):
+        return f"{type(value).__name__}, not a Trajectory"
+    shapes = [np.shape(value.timestamps), np.shape(value.positions), np.shape(value.quaternions)]
+    n = shapes[0][0] if len(shapes[0]) == 1 else -1
+    if shapes != [(n,), (n, 3), (n, 4)]:
+        counts = [s[0] if s else 0 for s in shapes]
+        return f"a Trajectory of {counts[0]} times, {counts[1]} positions and {counts[2]} rotations"
+    for name in ("timestamps", "positions", "quaternions"):
+        if not np.issubdtype(np.asarray(getattr(value, name)).dtype, np.number):
+            return f"a Trajectory whose {name} are not numbers"
+    return None
+
+
+class PythonProcess:
+    """Mixin for methods run as `python -m ...`: this interpreter locally, the image's python3 in a container."""
+
+    python: str = sys.executable
+
+    def for_backend(self, backend: str) -> Method:
+        method = type(self)(self.params)
+        method.python = sys.executable if backend == "local" else "python3"
+        return method

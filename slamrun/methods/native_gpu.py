@@ -1,0 +1,105 @@
+"""What the GPU methods built by `slamrun native-build` (dpvo, droid_slam) share: slamrun's cache of native builds,
+their build.json, the checks that a build can run here, and a Method base that takes its build and network from the
+native build (`backend: local`) or from the image (`backend: docker|podman`)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from abc import abstractmethod
+from pathlib import Path
+
+from slamrun.methods.base import Method, PythonProcess
+
+
+def native_root() -> Path:
+    """slamrun's cache of native builds ($XDG_CACHE_HOME/slamrun/native, default ~/.cache/slamrun/native)."""
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "slamrun" / "native"
+
+
+def read_build_record(build: Path) -> dict | None:
+    """The build.json of a native build (what `slamrun native-build dpvo` wrote), or None when there is none."""
+    try:
+        record = json.loads((build / "build.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return record if isinstance(record, dict) else None
+
+
+def installed_torch() -> str | None:
+    """The version of PyTorch installed beside slamrun (read from its metadata: importing it takes seconds)."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("torch")
+    except PackageNotFoundError:
+        return None
+
+
+def native_problems(build: Path, weights: str | None, method: str, weights_name: str) -> list[str]:
+    """Why a native build of `method` (DPVO, or another GPU method built by `slamrun native-build`) at `build` cannot
+    run here ([] when it can)."""
+    how = f"run `slamrun native-build {method}` (a PyTorch with CUDA and nvcc needed), or give params.build"
+    record = read_build_record(build)
+    if record is None:
+        return [f"{method} has no native build at {build} (no build.json): {how}"]
+    torch = installed_torch()
+    if torch is None:
+        return [f"{method} runs on PyTorch, which this Python ({sys.executable}) lacks: install it, then {how}"]
+    if record.get("torch_dist") != torch:  # the distribution's version (torch.__version__ may add +cuXXX)
+        return [
+            f"{method}'s native build at {build} was made for PyTorch {record.get('torch_dist')}, this Python has "
+            f"{torch}: rebuild it (`slamrun native-build {method}`)"
+        ]
+    if weights is not None:
+        return [] if Path(weights).is_file() else [f"{method}: params.weights: {weights} not found"]
+    if not (build / record.get("weights_file", f"weights/{weights_name}")).is_file():
+        return [
+            f"{method}'s native build at {build} holds no network: rebuild with --weights {weights_name}=FILE (or "
+            f"--standin-model for plumbing tests), or give params.weights"
+        ]
+    return []
+
+
+class NativeGpuMethod(PythonProcess, Method):
+    """A GPU method run as slamrun's own Python process: natively from a build in slamrun's cache, or in its image."""
+
+    needs_gpu = True
+    native = True
+    modules = ("torch", "numpy", "cv2")
+    image_build: str  # where the image holds the build (its network in weights/)
+    weights_name: str  # the network's file name (dpvo.pth, droid.pth)
+    recipe: Path  # the image's Dockerfile
+    backend: str = "local"
+
+    @abstractmethod
+    def default_build(self) -> Path:
+        """Where slamrun's cache holds this method's native build (each GPU method names its own)."""
+
+    def for_backend(self, backend: str) -> Method:
+        method = super().for_backend(backend)
+        method.backend = backend
+        return method
+
+    def build_dir(self) -> str:
+        if self.backend != "local":
+            return self.image_build
+        return self.params.build or str(self.default_build())
+
+    def weights(self) -> str:
+        if self.params.weights:
+            return self.params.weights
+        if self.backend != "local":
+            return f"{self.image_build}/weights/{self.weights_name}"
+        record = read_build_record(Path(self.build_dir())) or {}
+        return str(Path(self.build_dir()) / record.get("weights_file", f"weights/{self.weights_name}"))
+
+    def problems(self, backend: str) -> list[str]:
+        if backend != "local":
+            if self.recipe.exists():
+                return []  # a missing image is said by the backend, naming `slamrun images --method NAME`
+            return [f"{self.name}'s image {self.image} has no recipe (no {self.recipe}): use backend: local"]
+        build = Path(self.params.build or self.default_build())
+        return native_problems(build, self.params.weights, self.name, self.weights_name)
