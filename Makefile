@@ -32,7 +32,7 @@ bench: install-dev
 	$(BIN)/python -m bench $(ARGS)
 
 lint: install-dev
-	$(BIN)/ruff check slamrun tests bench docker
+	$(BIN)/ruff check slamrun tests bench
 	$(BIN)/ruff format --check slamrun tests bench
 
 IMAGE_ARGS = $(foreach m,$(METHOD),--method $(m)) $(if $(SOURCES),--sources $(SOURCES)) $(if $(MARCH),--march $(MARCH))
@@ -57,8 +57,8 @@ WHEELS ?= .whl
 GPU_PY ?= 3.12
 OUT ?= gpu-check-out
 
-gpu-wheels:
-	PY=$(PYTHON) scripts/gpu-wheels.sh $(WHEELS) $(GPU_PY)
+gpu-wheels: install
+	PY=$(PYTHON) SLAMRUN_PY=$(BIN)/python scripts/gpu-wheels.sh $(WHEELS) $(GPU_PY)
 
 gpu-check:
 ifeq ($(METHOD),all)

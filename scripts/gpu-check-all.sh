@@ -13,7 +13,6 @@ export PYTHONUNBUFFERED=1 WORK=${WORK:-${TMPDIR:-/tmp}/slamrun-gpu-check}
 export XDG_CACHE_HOME="$WORK/xdg"  # where gpu-check.sh looks for the builds to reuse
 PYTHON=${PYTHON:-python3}
 WHEELS=${WHEELS:-.whl}
-METHODS=(dpvo droid_slam)
 T0=$(date +%s)
 say() { printf '[%s +%4ss] %s\n' "$(date +%T)" "$(( $(date +%s) - T0 ))" "$*"; }
 
@@ -23,6 +22,10 @@ bash scripts/gpu-check.sh "$OUT_DIR/setup" --until-gpu || { say "FAILED in the s
 EIGEN=/usr/include/eigen3
 [ -f "$EIGEN/Eigen/Core" ] || EIGEN="$WORK/eigen3"
 
+# every method with a native build (its declaration), from slamrun list-methods --json
+METHODS=($("$PYTHON" -m slamrun.cli list-methods --json | "$PYTHON" -c '
+import json, sys
+print(*(n for n, m in json.load(sys.stdin).items() if m["native_build"]))')) || { say "FAILED: slamrun list-methods"; exit 1; }
 say "building ${METHODS[*]} side by side (logs: $OUT_DIR/build-<method>.log)"
 pids=()
 for m in "${METHODS[@]}"; do

@@ -32,12 +32,6 @@ FRAMES=${FRAMES:-160}
 TRIALS=${TRIALS:-2}
 JOBS=${JOBS:-$(nproc)}
 METHOD=${METHOD:-dpvo}
-case $METHOD in  # the pinned archives the native build takes (slamrun/images/sources.py), carried in .whl/sources
-  dpvo) ARCHIVES=(DPVO-859bbbfdac6c6185f345003b3c473901fcd13ace.tar.gz) ;;
-  droid_slam) ARCHIVES=(DROID-SLAM-2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99.tar.gz
-                        lietorch-7f687644fcea81ab337831749445224503c1290d.tar.gz) ;;
-  *) echo "gpu-check: METHOD=$METHOD: expected dpvo or droid_slam" >&2; exit 2 ;;
-esac
 
 mkdir -p "$OUT_DIR/logs"
 OUT_DIR=$(cd "$OUT_DIR" && pwd)
@@ -59,7 +53,7 @@ step preflight "the machine: Python, the carried wheels and sources$([ $UNTIL_GP
 logged "$PYTHON" -c 'import sys; print(sys.version); assert sys.version_info >= (3, 11), "slamrun needs Python 3.11+"' \
   || fail "$PYTHON is no Python 3.11+ (set PYTHON)"
 ls "$WHEELS"/pydantic-*.whl "$WHEELS"/pydantic_core-*.whl "$WHEELS/eigen3-headers.tar.gz" \
-  "${ARCHIVES[@]/#/$WHEELS/sources/}" >>"$STEP_LOG" 2>&1 || fail "$WHEELS lacks the carried files: run 'make gpu-wheels' and carry .whl"
+  >>"$STEP_LOG" 2>&1 || fail "$WHEELS lacks the carried files: run 'make gpu-wheels' and carry .whl"
 if [ $UNTIL_GPU = 0 ]; then
   logged "$PYTHON" -c 'import torch; print("torch", torch.__version__, "cuda", torch.version.cuda); assert torch.cuda.is_available(), "no CUDA device"; print(torch.cuda.get_device_name(0), torch.cuda.get_device_capability(0))' \
     || fail "PyTorch with a CUDA device is needed in $PYTHON (see $STEP_LOG)"
@@ -76,7 +70,15 @@ fi
 logged "$PYTHON" -m pip install --no-index --no-deps --no-build-isolation -e .
 SLAMRUN=("$PYTHON" -m slamrun.cli)
 logged "${SLAMRUN[@]}" --version
-logged "$PYTHON" -c "import pydantic, slamrun.engine.spec, slamrun.methods; assert '$METHOD' in slamrun.methods.REGISTRY"
+logged "$PYTHON" -c "import pydantic, slamrun.engine.spec, slamrun.methods"
+# the pinned archives $METHOD's native build takes, from its declaration (slamrun list-methods --json)
+ARCHIVES=($("${SLAMRUN[@]}" list-methods --json | "$PYTHON" -c '
+import json, sys
+m = json.load(sys.stdin).get(sys.argv[1])
+sys.exit(f"no method {sys.argv[1]!r}") if m is None else None
+sys.exit(f"{sys.argv[1]} has no native build") if m["native_build"] is None else print(*m["native_build"]["archives"])
+' "$METHOD" 2>>"$STEP_LOG")) || fail "METHOD=$METHOD: not a method with a native build (slamrun list-methods)"
+ls "${ARCHIVES[@]/#/$WHEELS/sources/}" >>"$STEP_LOG" 2>&1 || fail "$WHEELS/sources lacks $METHOD's archives: run 'make gpu-wheels' and carry .whl"
 
 step eigen "Eigen 3.4's headers from the carried archive"
 if [ -f /usr/include/eigen3/Eigen/Core ]; then
@@ -92,7 +94,7 @@ step synth "a synthetic room: $FRAMES frames at 640x480 (slamrun synth)"
 rm -rf "$WORK/data" && mkdir -p "$WORK/data"
 logged "${SLAMRUN[@]}" synth --frames "$FRAMES" --size 640x480 --seed 0 --scene indoor "$WORK/data/room"
 
-step unpack "$METHOD's pinned sources, checked, unpacked and patched (docker/$METHOD/patches.py)"
+step unpack "$METHOD's pinned sources, checked, unpacked and patched (slamrun/methods/$METHOD/image/patches.py)"
 rm -rf "$WORK/$METHOD-patched"
 logged "${SLAMRUN[@]}" native-build "$METHOD" --unpack-only --sources "$WHEELS/sources" --into "$WORK/$METHOD-patched"
 if [ $UNTIL_GPU = 1 ]; then

@@ -10,8 +10,12 @@ DIR=${1:-.whl}
 PYVER=${2:-3.12}
 PY=${PY:-python3}
 SOURCES=${SOURCES:-../shared/upstream}
-ARCHIVES=(DPVO-859bbbfdac6c6185f345003b3c473901fcd13ace.tar.gz DROID-SLAM-2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99.tar.gz
-          lietorch-7f687644fcea81ab337831749445224503c1290d.tar.gz)
+# the archives of every method with a native build, from their declarations (slamrun list-methods --json): slamrun
+# is run by SLAMRUN_PY (default PY), a Python that has it installed
+ARCHIVES=($("${SLAMRUN_PY:-$PY}" -m slamrun.cli list-methods --json | "${SLAMRUN_PY:-$PY}" -c '
+import json, sys
+print(*sorted({a for m in json.load(sys.stdin).values() if m["native_build"] for a in m["native_build"]["archives"]}))'))
+[ ${#ARCHIVES[@]} -gt 0 ] || { echo "gpu-wheels: no archives: is slamrun installed in ${SLAMRUN_PY:-$PY}? (make gpu-wheels)" >&2; exit 1; }
 # pinned as tested with slamrun (pyproject: pydantic>=2.5); typing-extensions: pydantic 2.14 needs >= 4.14.1;
 # setuptools: installed there only when its own cannot build an editable wheel (older than 70.1, no `wheel`)
 WHEELS=(pydantic==2.14.4 pydantic-core==2.50.5 annotated-types==0.8.0 typing-inspection==0.4.5

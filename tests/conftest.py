@@ -152,3 +152,11 @@ def mount_tmpfs(mount: Path, size_mb: int, why: str) -> Path:
             pytest.fail(f"CI runs as root and must be able to mount a tmpfs ({why})")
         pytest.skip(reason=f"mounting a tmpfs ({why}) needs root")
     return mount
+
+
+def recipe(name: str) -> Path:
+    """The image recipe folder of method `name` (slamrun/methods/<name>/image), or a shared recipe part's
+    (slamrun/methods/recipes/<name>: common, monodepth)."""
+    methods = Path(__file__).resolve().parents[1] / "slamrun" / "methods"
+    own = methods / name / "image"
+    return own if own.is_dir() else methods / "recipes" / name

@@ -14,9 +14,10 @@ import pytest
 
 import slamrun.methods
 from slamrun.datasets.view import Direction, PreparedView, Profile
+from tests.conftest import recipe
 
 ROOT = Path(__file__).resolve().parents[1]
-DRIVER = ROOT / "docker" / "df_orb_slam" / "mono_tum_df.cc"
+DRIVER = recipe("df_orb_slam") / "mono_tum_df.cc"
 
 
 def _view(root: Path) -> PreparedView:

@@ -26,6 +26,7 @@ from slamrun.backends.base import ExecRequest
 from slamrun.datasets.cache import prepare
 from slamrun.datasets.view import Direction, Profile
 from slamrun.engine.campaign import run_campaign
+from slamrun.engine.ledger import Ledger
 from slamrun.engine.spec import load_spec
 from slamrun.errors import InfraError
 from tests.conftest import one_sequence, write_spec
@@ -90,7 +91,8 @@ def in_podman(tag: str) -> None:
 
 @pytest.fixture(scope="module")
 def image(backend):
-    """The reference VO image, built from docker/reference_vo/Dockerfile (Docker's layer cache makes reruns fast)."""
+    """The reference VO image, built from slamrun/methods/reference_vo/image/Dockerfile (Docker's layer cache makes
+    reruns fast)."""
     from slamrun.images.build import build
 
     build(["reference_vo"], log=lambda *a: None)
@@ -120,8 +122,13 @@ def view(tmp_path, tiny_dataset):
     return prepare(tiny_dataset / "seq_a", Direction.forward, Profile.native, tmp_path / "cache")
 
 
-def _no_containers(backend, campaign: str) -> bool:
-    return not backend.client.containers.list(all=True, filters={"label": f"slamrun.campaign={campaign}"})
+def _no_containers(backend, campaign: str, results: Path | None = None) -> bool:
+    """No container of `campaign` is left; with `results`, of that results folder only (another test suite on the
+    same engine may be running a campaign of the same name)."""
+    labels = [f"slamrun.campaign={campaign}"]
+    if results is not None:
+        labels.append(f"slamrun.results={Ledger(results / 'ledger.sqlite', read_only=True).meta('results_id')}")
+    return not backend.client.containers.list(all=True, filters={"label": labels})
 
 
 def _engine_process(backend):
@@ -308,7 +315,7 @@ def test_campaign_with_reference_vo_image(backend, image, tmp_path, vo_dataset):
     # sampled through the run (how many samples depends on the engine's load: a stats call can take a second; the
     # schedule, 2 Hz from the first sample, is checked on a fake clock in tests/test_monitor_rate.py)
     assert len(series) >= 3 and series.t_s.is_monotonic_increasing and series.t_s.iloc[-1] <= df.wall_s[0]
-    assert _no_containers(backend, "t")
+    assert _no_containers(backend, "t", tmp_path / "results")
 
 
 def _running_keys(results: Path) -> set[str]:

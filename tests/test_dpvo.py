@@ -23,14 +23,14 @@ from slamrun.datasets.synth import generate
 from slamrun.datasets.view import Direction, Profile
 from slamrun.images import native
 from slamrun.images.sources import SOURCES
-from slamrun.methods import dpvo_process
 from slamrun.methods.dpvo import Dpvo, DpvoParams
+from slamrun.methods.dpvo import process as dpvo_process
 from slamrun.methods.native_gpu import native_problems as gpu_native_problems
-from tests.conftest import require_upstream, unpack_upstream
+from tests.conftest import recipe, require_upstream, unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
-PATCHES = ROOT / "docker" / "dpvo" / "patches.py"
-COMPAT = ROOT / "docker" / "dpvo" / "torch_scatter_compat.py"
+PATCHES = recipe("dpvo") / "patches.py"
+COMPAT = recipe("dpvo") / "torch_scatter_compat.py"
 
 
 def patch_tree(dest: Path) -> Path:
@@ -192,10 +192,10 @@ def test_settings_are_the_authors_defaults(patched):
 def test_registered_native_needing_a_gpu_with_an_image_recipe():
     cls = slamrun.methods.get("dpvo")
     assert cls is Dpvo and cls.needs_gpu is True and cls.native and cls.profile is Profile.rectified
-    assert Dpvo().problems("docker") == []  # docker/dpvo/Dockerfile (tests/test_dpvo_image.py)
+    assert Dpvo().problems("docker") == []  # slamrun/methods/dpvo/image/Dockerfile (tests/test_dpvo_image.py)
     from slamrun.images.build import buildable
 
-    assert buildable()["dpvo"] == ("slamrun/dpvo:latest", ROOT / "docker" / "dpvo" / "Dockerfile")
+    assert buildable()["dpvo"] == ("slamrun/dpvo:latest", recipe("dpvo") / "Dockerfile")
 
 
 def fake_build(folder: Path, torch: str | None, weights: bool = True) -> Path:
@@ -231,7 +231,7 @@ def test_command_carries_the_settings_and_the_build(tmp_path):
 
     view = make_view(tmp_path / "v", 1000 + np.arange(40) / 30, Profile.rectified)
     argv = m.command(view, tmp_path / "work")
-    assert argv[:3] == [sys.executable, "-m", "slamrun.methods.dpvo_process"]
+    assert argv[:3] == [sys.executable, "-m", "slamrun.methods.dpvo.process"]
     opts = dict(zip(argv[3::2], argv[4::2], strict=False))
     assert opts["--build"] == str(build) and opts["--weights"] == str(build / "weights/dpvo.pth")
     assert opts["--stride"] == "1" and opts["--patches-per-frame"] == "64" and opts["--seed"] == "3"
@@ -259,7 +259,7 @@ def test_runner_reads_the_view_and_stops_at_the_missing_gpu(tmp_path, room_view,
     weights = tmp_path / "dpvo.pth"
     weights.write_bytes(b"x")
     argv = [
-        sys.executable, "-m", "slamrun.methods.dpvo_process", "--build", str(patched.parent), "--weights", str(weights),
+        sys.executable, "-m", "slamrun.methods.dpvo.process", "--build", str(patched.parent), "--weights", str(weights),
         "--images", str(room_view.path("images")), "--times", str(room_view.path("times.txt")),
         "--camera", str(room_view.path("camera_pinhole.json")), "--out", str(tmp_path / "t.txt"),
     ]  # fmt: skip

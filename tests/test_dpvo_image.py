@@ -1,4 +1,5 @@
-"""DPVO's image (docker/dpvo): its recipe against the pins (every PyPI file by SHA-256, one CUDA version for PyTorch
+"""DPVO's image (slamrun/methods/dpvo/image): its recipe against the pins (every PyPI file by SHA-256, one CUDA version
+for PyTorch
 and the compiler, the compiler left out of the runtime stage, the native route's patches and stand-in reused), the
 labels `slamrun images` gives it, its refusal without a network before any download, and, when the image
 slamrun/dpvo has been built, its compiled extensions and DPVO's package imported inside it without a GPU."""
@@ -19,10 +20,10 @@ from slamrun.images import native
 from slamrun.images import sources as src
 from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
 from tests import images
-from tests.conftest import UPSTREAM, require_upstream
+from tests.conftest import UPSTREAM, recipe, require_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
-RECIPE = ROOT / "docker" / "dpvo"
+RECIPE = recipe("dpvo")
 DOCKERFILE = RECIPE / "Dockerfile"
 IMAGE = "slamrun/dpvo:latest"
 ARCHS = "7.5 8.0 8.6 8.9 9.0"  # Turing, A100, Ampere consumer, Ada, Hopper (issue 41)
@@ -98,12 +99,13 @@ def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_pat
     assert "USER slam" in runtime and "useradd --create-home --uid 1000 slam" in runtime
     assert ARCH_ARG.search(build).group(1) == ARCHS
     # the native route's files, not copies: patches.py (with the torch_scatter stand-in) and the stand-in network
-    assert native.PATCHES == RECIPE / "patches.py" and native.STANDIN == RECIPE / "standin_model.py"
-    assert "docker/dpvo/patches.py docker/dpvo/torch_scatter_compat.py" in build
-    assert "docker/dpvo/standin_model.py" in build
+    recipe_ = native.NATIVE["dpvo"]
+    assert recipe_.patches == RECIPE / "patches.py" and recipe_.standin == RECIPE / "standin_model.py"
+    assert "slamrun/methods/dpvo/image/patches.py slamrun/methods/dpvo/image/torch_scatter_compat.py" in build
+    assert "slamrun/methods/dpvo/image/standin_model.py" in build
     script = (RECIPE / "network.sh").read_text()
     seed, gain = re.search(r"seed=(\d+) gain=(\d+)", script).groups()
-    assert (int(seed), float(gain)) == (native.STANDIN_SEED, native.STANDIN_FLOW_GAIN)
+    assert recipe_.standin_args == (seed, str(float(gain)))
 
 
 def test_the_extension_build_script_compiles_with_the_wheels_toolkit_for_the_given_targets():
@@ -129,7 +131,7 @@ def test_labels_name_torch_cuda_and_the_targets():
         "slamrun.cuda-arch": ARCHS,
     }
     assert toolchain_labels(DOCKERFILE, wheels, {"TORCH_CUDA_ARCH_LIST": "9.0"})["slamrun.cuda-arch"] == "9.0"
-    reference = ROOT / "docker" / "reference_vo" / "Dockerfile"
+    reference = recipe("reference_vo") / "Dockerfile"
     assert toolchain_labels(reference, pypi_files_of(reference), {}) == {}  # not a GPU image
 
 
@@ -235,7 +237,7 @@ def test_the_compiled_extensions_and_dpvo_import_inside_the_image_without_a_gpu(
 
 
 def test_slamruns_dpvo_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
-    """The image's `python3 -m slamrun.methods.dpvo_process`, as the docker backend runs it, on a real prepared view: it
+    """The image's `python3 -m slamrun.methods.dpvo.process`, as the docker backend runs it, on a real prepared view: it
     reads the frames and the network, imports PyTorch, and exits 3 saying there is no GPU."""
     from slamrun.datasets.cache import prepare
     from slamrun.datasets.synth import generate
@@ -245,7 +247,7 @@ def test_slamruns_dpvo_process_in_the_image_reads_a_view_and_stops_at_the_missin
     api, _ = built_image()
     view = prepare(generate(tmp_path / "room", frames=20, seed=3), Direction.forward, Profile.rectified, tmp_path / "c")
     argv = [
-        "python3", "-m", "slamrun.methods.dpvo_process", "--build", IMAGE_BUILD, "--weights", IMAGE_WEIGHTS,
+        "python3", "-m", "slamrun.methods.dpvo.process", "--build", IMAGE_BUILD, "--weights", IMAGE_WEIGHTS,
         "--images", f"/data/{view.images_dir}", "--times", f"/data/{view.times}",
         "--camera", "/data/camera_pinhole.json",
         "--out", "/tmp/trajectory.txt",

@@ -23,12 +23,12 @@ from slamrun.datasets.synth import generate
 from slamrun.datasets.view import Direction, Profile
 from slamrun.images import native
 from slamrun.images.sources import SOURCES
-from slamrun.methods import droid_slam_process as proc
 from slamrun.methods.droid_slam import DroidSlam, DroidSlamParams
-from tests.conftest import UPSTREAM, require_upstream
+from slamrun.methods.droid_slam import process as proc
+from tests.conftest import UPSTREAM, recipe, require_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
-PATCHES = ROOT / "docker" / "droid_slam" / "patches.py"
+PATCHES = recipe("droid_slam") / "patches.py"
 TOP = SOURCES["droid_slam"].top
 # what DROID's modules may import at their top level once patched: PyTorch, NumPy, OpenCV, lietorch and the two
 # compiled extensions, DROID's own flat modules, and the standard library
@@ -202,10 +202,10 @@ def test_images_are_resized_as_demo_py_does():
 def test_registered_native_needing_a_gpu_with_an_image_recipe():
     cls = slamrun.methods.get("droid_slam")
     assert cls is DroidSlam and cls.needs_gpu and cls.native and cls.profile is Profile.rectified
-    from slamrun.images.build import WEIGHTS, buildable
+    from slamrun.images.build import buildable, weights_of
 
-    assert buildable()["droid_slam"] == ("slamrun/droid_slam:latest", ROOT / "docker" / "droid_slam" / "Dockerfile")
-    assert WEIGHTS["droid_slam"].name == "droid.pth" and WEIGHTS["droid_slam"].standin
+    assert buildable()["droid_slam"] == ("slamrun/droid_slam:latest", recipe("droid_slam") / "Dockerfile")
+    assert weights_of("droid_slam").name == "droid.pth" and weights_of("droid_slam").standin
     with pytest.raises(Exception, match="stride"):
         DroidSlam({"stride": 0})
     with pytest.raises(Exception, match="extra"):
@@ -245,7 +245,7 @@ def test_command_carries_every_setting_and_the_build(tmp_path):
     m = DroidSlam({"build": str(build), "stride": 1, "buffer": 300, "upsample": True, "seed": 5}).for_backend("local")
     view = make_view(tmp_path / "v", 1000 + np.arange(40) / 30, Profile.rectified)
     argv = m.command(view, tmp_path / "work")
-    assert argv[:3] == [sys.executable, "-m", "slamrun.methods.droid_slam_process"]
+    assert argv[:3] == [sys.executable, "-m", "slamrun.methods.droid_slam.process"]
     opts = dict(zip(argv[3::2], argv[4::2], strict=True))
     assert opts["--build"] == str(build) and opts["--weights"] == str(build / "weights/droid.pth")
     assert opts["--stride"] == "1" and opts["--buffer"] == "300" and opts["--upsample"] == "1" and opts["--seed"] == "5"
@@ -269,7 +269,7 @@ def room_view(tmp_path_factory):
 
 def process_argv(view, build: Path, weights: Path, out: Path, times: Path | None = None) -> list[str]:
     return [
-        sys.executable, "-m", "slamrun.methods.droid_slam_process", "--build", str(build), "--weights", str(weights),
+        sys.executable, "-m", "slamrun.methods.droid_slam.process", "--build", str(build), "--weights", str(weights),
         "--images", str(view.path("images")), "--times", str(times or view.path("times.txt")),
         "--camera", str(view.path("camera_pinhole.json")), "--out", str(out),
     ]  # fmt: skip
@@ -374,10 +374,8 @@ def test_native_build_without_weights_names_droid_pth_and_where_it_is_published(
         native.build("orb_slam2", native.NativeOptions(into=tmp_path / "b"), log=lambda m: None)
 
 
-def test_the_cli_offers_every_native_recipe():
-    from slamrun.cli.native import NATIVE
-
-    assert set(NATIVE) == set(native.NATIVE)
+def test_every_declared_native_recipe_is_built_by_the_cli():
+    assert set(native.NATIVE) == {"dpvo", "droid_slam"}  # the methods whose declarations have a native_build
     for name, m in native.NATIVE.items():
         assert slamrun.methods.get(name).native and m.patches.is_file() and m.standin.is_file()
         assert m.default_build().name == name

@@ -1,4 +1,5 @@
-"""DROID-SLAM's image (docker/droid_slam): its recipe against DPVO's (the same torch stage word for word, so one list of
+"""DROID-SLAM's image (slamrun/methods/droid_slam/image): its recipe against DPVO's (the same torch stage word for
+word, so one list of
 pins and one set of cached layers), the compiler left out of the runtime stage, the native route's patches and
 stand-in reused, its labels and its refusal without a network; and, when the image slamrun/droid_slam has been
 built, inside it without a GPU: the compiled extensions and DROID's modules import, lietorch's SE3 inverse on a known
@@ -21,13 +22,13 @@ from slamrun.images import native
 from slamrun.images import sources as src
 from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
 from tests import images
-from tests.conftest import UPSTREAM, require_upstream
+from tests.conftest import UPSTREAM, recipe, require_upstream
 from tests.test_dpvo_image import stages
 
 ROOT = Path(__file__).resolve().parents[1]
-RECIPE = ROOT / "docker" / "droid_slam"
+RECIPE = recipe("droid_slam")
 DOCKERFILE = RECIPE / "Dockerfile"
-DPVO = ROOT / "docker" / "dpvo" / "Dockerfile"
+DPVO = recipe("dpvo") / "Dockerfile"
 IMAGE = "slamrun/droid_slam:latest"
 ARCHS = "7.5 8.0 8.6 8.9 9.0"
 TOOLCHAIN = {"nvidia-cuda-nvcc", "nvidia-cuda-crt", "nvidia-nvvm", "nvidia-cuda-cccl", "ninja"}
@@ -46,13 +47,13 @@ def test_the_torch_stage_is_dpvos_word_for_word():
     """Up to the patches, the build stage is DPVO's: the same wheels (one pinned list, DPVO_TORCH and DPVO_TOOLCHAIN),
     the same requirement files, the same commands, so that an engine that built one serves the other from its cache."""
     mine, theirs = instructions(DOCKERFILE.read_text()), instructions(DPVO.read_text())
-    shared = next(i for i, line in enumerate(theirs) if "docker/dpvo/patches.py" in line)
+    shared = next(i for i, line in enumerate(theirs) if "slamrun/methods/dpvo/image/patches.py" in line)
     assert shared >= 9 and mine[:shared] == theirs[:shared]
     assert pypi_files_of(DOCKERFILE) == pypi_files_of(DPVO)
     assert [f.filename for f in (*src.pypi_table(src.DPVO_TORCH), *src.pypi_table(src.DPVO_TOOLCHAIN))] == (
         pypi_files_of(DOCKERFILE)
     )
-    assert "COPY docker/dpvo/requirements.txt /opt/slamrun-build/" in mine[:shared]
+    assert "COPY slamrun/methods/dpvo/image/requirements.txt /opt/slamrun-build/" in mine[:shared]
     assert not (RECIPE / "requirements.txt").exists()  # no second copy of the pins
 
 
@@ -70,13 +71,14 @@ def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_rec
     recipe = native.NATIVE["droid_slam"]
     assert recipe.patches == RECIPE / "patches.py" and recipe.standin == RECIPE / "standin_model.py"
     assert recipe.parts == (("lietorch", "thirdparty/lietorch"),)
-    assert "docker/droid_slam/patches.py" in build and "docker/dpvo/torch_scatter_compat.py" in build
+    assert "slamrun/methods/droid_slam/image/patches.py" in build
+    assert "slamrun/methods/dpvo/image/torch_scatter_compat.py" in build
     script = (RECIPE / "network.sh").read_text()
     seed, flow = re.search(r"seed=(\d+) flow_px=(\d+)", script).groups()
-    assert (int(seed), float(flow)) == (native.DROID_STANDIN_SEED, native.DROID_STANDIN_FLOW_PX)
     assert recipe.standin_args == (seed, str(float(flow)))
     # the process runs with its helpers from DPVO's process, both copied in
-    assert "COPY slamrun/methods/dpvo_process.py slamrun/methods/droid_slam_process.py /opt/slamrun/methods/" in runtime
+    assert "COPY slamrun/methods/dpvo/process.py /opt/slamrun/slamrun/methods/dpvo/" in runtime
+    assert "COPY slamrun/methods/droid_slam/process.py /opt/slamrun/slamrun/methods/droid_slam/" in runtime
 
 
 def test_the_build_scripts_place_lietorch_as_the_native_build_does_and_parse():
@@ -86,12 +88,12 @@ def test_the_build_scripts_place_lietorch_as_the_native_build_does_and_parse():
     for folder, exts in native.NATIVE["droid_slam"].setups:
         where = '"$tree"' if folder == "." else f'"$tree/{folder}"'
         assert f'bash "$compile" {where} "$arch" "$jobs" {" ".join(exts)}' in script
-    common = (ROOT / "docker" / "common" / "build-torch-extension.sh").read_text()
+    common = (recipe("common") / "build-torch-extension.sh").read_text()
     assert 'CUDA_HOME=$cuda TORCH_CUDA_ARCH_LIST="$arch"' in common and "libcudart.so.13" in common
     for path in (
         RECIPE / "build-extensions.sh",
         RECIPE / "network.sh",
-        ROOT / "docker/common/build-torch-extension.sh",
+        ROOT / "slamrun/methods/recipes/common/build-torch-extension.sh",
     ):
         res = subprocess.run(["bash", "-n", str(path)], capture_output=True, text=True)
         assert res.returncode == 0, (path, res.stderr)
@@ -237,7 +239,7 @@ def test_the_torch_scatter_stand_in_matches_pytorch_scatters_own_code(tmp_path):
 
 
 def test_slamruns_droid_slam_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
-    """The image's `python3 -m slamrun.methods.droid_slam_process`, as the docker backend runs it, on a real prepared
+    """The image's `python3 -m slamrun.methods.droid_slam.process`, as the docker backend runs it, on a real prepared
     view: it reads the frames and the network, imports PyTorch and exits 3 saying there is no GPU."""
     from slamrun.datasets.cache import prepare
     from slamrun.datasets.synth import generate

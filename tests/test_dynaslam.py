@@ -1,4 +1,5 @@
-"""DynaSLAM's image (docker/dynaslam): its patches on the real archive, its Python 2.7 packages (pinned in
+"""DynaSLAM's image (slamrun/methods/dynaslam/image): its patches on the real archive, its Python 2.7 packages (pinned
+in
 slamrun/images/sources.py, installed by hash), the fetch path refusing a wrong or missing wheel, its weights
 choice, and Mask R-CNN loading under the image's Python 2.7 (when the image has been built)."""
 
@@ -15,10 +16,10 @@ from slamrun.images import sources as src
 from slamrun.images.build import BuildOptions, model_choice, pypi_files_of, vocabulary_choice
 from slamrun.images.sources import SourceError, obtain_pypi
 from tests import images
-from tests.conftest import UPSTREAM, loopback_server, require_upstream, unpack_upstream
+from tests.conftest import UPSTREAM, loopback_server, recipe, require_upstream, unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
-RECIPE = ROOT / "docker" / "dynaslam"
+RECIPE = recipe("dynaslam")
 IMAGE = "slamrun/dynaslam:latest"
 
 
@@ -67,11 +68,12 @@ def test_the_patches_stop_on_an_upstream_change(tmp_path):
 
 
 def test_the_other_orb_slam2_recipes_still_patch_their_trees(tmp_path):
-    """The family DynaSLAM shares (docker/common) keeps ORB-SLAM2's and DF-ORB-SLAM's patches working."""
+    """The family DynaSLAM shares (slamrun/methods/recipes/common) keeps ORB-SLAM2's and DF-ORB-SLAM's patches
+    working."""
     for name in ("orb_slam2", "df_orb_slam"):
         root = unpack_upstream(name, tmp_path / name)
         res = subprocess.run(
-            [sys.executable, str(ROOT / "docker" / name / "patches.py"), str(root)], capture_output=True, text=True
+            [sys.executable, str(recipe(name) / "patches.py"), str(root)], capture_output=True, text=True
         )
         assert res.returncode == 0, (name, res.stderr)
 

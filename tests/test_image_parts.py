@@ -11,10 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from tests.conftest import loopback_server, unpack_upstream
+from tests.conftest import loopback_server, recipe, unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCKER = ROOT / "docker"
 
 
 def tree(root: Path, files: dict[str, str]) -> Path:
@@ -32,7 +31,7 @@ def run(script: Path, *args) -> subprocess.CompletedProcess:
 def test_orb_slam2_patches_on_the_real_tree(tmp_path):
     root = unpack_upstream("orb_slam2", tmp_path)
     assert not (root / "Vocabulary" / "ORBvoc.txt.tar.gz").exists()  # why the build trains one here
-    res = run(DOCKER / "orb_slam2" / "patches.py", root)
+    res = run(recipe("orb_slam2") / "patches.py", root)
     assert res.returncode == 0, res.stderr
     assert "MONOCULAR,false);" in (root / "Examples/Monocular/mono_tum.cc").read_text()
     loop = (root / "src/LoopClosing.cc").read_text()
@@ -50,14 +49,14 @@ def test_orb_slam2_patches_on_the_real_tree(tmp_path):
     broken = unpack_upstream("orb_slam2", tmp_path / "broken")
     lc = broken / "src/LoopClosing.cc"
     lc.write_text(lc.read_text().replace("bool LoopClosing::DetectLoop()\n{", "bool LoopClosing::DetectLoop() {"))
-    res = run(DOCKER / "orb_slam2" / "patches.py", broken)
+    res = run(recipe("orb_slam2") / "patches.py", broken)
     assert res.returncode != 0 and "src/LoopClosing.cc" in res.stderr and "found 0 times" in res.stderr
 
 
 def test_df_orb_slam_monocular_fixes_on_the_real_tree(tmp_path):
     root = unpack_upstream("df_orb_slam", tmp_path)
     assert not (root / "Examples" / "Monocular").exists()  # upstream has only the ROS node
-    res = run(DOCKER / "df_orb_slam" / "patches.py", root)
+    res = run(recipe("df_orb_slam") / "patches.py", root)
     assert res.returncode == 0, res.stderr
     tracking = (root / "src/Tracking.cc").read_text()
     mono = tracking[tracking.index("cv::Mat Tracking::GrabImageMonocular") :]
@@ -79,7 +78,7 @@ def test_df_orb_slam_monocular_fixes_on_the_real_tree(tmp_path):
 
 def test_dynaslam_patches_on_the_real_tree(tmp_path):
     root = unpack_upstream("dynaslam", tmp_path)
-    res = run(DOCKER / "dynaslam" / "patches.py", root)
+    res = run(recipe("dynaslam") / "patches.py", root)
     assert res.returncode == 0, res.stderr
     cmake = (root / "CMakeLists.txt").read_text()
     assert "mono_carla" not in cmake and "add_executable(mono_tum" in cmake
@@ -90,7 +89,7 @@ def test_dynaslam_patches_on_the_real_tree(tmp_path):
 
 def test_cnn_dso_and_monodepth_patches_on_the_real_trees(tmp_path):
     cnn = unpack_upstream("cnn_dso", tmp_path)
-    res = run(DOCKER / "cnn_dso" / "patches.py", cnn)
+    res = run(recipe("cnn_dso") / "patches.py", cnn)
     assert res.returncode == 0, res.stderr
     cmake = (cnn / "CMakeLists.txt").read_text()
     for gone in ("/abosolute", "/path/to", "/home/"):
@@ -99,7 +98,7 @@ def test_cnn_dso_and_monodepth_patches_on_the_real_trees(tmp_path):
     assert "tensorflow/" not in (cnn / "src/FullSystem/ImmaturePoint.cpp").read_text()  # DSO stays C++14
     assert "boost::placeholders" in (cnn / "src/util/IndexThreadReduce.h").read_text()  # DSO's own fixes too
     md = unpack_upstream("monodepth-cpp", tmp_path)
-    res = run(DOCKER / "monodepth" / "patches.py", md)
+    res = run(recipe("monodepth") / "patches.py", md)
     assert res.returncode == 0, res.stderr
     mcm = (md / "CMakeLists.txt").read_text()
     assert "-std=c++17" in mcm and "FIND_PACKAGE(TensorFlow REQUIRED)" not in mcm
@@ -110,7 +109,7 @@ def test_cnn_svo_patches_on_the_real_trees(tmp_path):
     cnn = unpack_upstream("cnn_svo", tmp_path)
     sophus = unpack_upstream("sophus", tmp_path)
     fast = unpack_upstream("fast", tmp_path)
-    res = run(DOCKER / "cnn_svo" / "patches.py", cnn, sophus, fast)
+    res = run(recipe("cnn_svo") / "patches.py", cnn, sophus, fast)
     assert res.returncode == 0, res.stderr
     cm = (cnn / "rpg_svo/svo/CMakeLists.txt").read_text()
     assert "SET(USE_ROS FALSE)" in cm and "${HOME}" not in cm and "ADD_EXECUTABLE(cnn_svo_offline" in cm
@@ -121,7 +120,7 @@ def test_cnn_svo_patches_on_the_real_trees(tmp_path):
 
 def test_dso_patches_on_the_real_tree(tmp_path):
     root = unpack_upstream("dso", tmp_path)
-    res = run(DOCKER / "dso" / "patches.py", root)
+    res = run(recipe("dso") / "patches.py", root)
     assert res.returncode == 0, res.stderr
     ird = (root / "src/util/IndexThreadReduce.h").read_text()
     assert ird.index('#include "boost/thread.hpp"') < ird.index("using namespace boost::placeholders;")
@@ -130,13 +129,13 @@ def test_dso_patches_on_the_real_tree(tmp_path):
     cmake = (root / "CMakeLists.txt").read_text()
     assert "-std=c++14" in cmake and "c++0x" not in cmake
     # patched twice (a second run on the same tree) fails instead of patching twice
-    again = run(DOCKER / "dso" / "patches.py", root)
+    again = run(recipe("dso") / "patches.py", root)
     assert again.returncode != 0
 
 
 def test_dsm_patches_on_the_real_tree(tmp_path):
     root = unpack_upstream("dsm", tmp_path)
-    res = run(DOCKER / "dsm" / "patches.py", root)
+    res = run(recipe("dsm") / "patches.py", root)
     assert res.returncode == 0, res.stderr
     fs = (root / "dsm/src/FullSystem/FullSystem.h").read_text()
     assert fs.index("#include <mutex>") < fs.index("#include <condition_variable>")
@@ -150,7 +149,7 @@ def test_dsm_patches_on_the_real_tree(tmp_path):
 def test_ldso_patches_on_the_real_tree(tmp_path):
     root = unpack_upstream("ldso", tmp_path)
     assert not (root / "vocab" / "orbvoc.dbow3").exists()  # why the build trains one here
-    res = run(DOCKER / "ldso" / "patches.py", root)
+    res = run(recipe("ldso") / "patches.py", root)
     assert res.returncode == 0, res.stderr
     bow = (root / "thirdparty/DBoW3/src/BowVector.h").read_text()
     assert all(f"#include <{h}>" in bow for h in ("cstdint", "cstddef", "iostream", "string"))
@@ -158,7 +157,7 @@ def test_ldso_patches_on_the_real_tree(tmp_path):
     assert "_mm_popcnt_u64" not in matcher and "__builtin_popcount(v)" in matcher
     main = (root / "examples/run_dso_tum_mono.cc").read_text()
     assert 'if (viewer) viewer->saveAsPLYFile("./pointcloud.ply");' in main
-    march = subprocess.run([str(DOCKER / "common" / "portable-march.sh"), str(root)], capture_output=True, text=True)
+    march = subprocess.run([str(recipe("common") / "portable-march.sh"), str(root)], capture_output=True, text=True)
     assert march.returncode == 0, march.stderr
     for cmake in (root / "CMakeLists.txt", root / "thirdparty/g2o/CMakeLists.txt"):  # both sides of libg2o alike
         assert "-march=x86-64-v2" in cmake.read_text() and "-march=native" not in cmake.read_text()
@@ -168,7 +167,7 @@ def test_a_moved_anchor_fails_naming_the_file(tmp_path):
     root = unpack_upstream("dso", tmp_path)
     ird = root / "src/util/IndexThreadReduce.h"
     ird.write_text(ird.read_text().replace('#include "boost/thread.hpp"', "#include <boost/thread.hpp>"))
-    res = run(DOCKER / "dso" / "patches.py", root)
+    res = run(recipe("dso") / "patches.py", root)
     assert res.returncode != 0
     assert "src/util/IndexThreadReduce.h" in res.stderr and "found 0 times" in res.stderr
 
@@ -181,7 +180,7 @@ def test_portable_march(tmp_path):
             "sub/CMakeLists.txt": "add_compile_options(-march=native -mtune=native)\n",
         },
     )
-    res = subprocess.run([str(DOCKER / "common" / "portable-march.sh"), str(root)], capture_output=True, text=True)
+    res = subprocess.run([str(recipe("common") / "portable-march.sh"), str(root)], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     assert "-march=x86-64-v2" in (root / "CMakeLists.txt").read_text()
     assert "native" not in (root / "sub/CMakeLists.txt").read_text()
@@ -196,7 +195,7 @@ def weights_server(tmp_path):
 
 def test_fetch_checks_the_checksum(tmp_path, weights_server):
     url, sha = weights_server
-    fetch = str(DOCKER / "common" / "fetch.sh")
+    fetch = str(recipe("common") / "fetch.sh")
     env = {**os.environ, "ALLOW_UNVERIFIED": "0"}
     ok = subprocess.run([fetch, url, sha, str(tmp_path / "a.h5")], capture_output=True, text=True, env=env)
     assert ok.returncode == 0, ok.stderr
@@ -217,10 +216,10 @@ def test_images_and_what_their_builds_take():
     from slamrun.images.build import buildable, pypi_files_of, sources_of
 
     wheel = "tensorflow_cpu-2.21.0-cp311-cp311-manylinux_2_27_x86_64.whl"
-    assert pypi_files_of(DOCKER / "cnn_dso" / "Dockerfile") == [wheel]
-    assert pypi_files_of(DOCKER / "cnn_svo" / "Dockerfile") == [wheel]
-    assert pypi_files_of(DOCKER / "dso" / "Dockerfile") == []
-    assert sources_of(DOCKER / "cnn_dso" / "Dockerfile") == ["pangolin-0.6", "monodepth-cpp", "cnn_dso"]
+    assert pypi_files_of(recipe("cnn_dso") / "Dockerfile") == [wheel]
+    assert pypi_files_of(recipe("cnn_svo") / "Dockerfile") == [wheel]
+    assert pypi_files_of(recipe("dso") / "Dockerfile") == []
+    assert sources_of(recipe("cnn_dso") / "Dockerfile") == ["pangolin-0.6", "monodepth-cpp", "cnn_dso"]
     assert set(buildable()) == {
         "orb_slam2",
         "df_orb_slam",
@@ -243,7 +242,7 @@ def test_no_recipe_step_can_fail_silently():
     """`|| true` (or `|| :`) after a build command hides its failure: no Dockerfile may hold one."""
     import re
 
-    for dockerfile in DOCKER.glob("*/Dockerfile"):
+    for dockerfile in (ROOT / "slamrun" / "methods").glob("*/image/Dockerfile"):
         text = dockerfile.read_text()
         assert not re.search(r"\|\|\s*(true|:)\b", text), f"{dockerfile}: a step that cannot fail"
         assert "set +e" not in text, dockerfile

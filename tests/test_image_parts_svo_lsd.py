@@ -18,10 +18,9 @@ import yaml
 
 import slamrun.methods
 from slamrun.datasets.view import Direction, PreparedView
-from tests.conftest import unpack_upstream
+from tests.conftest import recipe, unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCKER = ROOT / "docker"
 FIXTURES = Path(__file__).parent / "fixtures"
 GET_PARAM = re.compile(r'getParam<[^>]*>\("(svo/\w+)"')
 
@@ -39,7 +38,7 @@ def svo_trees(tmp_path: Path) -> tuple[Path, Path, Path, Path]:
 
 def test_svo_patches_on_the_real_trees(tmp_path):
     svo, vikit, fast, sophus = svo_trees(tmp_path)
-    res = run(DOCKER / "svo" / "patches.py", svo, vikit, fast, sophus)
+    res = run(recipe("svo") / "patches.py", svo, vikit, fast, sophus)
     assert res.returncode == 0, res.stderr
     cm = (svo / "svo/CMakeLists.txt").read_text()
     assert "SET(USE_ROS FALSE)" in cm and "ADD_DEFINITIONS(-DSLAMRUN_PARAMS)" in cm
@@ -57,14 +56,14 @@ def test_svo_patches_on_the_real_trees(tmp_path):
     assert "SET(BUILD_TEST FALSE)" in fast_cm and '"-std=c++11 -Wall -Werror' in fast_cm
     assert "unit_complex_ = std::complex<double>(1, 0);" in (sophus / "sophus/so2.cpp").read_text()
     # a second run on the patched trees fails instead of patching twice
-    assert run(DOCKER / "svo" / "patches.py", svo, vikit, fast, sophus).returncode != 0
+    assert run(recipe("svo") / "patches.py", svo, vikit, fast, sophus).returncode != 0
 
 
 def test_svo_atan_camera_centre_is_the_models_limit(tmp_path):
     """vikit's ATAN (FOV) camera returned a factor of 1 near the principal point, where the model's factors are
     t/s (distort) and s/t (undistort), t = 2 tan(s/2): the patched branches return exactly those limits."""
     trees = svo_trees(tmp_path)
-    assert run(DOCKER / "svo" / "patches.py", *trees).returncode == 0
+    assert run(recipe("svo") / "patches.py", *trees).returncode == 0
     header = (trees[1] / "vikit_common/include/vikit/atan_camera.h").read_text()
     source = (trees[1] / "vikit_common/src/atan_camera.cpp").read_text()
     assert "if(r < 0.001)  // slamrun: the limit, not 1\n      return s_inv_ * tans_;" in header
@@ -81,7 +80,7 @@ def test_svo_parameters_are_read_by_the_real_tree_and_the_driver(tmp_path, tmp_p
     """Every key the adapters write is one SVO's config (the ROS node's getParam calls) or the driver reads."""
     svo = unpack_upstream("svo", tmp_path)
     read = set(GET_PARAM.findall((svo / "svo/src/config.cpp").read_text()))
-    read |= set(GET_PARAM.findall((DOCKER / "svo/svo_offline.cpp").read_text()))
+    read |= set(GET_PARAM.findall((recipe("svo") / "svo_offline.cpp").read_text()))
     view = PreparedView(
         Path("/data"), "s", Direction.forward, slamrun.methods.get("svo").profile, 10, 1.0, 1.3, 640, 480, None
     )
@@ -89,7 +88,7 @@ def test_svo_parameters_are_read_by_the_real_tree_and_the_driver(tmp_path, tmp_p
     assert set(params) <= read, set(params) - read
     assert {"svo/init_min_disparity", "svo/max_fts", "svo/grid_size"} <= set(params)
     cnn = unpack_upstream("cnn_svo", tmp_path_factory.mktemp("cnn"))
-    read = set(GET_PARAM.findall((DOCKER / "cnn_svo/cnn_svo_offline.cpp").read_text()))
+    read = set(GET_PARAM.findall((recipe("cnn_svo") / "cnn_svo_offline.cpp").read_text()))
     for f in (cnn / "rpg_svo/svo/src").glob("*.cpp"):
         read |= set(GET_PARAM.findall(f.read_text(errors="ignore")))
     profile = slamrun.methods.get("cnn_svo").profile
@@ -106,7 +105,7 @@ def test_svo_parameters_are_read_by_the_real_tree_and_the_driver(tmp_path, tmp_p
 
 def test_the_svo_driver_restarts_a_paused_system():
     """svo_offline restarts SVO when an initialisation failure paused it, and exits 3 without a pose."""
-    driver = (DOCKER / "svo/svo_offline.cpp").read_text()
+    driver = (recipe("svo") / "svo_offline.cpp").read_text()
     loop = driver[driver.index("vo->addImage(img, frames[i].t);") :]
     assert loop.index("STAGE_PAUSED") < loop.index("vo->start();")
     assert "return n_poses > 0 ? 0 : 3;" in driver
@@ -118,7 +117,7 @@ def test_the_svo_driver_restarts_a_paused_system():
 
 def test_lsd_slam_patches_on_the_real_tree(tmp_path):
     root = unpack_upstream("lsd_slam", tmp_path)
-    res = run(DOCKER / "lsd_slam" / "patches.py", root)
+    res = run(recipe("lsd_slam") / "patches.py", root)
     assert res.returncode == 0, res.stderr
     src = root / "lsd_slam_core/src"
     itr = (src / "util/IndexThreadReduce.h").read_text()
@@ -130,7 +129,7 @@ def test_lsd_slam_patches_on_the_real_tree(tmp_path):
     )
     core = "".join(p.read_text() for p in src.rglob("*.[ch]*") if "ROS" not in p.parts)
     assert "cvPoint(" not in core and not re.search(r"\bCV_(GRAY2RGB|LOAD_IMAGE_\w+|AA)\b", core)
-    assert run(DOCKER / "lsd_slam" / "patches.py", root).returncode != 0  # anchors: never patched twice
+    assert run(recipe("lsd_slam") / "patches.py", root).returncode != 0  # anchors: never patched twice
 
 
 def cmake_list(text: str, var: str) -> list[str]:
@@ -145,7 +144,7 @@ def test_lsd_slam_core_sources_are_upstreams(tmp_path):
     place of the OpenCV one (IOWrapper/ROS is left out)."""
     root = unpack_upstream("lsd_slam", tmp_path)
     upstream = (root / "lsd_slam_core/CMakeLists.txt").read_text()
-    ours = (DOCKER / "lsd_slam/CMakeLists.txt").read_text()
+    ours = (recipe("lsd_slam") / "CMakeLists.txt").read_text()
     assert sorted(cmake_list(ours, "LSD_CORE_SOURCES")) == sorted(cmake_list(upstream, "lsd_SOURCE_FILES"))
     extra = set(cmake_list(upstream, "SOURCE_FILES")) - set(cmake_list(upstream, "lsd_SOURCE_FILES"))
     assert extra == {
@@ -156,7 +155,7 @@ def test_lsd_slam_core_sources_are_upstreams(tmp_path):
     declared = re.findall(
         r"^\s*(?:void|int)\s+(\w+)\(", (root / "lsd_slam_core/src/IOWrapper/ImageDisplay.h").read_text(), re.M
     )
-    headless = (DOCKER / "lsd_slam/image_display_headless.cpp").read_text()
+    headless = (recipe("lsd_slam") / "image_display_headless.cpp").read_text()
     assert set(declared) == {"displayImage", "waitKey", "waitKeyNoConsume", "closeAllWindows"}
     for name in declared:
         assert re.search(rf"\b(void|int) {name}\(", headless), name
@@ -173,7 +172,7 @@ def test_the_lsd_slam_driver_uses_the_ros_nodes_settings(tmp_path):
             f"[{call.replace('bool_t', 'None').replace('double_t', 'None').replace('int_t', 'None')}]"
         )
         defaults[args[0]] = args[4]
-    driver = (DOCKER / "lsd_slam/lsd_slam_offline.cpp").read_text()
+    driver = (recipe("lsd_slam") / "lsd_slam_offline.cpp").read_text()
     body = driver[driver.index("void ros_node_settings(bool loop) {") :]
     body = body[: body.index("\n}\n")]
     assigned = dict(re.findall(r"^\s*(\w+) = ([^;]+);", body, re.M))

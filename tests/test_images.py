@@ -12,7 +12,7 @@ import pytest
 from slamrun.errors import InfraError, SlamRunError
 from slamrun.images.build import BuildOptions, build, build_one, image_labels, sources_of, vocabulary_choice
 from slamrun.images.sources import SOURCES
-from tests.conftest import UPSTREAM, require_upstream
+from tests.conftest import UPSTREAM, recipe, require_upstream
 from tests.test_docker import engine_with_base
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,7 +30,7 @@ def opts(tmp_path) -> BuildOptions:
 
 
 def test_dockerfiles_name_their_sources():
-    assert sources_of(ROOT / "docker" / "dso" / "Dockerfile") == ["pangolin-0.6", "dso"]
+    assert sources_of(recipe("dso") / "Dockerfile") == ["pangolin-0.6", "dso"]
     for dockerfile in (ROOT / "docker").glob("*/Dockerfile"):
         assert all(s in SOURCES for s in sources_of(dockerfile)), dockerfile  # raises on an unknown name
 
@@ -85,7 +85,8 @@ def test_a_patch_whose_anchor_is_missing_fails_the_build_naming_step_and_file(cl
     dockerfile = tmp_path / "Dockerfile"
     dockerfile.write_text(
         "FROM slamrun/reference_vo:latest\nUSER root\n"
-        "COPY docker/common /b/common\nCOPY docker/dso /b/dso\nCOPY sources/dso.tar.gz /b/\n"
+        "COPY slamrun/methods/recipes/common /b/common\nCOPY slamrun/methods/dso/image /b/dso\n"
+        "COPY sources/dso.tar.gz /b/\n"
         "RUN /b/common/unpack.sh /b/dso.tar.gz /opt/dso "
         "&& sed -i 's|\"boost/thread.hpp\"|<boost/thread.hpp>|' /opt/dso/src/util/IndexThreadReduce.h "
         "&& python3 /b/dso/patches.py /opt/dso\n"
@@ -151,7 +152,8 @@ def test_the_network_an_image_holds_is_given_a_stand_in_or_a_clear_error(tmp_pat
     assert model_choice("cnn_dso", given)[0] == "given"
     with pytest.raises(SlamRunError, match="mask_rcnn_coco.h5.*matterport"):
         model_choice("dynaslam", BuildOptions())
-    assert model_choice("dynaslam", BuildOptions(standin_model=True))[0] == "standin"  # docker/dynaslam makes one
+    # slamrun/methods/dynaslam/image makes one
+    assert model_choice("dynaslam", BuildOptions(standin_model=True))[0] == "standin"
 
 
 def test_every_pypi_file_of_a_continued_copy_is_found(tmp_path):
@@ -162,9 +164,8 @@ def test_every_pypi_file_of_a_continued_copy_is_found(tmp_path):
     dockerfile = tmp_path / "Dockerfile"
     dockerfile.write_text("FROM x\nCOPY pypi/a-1-py3-none-any.whl \\\n     pypi/b-2-py3-none-any.whl /tmp/\nRUN true\n")
     assert pypi_files_of(dockerfile) == ["a-1-py3-none-any.whl", "b-2-py3-none-any.whl"]
-    from slamrun.images.build import ROOT
 
-    assert len(pypi_files_of(ROOT / "docker" / "reference_vo" / "Dockerfile")) == 3
+    assert len(pypi_files_of(recipe("reference_vo") / "Dockerfile")) == 3
 
 
 def test_each_recipe_names_the_debian_base_slamrun_makes_when_missing():

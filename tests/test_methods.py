@@ -22,6 +22,7 @@ from slamrun.errors import MethodFailure, TrajectoryFormatError
 from slamrun.images.build import sources_of
 from slamrun.images.sources import SOURCES
 from slamrun.methods.base import Method
+from tests.conftest import recipe
 
 ROOT = Path(__file__).resolve().parents[1]
 # upstream commits, as methods.md pins them
@@ -132,7 +133,7 @@ def test_svo_family_parameters_parse_back(views):
     assert params["svo/cam_model"] == "ATAN" and params["svo/camera_file"] == "/data/camera.txt"
     assert params["svo/dataset_directory"] == "/data" and params["svo/output_file"] == "/work/traj_estimate.txt"
     assert params["svo/trace_dir"] == "/work" and params["svo/max_fts"] == 150
-    assert params["svo/init_min_disparity"] == 10.0  # lower than SVO's 50 px: see slamrun/methods/svo.py
+    assert params["svo/init_min_disparity"] == 10.0  # lower than SVO's 50 px: see slamrun/methods/svo/__init__.py
     assert m.command(v, Path("/work")) == ["/opt/svo/bin/svo_offline", "/work/svo_params.yaml"]
     assert m.accepts_exit(3, Path("/work")) and not m.accepts_exit(1, Path("/work"))  # 3: no pose written
     assert m.failure_from_log("slamrun: never initialised\n") == "not_initialized"
@@ -342,7 +343,7 @@ def test_local_backend_needs_a_local_build(tiny_dataset, tmp_path):
 def test_every_module_is_registered_and_every_image_has_a_folder():
     classes = set()
     for mod in pkgutil.walk_packages(slamrun.methods.__path__, "slamrun.methods."):
-        if mod.name.endswith("__main__") or mod.name.endswith("colmap_process"):
+        if mod.name.endswith("__main__") or mod.name.endswith("colmap.process"):
             continue
         module = importlib.import_module(mod.name)
         for obj in vars(module).values():
@@ -355,12 +356,12 @@ def test_every_module_is_registered_and_every_image_has_a_folder():
                 classes.add(obj)
     assert classes == set(slamrun.methods.REGISTRY.values())
     for name, cls in slamrun.methods.REGISTRY.items():
-        assert cls.native or (ROOT / "docker" / name / "Dockerfile").exists(), name
+        assert cls.native or cls.recipe().exists(), name
 
 
 @pytest.mark.parametrize("name", sorted(COMMITS))
 def test_dockerfile_pins_commit_and_portable_flags(name):
-    docker = ROOT / "docker" / name
+    docker = recipe(name)
     text = (docker / "Dockerfile").read_text()
     if name in sources_of(docker / "Dockerfile"):  # the source by its pinned commit, from the build context
         assert SOURCES[name].commit.startswith(COMMITS[name])

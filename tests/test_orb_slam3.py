@@ -24,11 +24,10 @@ from slamrun.core.trajectory import read_tum
 from slamrun.datasets.view import Direction, Profile
 from slamrun.errors import MethodFailure
 from slamrun.methods.orb_slam3 import INDEX, MapsReport
-from tests.conftest import unpack_upstream
+from tests.conftest import recipe, unpack_upstream
 from tests.test_methods import make_view
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCKER = ROOT / "docker"
 IMAGE = "slamrun/orb_slam3:latest"
 
 
@@ -44,8 +43,8 @@ def test_orb_slam3_patches_on_the_real_tree(tmp_path):
     assert not (root / "Vocabulary" / "ORBvoc.txt.tar.gz").exists()  # why the build trains one here
     trainer = tmp_path / "trainer"
     trainer.mkdir()
-    shutil.copy(DOCKER / "orb_slam2" / "train_orb_vocabulary.cc", trainer)
-    res = run(DOCKER / "orb_slam3" / "patches.py", root, trainer)
+    shutil.copy(recipe("orb_slam2") / "train_orb_vocabulary.cc", trainer)
+    res = run(recipe("orb_slam3") / "patches.py", root, trainer)
     assert res.returncode == 0, res.stderr
     mono = (root / "Examples/Monocular/mono_tum.cc").read_text()
     assert "ORB_SLAM3::System::MONOCULAR,false);" in mono
@@ -90,7 +89,7 @@ def test_a_moved_anchor_fails_the_orb_slam3_build_naming_the_file(tmp_path):
     lc = root / "src/LoopClosing.cc"
     text = lc.read_text().replace("    if(!mbActiveLC)\n        return false;\n", "    if(!mbActiveLC) return false;\n")
     lc.write_text(text)
-    res = run(DOCKER / "orb_slam3" / "patches.py", root)
+    res = run(recipe("orb_slam3") / "patches.py", root)
     assert res.returncode != 0 and "src/LoopClosing.cc" in res.stderr and "found 0 times" in res.stderr
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from slamrun.cli.console import console
@@ -10,6 +11,7 @@ from slamrun.errors import SlamRunError
 
 def add_commands(sub) -> None:
     lm = sub.add_parser("list-methods", help="the registered methods")
+    lm.add_argument("--json", action="store_true", help="as JSON, for scripts (image, GPU, pinned archives)")
     lm.set_defaults(func=cmd_list_methods)
     im = sub.add_parser("images", help="build (and verify) the methods' Docker images")
     im.add_argument("--method", action="append", help="only this method (repeatable)")
@@ -73,6 +75,9 @@ def cmd_list_methods(args) -> int:
 
     import slamrun.methods
 
+    if args.json:
+        print(json.dumps(methods_json(), indent=1))
+        return 0
     t = Table(title="methods")
     for c in ("name", "view", "image", "gpu", "native", "loop closure switch", "from"):
         t.add_column(c)
@@ -93,14 +98,35 @@ def cmd_list_methods(args) -> int:
     return 0
 
 
+def methods_json() -> dict:
+    """Each method as scripts read it (scripts/gpu-check.sh, gpu-wheels.sh): its image, GPU needs, the file names of
+    the pinned archives its image builds from, and its native build's (null without one)."""
+    import slamrun.methods
+    from slamrun.images.sources import SOURCES
+    from slamrun.methods.declare import declared
+
+    out = {}
+    for name, cls in slamrun.methods.REGISTRY.items():
+        native = declared(cls, "native_build")
+        out[name] = {
+            "image": cls.image if isinstance(cls.image, str) else None,
+            "gpu": "required" if cls.needs_gpu is True else "optional" if cls.gpu_capable else "no",
+            "native": bool(cls.native),
+            "archives": [s.filename for s in declared(cls, "sources", ())],
+            "native_build": {"archives": [SOURCES[s].filename for s in native.archives]} if native else None,
+        }
+    return out
+
+
 def cmd_images(args) -> int:
     import slamrun.methods
-    from slamrun.images.build import BuildOptions, build, buildable
+    from slamrun.images.build import METHODS, BuildOptions, build, buildable
 
     if args.list:
         for name, (tag, dockerfile) in buildable().items():
             gpu = " (GPU optional, CPU by default)" if slamrun.methods.REGISTRY[name].gpu_capable else ""
-            console.print(f"{name}: {tag} <- {dockerfile.parent.name}/Dockerfile{gpu}")
+            where = dockerfile.relative_to(METHODS) if dockerfile.is_relative_to(METHODS) else dockerfile
+            console.print(f"{name}: {tag} <- {where}{gpu}")
         return 0
     opts = BuildOptions(
         sources_dir=args.sources,

@@ -6,15 +6,13 @@ from pathlib import Path
 
 from slamrun.cli.console import console
 
-NATIVE = ("dpvo", "droid_slam")  # slamrun/images/native.py NATIVE
-
 
 def add_commands(sub) -> None:
     nb = sub.add_parser(
         "native-build",
-        help="compile a GPU method (dpvo, droid_slam) for backend: local with this Python's PyTorch, into the cache",
+        help="compile a GPU method for backend: local with this Python's PyTorch, into the cache",
     )
-    nb.add_argument("method", choices=NATIVE, help="the method to build")
+    nb.add_argument("method", help="the method to build (`slamrun list-methods` names those with a native build)")
     nb.add_argument("--sources", type=Path, help="folder holding the pinned source archive (no network needed)")
     nb.add_argument("--source-url", help="base address of the source archives (default https://github.com)")
     nb.add_argument("--arch", help="CUDA compute capability to build for, e.g. 9.0 (default: this machine's GPU)")

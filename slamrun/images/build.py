@@ -1,11 +1,11 @@
 """Build the methods' Docker images: `slamrun images` / `make images [METHOD=name] [SOURCES=DIR]`.
 
-Each image is built from `docker/<name>/Dockerfile` in a build context the runner assembles: the
-project's `docker/` and `slamrun/methods/` folders, the upstream sources the Dockerfile copies
-(`COPY sources/<source>.tar.gz ...`, checked archives from a folder or GitHub, see slamrun/images/sources.py) and
-the inputs a build needs (`inputs/`: a vocabulary, weights, frames to train a vocabulary on). Build
-arguments (MARCH, JOBS, VOCABULARY, any --build-arg) reach the Dockerfile. The image carries labels saying
-what it holds (sources and commits, vocabulary, weights, target). Every build writes its log to
+Each image is built from `slamrun/methods/<name>/image/Dockerfile` in a build context the runner assembles:
+slamrun's `slamrun/methods/` folder (every method's folder and the shared recipe parts, `recipes/`), the upstream
+sources the Dockerfile copies (`COPY sources/<source>.tar.gz ...`, checked archives from a folder or GitHub, see
+slamrun/images/sources.py) and the inputs a build needs (`inputs/`: a vocabulary, weights, frames to train a
+vocabulary on). Build arguments (MARCH, JOBS, VOCABULARY, any --build-arg) reach the Dockerfile. The image carries
+labels saying what it holds (sources and commits, vocabulary, weights, target). Every build writes its log to
 `<log_dir>/<name>.log` and a record (`<name>.json`: time, size, labels); a failed build names the step and
 shows the end of its output.
 """
@@ -25,8 +25,10 @@ from pathlib import Path
 import slamrun.methods
 from slamrun.errors import InfraError, SlamRunError
 from slamrun.images import sources as src
+from slamrun.methods.declare import Vocabulary, Weights, declared
 
 ROOT = Path(__file__).resolve().parents[2]
+METHODS = Path(slamrun.methods.__file__).parent  # each method's folder: its adapter, its image/ recipe
 DEFAULT_LOG_DIR = ROOT / ".cache" / "images"
 SOURCE_RE = re.compile(r"\bsources/([A-Za-z0-9_.+-]+)\.tar\.gz\b")
 PYPI_RE = re.compile(r"\bpypi/([A-Za-z0-9_.+-]+\.(?:whl|tar\.gz|zip))(?![A-Za-z0-9_.+-])")  # wheels and sdists
@@ -34,66 +36,16 @@ LABEL = "slamrun"
 ANSI = re.compile(r"\x1b\[[0-9;]*m")  # the builder colours a step's stderr
 
 
-@dataclass(frozen=True)
-class Vocabulary:
-    """A bag-of-words vocabulary a method loads: where its source tree keeps it, and its format."""
-
-    source: str  # the source archive that normally holds it
-    path: str  # its path in that tree
-    format: str  # dbow3 (LDSO) or dbow2-text (ORB-SLAM2 family)
+def vocabulary_of(name: str) -> Vocabulary | None:
+    """The vocabulary method `name` declares (its folder's declaration), if any."""
+    cls = slamrun.methods.REGISTRY.get(name)
+    return declared(cls, "vocabulary") if cls else None
 
 
-VOCABULARIES = {
-    "ldso": Vocabulary("ldso", "vocab/orbvoc.dbow3", "dbow3"),
-    "orb_slam2": Vocabulary("orb_slam2", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
-    "df_orb_slam": Vocabulary("df_orb_slam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
-    "dynaslam": Vocabulary("dynaslam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),
-    "orb_slam3": Vocabulary("orb_slam3", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text"),  # the same as ORB-SLAM2's
-}
-
-
-@dataclass(frozen=True)
-class Weights:
-    """A trained network an image needs (`--weights NAME=FILE`), where its authors publish it, and whether an
-    untrained stand-in with the same interface can replace it for plumbing tests (`--standin-model`)."""
-
-    name: str
-    published: str
-    standin: bool = False
-    arg: str = "MONODEPTH_MODEL"  # the build argument that says given or standin
-
-
-MONODEPTH = Weights(
-    "model_city2kitti.pb",
-    "a frozen MonoDepth graph: monodepth-cpp's model/README.md links the converted graph, freeze_graph/README.md "
-    "the VGG (city2kitti) and ResNet50 graphs; MonoDepth's site serves .zip checkpoints only, which "
-    "freeze_graph/freeze_graph.py (TensorFlow 1.x) turns into a .pb",
-    standin=True,
-)
-WEIGHTS = {
-    "cnn_dso": MONODEPTH,
-    "cnn_svo": MONODEPTH,
-    "dynaslam": Weights(
-        "mask_rcnn_coco.h5",
-        "the matterport/Mask_RCNN GitHub release v2.0 (mask_rcnn_coco.h5)",
-        standin=True,
-        arg="MASK_RCNN_MODEL",
-    ),
-    "dpvo": Weights(
-        "dpvo.pth",
-        "DPVO's download_models_and_data.sh: models.zip (https://www.dropbox.com/s/nap0u8zslspdwm4/models.zip), "
-        "which holds dpvo.pth",
-        standin=True,
-        arg="DPVO_MODEL",
-    ),
-    "droid_slam": Weights(
-        "droid.pth",
-        "DROID-SLAM's tools/download_model.sh (`gdown 1PpqVt1H4maBa_GbPJp4NwxRsd9jk-elh`, a Google Drive file: "
-        "https://drive.google.com/uc?id=1PpqVt1H4maBa_GbPJp4NwxRsd9jk-elh)",
-        standin=True,
-        arg="DROID_MODEL",
-    ),
-}
+def weights_of(name: str) -> Weights | None:
+    """The trained network method `name` declares, if any."""
+    cls = slamrun.methods.REGISTRY.get(name)
+    return declared(cls, "network") if cls else None
 
 
 @dataclass
@@ -128,7 +80,7 @@ def buildable() -> dict[str, tuple[str, Path]]:
     """Registered methods with an image: name → (tag, Dockerfile)."""
     out = {}
     for name, cls in sorted(slamrun.methods.REGISTRY.items()):
-        dockerfile = ROOT / "docker" / name / "Dockerfile"
+        dockerfile = cls.recipe()
         if cls.native and not dockerfile.exists():  # runs natively; its image's recipe is not written yet
             continue
         if isinstance(cls.image, str):  # `external` names its image per spec (a property), not built here
@@ -171,7 +123,7 @@ def toolchain_labels(dockerfile: Path, wheels: list[str], build_args: dict[str, 
 def model_choice(name: str, opts: BuildOptions) -> tuple[str, str]:
     """How the image of `name` gets its network: (given | standin | none, what it is); an error naming the
     file and where it is published when there is none."""
-    w = WEIGHTS.get(name)
+    w = weights_of(name)
     if w is None:
         return "none", ""
     if w.name in opts.weights:
@@ -201,7 +153,7 @@ def sources_of(dockerfile: Path) -> list[str]:
 
 def vocabulary_choice(name: str, archives: dict[str, Path], opts: BuildOptions) -> tuple[str, str]:
     """How the image of `name` gets its vocabulary: (source | given | trained | none, what it is)."""
-    vocab = VOCABULARIES.get(name)
+    vocab = vocabulary_of(name)
     if vocab is None:
         return "none", ""
     given = opts.vocabulary.get(name) or opts.vocabulary.get("*")
@@ -227,8 +179,7 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
     """Fill `ctx` with what the build of `name` reads; returns the labels describing it."""
     model, model_detail = model_choice(name, opts)  # a missing network is said before anything is fetched
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    shutil.copytree(ROOT / "docker", ctx / "docker", ignore=ignore)
-    shutil.copytree(ROOT / "slamrun" / "methods", ctx / "slamrun" / "methods", ignore=ignore)
+    shutil.copytree(METHODS, ctx / "slamrun" / "methods", ignore=ignore)
     (ctx / "sources").mkdir()
     inputs = ctx / "inputs"
     inputs.mkdir()
@@ -251,7 +202,7 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
         if kind == "given":
             given = opts.vocabulary.get(name) or opts.vocabulary.get("*")
             (inputs / "vocabulary").mkdir()
-            shutil.copyfile(given, inputs / "vocabulary" / VOCABULARIES[name].path.rsplit("/", 1)[-1])
+            shutil.copyfile(given, inputs / "vocabulary" / vocabulary_of(name).path.rsplit("/", 1)[-1])
         elif kind == "trained":
             training_frames(inputs / "train-frames")
     wheels = pypi_files_of(dockerfile)
@@ -271,11 +222,12 @@ def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path,
             shutil.copyfile(path, inputs / "weights" / wname)
             weights[wname] = f"{path.name} sha256 {src.file_sha256(path)}"
     if model == "standin":
-        weights[WEIGHTS[name].name] = model_detail
+        weights[weights_of(name).name] = model_detail
     if weights:
         labels[f"{LABEL}.weights"] = json.dumps(weights)
         log(f"weights of {name}: {json.dumps(weights)}")
-    args = {"VOCABULARY": kind} | ({WEIGHTS[name].arg: model} if model != "none" and WEIGHTS[name].standin else {})
+    w = weights_of(name)
+    args = {"VOCABULARY": kind} | ({w.arg: model} if model != "none" and w.standin else {})
     labels[f"{LABEL}.build-args"] = json.dumps(args | opts.build_args)
     return labels
 
@@ -331,7 +283,7 @@ def build(
     for name in names or list(targets):
         tag, dockerfile = targets[name]
         if not dockerfile.exists():
-            raise SlamRunError(f"{dockerfile}: missing; every method with an image needs its docker/<name>/ folder")
+            raise SlamRunError(f"{dockerfile}: missing; every method with an image needs its image/ folder")
         if only_missing and client.images(name=tag):
             continue
         ensure_bases(client, dockerfile, log)

@@ -3,13 +3,12 @@
 A method's CUDA extensions (DPVO's cuda_corr, cuda_ba, lietorch_backends; DROID-SLAM's lietorch_backends and
 droid_backends) are compiled once into slamrun's cache ($XDG_CACHE_HOME/slamrun/native/<method>, the method module's
 default_build) from the pinned archives (slamrun/images/sources.py; DROID-SLAM's lietorch unpacked into its submodule
-folder) with the same patches as the image (docker/<method>/patches.py), by and for the Python that runs slamrun: its
-PyTorch (a CUDA build), the CUDA toolkit of $CUDA_HOME or of the nvcc on PATH, Eigen 3.4's headers (Debian's
-libeigen3-dev, or a folder given), for one GPU architecture (the local GPU's by default), with all cores. The build
-folder is staged and renamed into place at the end, so a failed build never replaces a working one. It holds the
+folder) with the same patches as the image (slamrun/methods/<method>/image/patches.py), by and for the Python that runs
+slamrun: its PyTorch (a CUDA build), the CUDA toolkit of $CUDA_HOME or of the nvcc on PATH, Eigen 3.4's headers
+(Debian's libeigen3-dev, or a folder given), for one GPU architecture (the local GPU's by default), with all cores. The
+build folder is staged and renamed into place at the end, so a failed build never replaces a working one. It holds the
 patched tree with the extensions beside it, the network (given, or an untrained stand-in), build.log and build.json
-(what it is). NATIVE names each method's recipe (NativeMethod); one code path builds them all.
-"""
+(what it is). NATIVE holds each method's recipe (its declaration's native_build); one code path builds them all."""
 
 from __future__ import annotations
 
@@ -24,26 +23,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import slamrun.methods
 from slamrun.errors import SlamRunError
 from slamrun.images import sources as src
 from slamrun.images.build import ROOT, BuildOptions, _weights_file, model_choice
-from slamrun.methods import dpvo as dpvo_method
-from slamrun.methods import droid_slam as droid_slam_method
+from slamrun.methods.declare import NativeMethod, declared
 
-PATCHES = ROOT / "docker" / "dpvo" / "patches.py"
-STANDIN = ROOT / "docker" / "dpvo" / "standin_model.py"  # the stand-in network, the image's too
 DEFAULT_CUDA = "/usr/local/cuda"
 EIGEN_CANDIDATES = ("/usr/include/eigen3", "/usr/local/include/eigen3")
-EXTENSIONS = ("cuda_corr", "cuda_ba", "lietorch_backends")
-STANDIN_SEED = 0  # the same as docker/dpvo/network.sh's
-# A random network's flow head gives sub-pixel updates, which DPVO's motion probe (median >= 2 px before it starts)
-# takes for a still camera: it would never initialise. The stand-in's flow head (update.d, Linear(384, 2)) is scaled
-# so that its updates are a few pixels and the whole pipeline runs (patches, BA, keyframes, terminate).
-STANDIN_FLOW_GAIN = 16.0
-# DROID-SLAM's stand-in (docker/droid_slam/standin_model.py, the same arguments as its network.sh): its flow head
-# (update.delta) scaled to a mean flow of 8 px on random inputs, above the motion filter's 2.4 px
-DROID_STANDIN_SEED = 0
-DROID_STANDIN_FLOW_PX = 8.0
 TAIL_LINES = 30
 
 
@@ -51,58 +38,8 @@ class NativeBuildError(SlamRunError):
     """A native build cannot start (no PyTorch with CUDA, no nvcc, no Eigen, no GPU to build for) or failed."""
 
 
-@dataclass(frozen=True)
-class NativeMethod:
-    """How `slamrun native-build <name>` makes a method: its archives, patches, extensions and stand-in network."""
-
-    name: str
-    label: str  # as messages name it
-    source: str  # the main archive (slamrun/images/sources.py); its top folder is the tree
-    parts: tuple[tuple[str, str], ...]  # (source, folder of the tree): archives unpacked into submodule folders
-    patches: Path
-    setups: tuple[tuple[str, tuple[str, ...]], ...]  # (folder of the tree holding a setup.py, the extensions it makes)
-    import_path: tuple[str, ...]  # folders of the tree on sys.path for the import check
-    weights_name: str
-    standin: Path
-    standin_args: tuple[str, ...]  # after TREE OUT: the seed and the stand-in's scale
-    standin_note: str  # what the stand-in is, {out} its script's last line (the gain it applied)
-    default_build: Callable[[], Path]
-
-    @property
-    def extensions(self) -> tuple[str, ...]:
-        return tuple(e for _, exts in self.setups for e in exts)
-
-
-NATIVE: dict[str, NativeMethod] = {
-    "dpvo": NativeMethod(
-        name="dpvo",
-        label="DPVO",
-        source="dpvo",
-        parts=(),
-        patches=PATCHES,
-        setups=((".", EXTENSIONS),),
-        import_path=(".",),
-        weights_name=dpvo_method.WEIGHTS_NAME,
-        standin=STANDIN,
-        standin_args=(str(STANDIN_SEED), str(STANDIN_FLOW_GAIN)),
-        standin_note=f"random init, torch seed {STANDIN_SEED}, flow head x{STANDIN_FLOW_GAIN:g}",
-        default_build=dpvo_method.default_build,
-    ),
-    "droid_slam": NativeMethod(
-        name="droid_slam",
-        label="DROID-SLAM",
-        source="droid_slam",
-        parts=(("lietorch", "thirdparty/lietorch"),),
-        patches=ROOT / "docker" / "droid_slam" / "patches.py",
-        setups=(("thirdparty/lietorch", ("lietorch_backends",)), (".", ("droid_backends",))),
-        import_path=("thirdparty/lietorch", "droid_slam", "."),
-        weights_name=droid_slam_method.WEIGHTS_NAME,
-        standin=ROOT / "docker" / "droid_slam" / "standin_model.py",
-        standin_args=(str(DROID_STANDIN_SEED), str(DROID_STANDIN_FLOW_PX)),
-        standin_note=f"random init, torch seed {DROID_STANDIN_SEED}, {{out}} for a mean flow of "
-        f"{DROID_STANDIN_FLOW_PX:g} px",
-        default_build=droid_slam_method.default_build,
-    ),
+NATIVE: dict[str, NativeMethod] = {  # each method's native_build, from its folder's declaration
+    name: recipe for name, cls in slamrun.methods.REGISTRY.items() if (recipe := declared(cls, "native_build"))
 }
 
 
@@ -275,7 +212,7 @@ def build_environment(opts: NativeOptions, log: Callable[[str], None]) -> dict[s
 
 def unpack_and_patch(m: NativeMethod, archives: dict[str, Path], dest: Path, log: Callable[[str], None]) -> Path:
     """The method's archive unpacked into `dest`, each part's into its (empty) submodule folder, then patched
-    (docker/<method>/patches.py); returns the tree."""
+    (slamrun/methods/<method>/image/patches.py); returns the tree."""
     with tarfile.open(archives[m.source], "r:gz") as tar:
         tar.extractall(dest, filter="data")
     tree = dest / src.SOURCES[m.source].top
@@ -348,7 +285,7 @@ def place_weights(
 
 
 def standin_network(python: str, tree: Path, dest: Path, m: NativeMethod) -> str:
-    """The method's network with random weights from a fixed seed, its flow head scaled (docker/<method>/
+    """The method's network with random weights from a fixed seed, its flow head scaled (slamrun/methods/<method>/image/
     standin_model.py, as the image makes it; needs the compiled extensions, not a GPU); returns the script's last line
     (what it applied, where it says)."""
     argv = [python, str(m.standin), str(tree), str(dest), *m.standin_args]

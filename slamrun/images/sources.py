@@ -1,4 +1,5 @@
-"""The upstream sources the method images build from, each named once by its full commit.
+"""The upstream sources the method images build from, each named once by its full commit (in the declaration of the
+method that builds from it, or among the libraries several share: slamrun/methods/libraries.py).
 
 A source is the archive GitHub serves for a commit (`https://github.com/<owner>/<repo>/archive/<commit>.tar.gz`,
 one top folder `<repo>-<commit>/`). It comes from a folder (`slamrun images --sources DIR`) or from the network
@@ -21,9 +22,11 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
+import slamrun.methods
 from slamrun.errors import SlamRunError
+from slamrun.methods.declare import GITHUB, Source, declared
+from slamrun.methods.libraries import LIBRARIES
 
-GITHUB = "https://github.com"
 PYPI = "https://pypi.org"
 
 
@@ -31,230 +34,18 @@ class SourceError(SlamRunError):
     """A source archive is missing, unreachable or not the pinned tree."""
 
 
-@dataclass(frozen=True)
-class Source:
-    name: str  # the name Dockerfiles use: COPY sources/<name>.tar.gz
-    repo: str  # owner/name on GitHub
-    commit: str  # full 40-hex commit
-    sha256: str  # of the archive as stored in the study's folder of upstream archives
-    tree: str  # tree_digest() of its content
-    absent: tuple[str, ...] = ()  # files the stored archives lack (vocabularies, GIFs); "dir/": all files below
-
-    @property
-    def filename(self) -> str:
-        return f"{self.repo.split('/')[1]}-{self.commit}.tar.gz"
-
-    @property
-    def top(self) -> str:
-        return f"{self.repo.split('/')[1]}-{self.commit}"
-
-    def url(self, base: str = GITHUB) -> str:
-        return f"{base.rstrip('/')}/{self.repo}/archive/{self.commit}.tar.gz"
+def _declared_sources() -> dict[str, Source]:
+    """Every pinned source: the libraries several images share, then each method's own (its folder's declaration).
+    A name two declarations give different pins is refused."""
+    out: dict[str, Source] = {}
+    methods_sources = (s for cls in slamrun.methods.REGISTRY.values() for s in declared(cls, "sources", ()))
+    for s in (*LIBRARIES, *methods_sources):
+        if out.setdefault(s.name, s) != s:
+            raise SlamRunError(f"source {s.name!r} is declared twice with different pins: {out[s.name]} and {s}")
+    return out
 
 
-# name, owner/repo, commit, sha256 of the stored archive, files the stored archives lack (not in the tree digest)
-_TABLE = (
-    (
-        "orb_slam2",
-        "raulmur/ORB_SLAM2",
-        "f2e6f51cdc8d067655d90a78c06261378e07e8f3",
-        "9470620833e1e57aff2aec40a5e90a8c4f55f4bbb7da218dbe234210db320404",
-        ("Vocabulary/ORBvoc.txt.tar.gz",),
-    ),
-    (
-        "df_orb_slam",
-        "834810269/DF-ORB-SLAM",
-        "462425d61903fa6efc71dde3011cbc3c920c2c16",
-        "d071d346217e4e1612cd441f16cfca8eb32cf39f33e68d3bcf3ebe84a61cc8cb",
-        ("Vocabulary/ORBvoc.txt.tar.gz",),
-    ),
-    (
-        "lsd_slam",
-        "tum-vision/lsd_slam",
-        "d1e6f0e1a027889985d2e6b4c0fe7a90b0c75067",
-        "0ddbb5c3256d7bddb4780d2e99fabe57b5b69a858ffd199ecc0366d87b0e677f",
-        (),
-    ),
-    (
-        "dso",
-        "JakobEngel/dso",
-        "7b0c99f01d238f801c625beaff90240bcb007198",
-        "4c3266cf9733af6af1cfe91df25fd770ee0f706d5556af46a661a3cea8d7dfca",
-        (),
-    ),
-    (
-        "svo",
-        "uzh-rpg/rpg_svo",
-        "d6161063b47f36ce78252ee4c4fedf3f6d8f2898",
-        "bab58b0732a03168a4896865d6b888024c7f5f9c4c24e7db301ef8263a8f082b",
-        (),
-    ),
-    (
-        "ldso",
-        "tum-vision/LDSO",
-        "9b0c48cfd3b3ee95a8dbf1aef2371ed4fca6f81a",
-        "b9b39de4a6aa77e50f234ac931912c5e605fe9a0c9f5d5079a02a5d1ff2fd6df",
-        ("vocab/orbvoc.dbow3",),
-    ),
-    (
-        "dsm",
-        "jzubizarreta/dsm",
-        "36ab5cf20ba4f83fc30c48cb0106c85e98aa9008",
-        "1ec626b114e1a8bf649ddcc2f163195001403f0fca769100861f918784aee4a9",
-        (),
-    ),
-    (
-        "dynaslam",
-        "BertaBescos/DynaSLAM",
-        "8f894a8b9d63c0a608fd871d63c10796491b9312",
-        "c99080b422cf68887f8fb98705b46279a899267a243f96bf35185d8c15ea7f34",
-        ("Vocabulary/ORBvoc.txt.tar.gz",),
-    ),
-    (
-        "cnn_dso",
-        "muskie82/CNN-DSO",
-        "46562f00f5237279ecc5777769107058fd31e264",
-        "157813e5371566db4f872cfeafba2476f532e55e8dd35eab0ead7850b2b23776",
-        (),
-    ),
-    (
-        "cnn_svo",
-        "yan99033/CNN-SVO",
-        "d5591ea88103f8d1b26e5296129bf3b3196a14f1",
-        "72af2e352f67a8fc6a2a5fd010ee1fa38e58456316a73be0e7c70d267191abb7",
-        (),
-    ),
-    (
-        "sophus",
-        "strasdat/Sophus",
-        "a621ff2e56c56c839a6c40418d42c3c254424b5c",
-        "ff3b929eee08bd569a10d797158f13528ac30b866ac4c1d4bfbeed65adad93a6",
-        (),
-    ),
-    (
-        "pangolin-0.6",
-        "stevenlovegrove/Pangolin",
-        "dd801d244db3a8e27b7fe8020cd751404aa818fd",
-        "cc7326281613773bc22949da9cd3e06fe68b45a9c848e1a3740f6613e7fb5f2d",
-        (),
-    ),
-    (
-        "pangolin-0.5",
-        "stevenlovegrove/Pangolin",
-        "7987c9ba6b6c2c46fdcf50baae28bfa4f8352696",
-        "e5ea71753fc4ea5c6b6576f12c375ba42a97a61b8b5e740eb21f3e95bb819050",
-        (),
-    ),
-    (
-        "rpg_vikit",
-        "uzh-rpg/rpg_vikit",
-        "10871da6d84c8324212053c40f468c6ab4862ee0",
-        "be35a2b470d0c7307a931a4c337eb1a710bf42d9ae831f9812db2a8ab321e32f",
-        (),
-    ),
-    (
-        "fast",
-        "uzh-rpg/fast",
-        "1153981a7d0263909e998789a5b5029412c28f5a",
-        "75b156ca526ed01a3c27c9b9cd55402e54956a0fea870e4111a71c8676ab4ce3",
-        (),
-    ),
-    (
-        "monodepth-cpp",
-        "yan99033/monodepth-cpp",
-        "1ea2fc30b96deba4e4d094088e4dc9f4c9c7980a",
-        "f538a24032c14f1d7d25cf55fd27c5134d3e27b8e005952e2dfe03fb818c2696",
-        (),
-    ),
-    (  # the TUM-Mono benchmark's own code: its MATLAB evaluator, run under Octave beside slamrun's (bench, tests)
-        "mono_dataset_code",
-        "tum-vision/mono_dataset_code",
-        "3feba2f77488e5b3e05c739c2c7afb57822ad083",
-        "e9091b93701240867ccd1b424771a3b8831c0fcdd2fa264b0a1d2ebd1fdebe99",
-        (),
-    ),
-    (  # after the study (shared/upstream README, "Methods after the study"): ORB-SLAM3 v1.0; the stored archive
-        # lacks the vocabulary, Examples_old/ and the IMU data folders (one file a line in its .absent.txt)
-        "orb_slam3",
-        "UZ-SLAMLab/ORB_SLAM3",
-        "4452a3c4ab75b1cde34e5505a36ec3f9edcdc4c4",
-        "b1cdb64a70f5e2443d1db8ced2a2ae3f4980eda237776ddb51e9c511720147ff",
-        (
-            "Vocabulary/ORBvoc.txt.tar.gz",
-            "Examples_old/",
-            "Examples/Monocular-Inertial/EuRoC_IMU/",
-            "Examples/Monocular-Inertial/TUM_IMU/",
-            "Examples/Stereo-Inertial/EuRoC_IMU/",
-            "Examples/Stereo-Inertial/TUM_IMU/",
-            "evaluation/Ground_truth/EuRoC_imu/",
-        ),
-    ),
-    (
-        "g2o",
-        "RainerKuemmerle/g2o",
-        "17fce87df9d5b2aa7b4239be1fbac9d40c95d72f",
-        "2e9e07587d3f6f06c92b55932a879eecbcbfa65d6863e7070a3df2fbd28854d1",
-        (),
-    ),
-    (  # a method after the study: `slamrun native-build dpvo` compiles it (docker/dpvo/patches.py)
-        "dpvo",
-        "princeton-vl/DPVO",
-        "859bbbfdac6c6185f345003b3c473901fcd13ace",
-        "40c43ebe3be51e5c6e1c9d1a0d866b84b8e285093ce132d8b53ae97bf8b49dfb",
-        (),
-    ),
-    (  # a method after the study: `slamrun native-build droid_slam` compiles it (docker/droid_slam/patches.py)
-        "droid_slam",
-        "princeton-vl/DROID-SLAM",
-        "2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99",
-        "03488a61c5741994523bee7a52ec1a9c0b17175e8fd5a8cf16de4c5fdebd8d91",
-        (),
-    ),
-    (  # DROID-SLAM's submodule thirdparty/lietorch, at the commit it records (Lie groups on PyTorch, compiled with it)
-        "lietorch",
-        "princeton-vl/lietorch",
-        "7f687644fcea81ab337831749445224503c1290d",
-        "2c9c9be882509068e5ec78721d33ebd1258d1311cae2ee82ab399fc77cb94863",
-        (),
-    ),
-    (  # DROID-SLAM's submodule thirdparty/pytorch_scatter, at the commit it records: not compiled (its scatter_sum and
-        # scatter_mean, pure Python there, are docker/dpvo/torch_scatter_compat.py's); the tests check them against it
-        "pytorch_scatter",
-        "rusty1s/pytorch_scatter",
-        "6cf77c420f837a427b0d57965e414d68c1bd89ec",
-        "97e3bddb38fc873a37a8a9f35b1cb08e268ee96effd25dee68dbb9389681e87d",
-        (),
-    ),
-)
-# tree_digest() of each source (absent files excluded), computed from the stored archives
-_TREES = {
-    "orb_slam2": "de0da80496099c3ec5f1c14e9bc64382734ec86d1c6b20b7784d48612106e7f1",
-    "df_orb_slam": "e627762c09476849fe5a6d674039716e105898936eacc425f82967ef6911bc6e",
-    "lsd_slam": "93409377ef6bf87ade71a7c9a3a01aea41e9f0033ea0273ef4f3177912ca6176",
-    "dso": "1fcce03d08190b7850738b94b589f0a3d648be75b46863c401bbc1e9beb77d3f",
-    "svo": "1c4cd0c48c07e3183b17a2fb4235b78f11961a2541eee52782e21ea89ed68cb3",
-    "ldso": "af56865268cbc17eb46ad3becdc474ee36f2f8925e7427dc336d77bdebefc5c2",
-    "dsm": "b56e326732b091996fc6b7af820f528c881ee1fee98fa8c8f695c0b75591dd1b",
-    "dynaslam": "87c56f71a912a1152dfd44d3fbdef9d7171dccc94d8e90619da01c54281c00a9",
-    "cnn_dso": "4924798bf7fad673fc27b2a9853419c8e7fdaa5c3ff4d1eea97e29c934259640",
-    "cnn_svo": "d5bd421d9725dfe656f289c095bf4a0e754e9ebab5d8a3c1499b61eff1a42c91",
-    "sophus": "eb40e486714c49fd3a311d2bd0598a8e3710f54fff9ffc700035eeb6143903f5",
-    "pangolin-0.6": "47161a2af7b2a7aa31203bc473f8aa73e2e3b0e1dea8e6b6fa41f7557ff56223",
-    "pangolin-0.5": "5f26ab14d5f6c8a1c78bb63c072cf1f730b9ca5c2630cee1411196ac541a7bca",
-    "rpg_vikit": "7c9e09f4433287f1b23863859ed0ba54eefc93d0ef43a2ad300f6801bb7da5de",
-    "fast": "b67642e64abe584df9154e7533a70d51de09716518553ff0e40604b335c9156e",
-    "monodepth-cpp": "ce43a2595cc78ee27ca5032022c3773984ef2aad97ec3acb66a80e28647dfac0",
-    "g2o": "e56f748c20bffba0f6880ad1a7b8c65fbbdd551e57ed190735c04faa7d86a70d",
-    "orb_slam3": "6654390006ae4d273a344f485958a454790a6b6dbb00a98465424d410a0832bf",
-    "mono_dataset_code": "1fbd1248c5b48a5f7047af46d8fc00da235c8b0e6783f313815fecb23b86fa25",
-    "dpvo": "4372b2d0909e07a42cf662c73ae98abe687b1a17733fb4dbcb872b60ca36b4a9",
-    "droid_slam": "e7828067e7d5343e85473a5bda4f9b62b5dbcd19cfeb83ca8512334ea717e6ea",
-    "lietorch": "15a27b463eaa0afe8b81101f338c899604d98d1c2c6fe22d9ce100357482fdcb",
-    "pytorch_scatter": "fa24f4f0b8da8c8b98689cdb58b4e1d95489f1a9a93486dd825f8b1e1316ec1f",
-}
-SOURCES: dict[str, Source] = {
-    name: Source(name, repo, commit, sha, _TREES[name], absent) for name, repo, commit, sha, absent in _TABLE
-}
+SOURCES: dict[str, Source] = _declared_sources()
 
 
 def tree_digest(archive: Path, exclude: tuple[str, ...] = ()) -> str:
@@ -384,7 +175,8 @@ class PypiFile:
 # DynaSLAM's Python 2.7 (Mask R-CNN in the image's embedded python2.7): every file pip installs there, as
 # "file name" then its SHA-256 on the next line; project and version come from the file name (pypi_file()).
 # Found with `pip download` run by a Python 2.7.18 (pip 20.3.4) on the top-level pins; the build installs exactly
-# these with --no-index --require-hashes (docker/dynaslam/requirements-py27.txt, checked against this list).
+# these with --no-index --require-hashes (slamrun/methods/dynaslam/image/requirements-py27.txt, checked against this
+# list).
 PY27_DYNASLAM = """
 # pip: the last pip for Python 2: installs everything below with --no-index --require-hashes
 pip-20.3.4-py2.py3-none-any.whl
@@ -494,7 +286,8 @@ wrapt-1.15.0-cp27-cp27mu-manylinux2010_x86_64.whl
 """
 
 
-# DPVO's image (docker/dpvo/Dockerfile), and DROID-SLAM's (docker/droid_slam/Dockerfile, whose build stage starts
+# DPVO's image (slamrun/methods/dpvo/image/Dockerfile), and DROID-SLAM's (slamrun/methods/droid_slam/image/Dockerfile,
+# whose build stage starts
 # with the same steps and the same requirement files: one list for both): PyTorch 2.11.0, the PyPI build for CUDA 13.0
 # (cp311, Debian 12's Python), with every file pip resolves for it, and the CUDA 13.0 compiler as PyPI wheels (no GPU
 # needed to compile). CUDA 13 because PyPI's CUDA 12 compiler wheels (nvidia-cuda-nvcc-cu12, 12.1 to 12.9) hold ptxas
@@ -502,8 +295,10 @@ wrapt-1.15.0-cp27-cp27mu-manylinux2010_x86_64.whl
 # Found with `pip download --only-binary=:all: --python-version 3.11 --platform manylinux_2_{5..36}_x86_64
 # torch==2.11.0 'cuda-toolkit[nvcc,cccl,crt,nvvm]==13.0.2' ninja==1.13.0 numpy==2.2.6
 # opencv-python-headless==4.11.0.86` (and pip==26.3). The runtime stage keeps DPVO_TORCH only
-# (docker/dpvo/requirements.txt); DPVO_TOOLCHAIN compiles the extensions in the build stage and is uninstalled
-# before the runtime stage copies the environment (docker/dpvo/requirements-build.txt); tests/test_dpvo_image.py
+# (slamrun/methods/dpvo/image/requirements.txt); DPVO_TOOLCHAIN compiles the extensions in the build stage and is
+# uninstalled
+# before the runtime stage copies the environment (slamrun/methods/dpvo/image/requirements-build.txt);
+# tests/test_dpvo_image.py
 # checks both files against these lists.
 DPVO_TORCH = """
 # pip: installs everything below with --no-index --require-hashes (Debian's venv has no pip of its own)

@@ -25,18 +25,25 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+import slamrun.methods
 from slamrun.core import jsonio, metrics
 from slamrun.core.trajectory import Trajectory, read_tum
 from slamrun.errors import MetricError, SlamRunError
 from slamrun.images.build import BuildOptions, build, buildable, last_record
+from slamrun.methods.base import Method
+from slamrun.methods.declare import declared
 
 DEFAULT_RESULTS = Path(".cache") / "verify"  # under the current directory: where the user works
 SEQUENCES = ("room_a", "room_b")
 FRAMES = 300
 TRIALS = 2
-# e_align / scene extent a verified image must stay under (median over its runs)
-BOUNDS = {"dso": 0.02}
-DEFAULT_BOUND = 0.05
+DEFAULT_BOUND = Method.verify_bound  # e_align / scene extent a verified run must stay under (median over its runs)
+
+
+def bound_of(name: str) -> float:
+    """The bound method `name` declares (verify_bound in its folder's declaration), else the default."""
+    cls = slamrun.methods.REGISTRY.get(name)
+    return declared(cls, "verify_bound", DEFAULT_BOUND) if cls else DEFAULT_BOUND
 
 
 @dataclass(frozen=True)
@@ -167,7 +174,7 @@ def verify(
     client = DockerBackend().client.api
     rows = []
     for name in names:
-        row = VerifyRow(name, built=False, bound=BOUNDS.get(name, DEFAULT_BOUND))
+        row = VerifyRow(name, built=False, bound=bound_of(name))
         rows.append(row)
         try:
             build([name], log=log, opts=opts, only_missing=True)
@@ -226,7 +233,7 @@ def verify_spec(
         )
     rows = []
     for m in chosen:
-        row = VerifyRow(m.run_label, built=True, bound=BOUNDS.get(m.name, DEFAULT_BOUND), backend=spec.backend)
+        row = VerifyRow(m.run_label, built=True, bound=bound_of(m.name), backend=spec.backend)
         rows.append(row)
         method = {"name": m.name, "label": m.run_label, "params": m.params}
         _campaign(m.run_label, row, results, trials, frames, log, method=method, backend=spec.backend)

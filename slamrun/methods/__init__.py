@@ -15,6 +15,8 @@ is its own failure, never slamrun's; its distribution and version (PLUGINS) key 
 from __future__ import annotations
 
 import functools
+import importlib
+from pathlib import Path
 
 from slamrun.core.suggest import did_you_mean
 from slamrun.datasets.view import Direction, PreparedView, Profile
@@ -29,23 +31,6 @@ from slamrun.methods.base import (
     read_tum_output,
     require_poses,
 )
-from slamrun.methods.cnn_dso import CnnDso
-from slamrun.methods.cnn_svo import CnnSvo
-from slamrun.methods.colmap import Colmap
-from slamrun.methods.df_orb_slam import DfOrbSlam
-from slamrun.methods.dpvo import Dpvo
-from slamrun.methods.droid_slam import DroidSlam
-from slamrun.methods.dsm import Dsm
-from slamrun.methods.dso import Dso
-from slamrun.methods.dynaslam import DynaSlam
-from slamrun.methods.external import External
-from slamrun.methods.glomap import Glomap
-from slamrun.methods.ldso import Ldso
-from slamrun.methods.lsd_slam import LsdSlam
-from slamrun.methods.orb_slam2 import OrbSlam2
-from slamrun.methods.orb_slam3 import OrbSlam3
-from slamrun.methods.reference_vo.adapter import ReferenceVO
-from slamrun.methods.svo import Svo
 
 __all__ = [  # the plug-in API, then the registry
     "Method",
@@ -68,28 +53,29 @@ __all__ = [  # the plug-in API, then the registry
 
 STUDY_METHODS = ("orb_slam2", "df_orb_slam", "lsd_slam", "dso", "svo", "ldso", "dsm", "dynaslam", "cnn_dso", "cnn_svo")
 
-REGISTRY: dict[str, type[Method]] = {
-    cls.name: cls
-    for cls in (
-        OrbSlam2,
-        DfOrbSlam,
-        LsdSlam,
-        Dso,
-        Svo,
-        Ldso,
-        Dsm,
-        DynaSlam,
-        CnnDso,
-        CnnSvo,
-        ReferenceVO,
-        Colmap,
-        OrbSlam3,
-        Glomap,
-        External,
-        Dpvo,
-        DroidSlam,
-    )
-}
+HERE = Path(__file__).parent
+
+
+def _built_in() -> dict[str, type[Method]]:
+    """The built-in methods: each folder of slamrun/methods/ with an __init__.py is one, named by the folder, and
+    declares its class there (the study's ten first, in the study's order, then the others by name)."""
+    found = {}
+    for folder in sorted(p.parent for p in HERE.glob("*/__init__.py")):
+        module = importlib.import_module(f"{__name__}.{folder.name}")
+        classes = [
+            c
+            for c in vars(module).values()
+            if isinstance(c, type) and issubclass(c, Method) and c.__module__ == module.__name__
+            and getattr(c, "name", None) == folder.name
+        ]  # fmt: skip
+        if len(classes) != 1:
+            raise ImportError(f"{folder}: declares {len(classes)} Method classes named {folder.name!r}, not one")
+        found[folder.name] = classes[0]
+    order = [n for n in STUDY_METHODS if n in found] + sorted(set(found) - set(STUDY_METHODS))
+    return {n: found[n] for n in order}
+
+
+REGISTRY: dict[str, type[Method]] = _built_in()
 
 
 PLUGIN_GROUP = "slamrun.methods"

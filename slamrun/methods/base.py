@@ -18,8 +18,19 @@ from pydantic import BaseModel, ConfigDict
 from slamrun.core.trajectory import Trajectory, read_tum
 from slamrun.datasets.view import PreparedView, Profile
 from slamrun.errors import MethodFailure, TrajectoryFormatError, one_line
+from slamrun.methods.declare import NativeMethod, Source, Vocabulary, Weights
 
 MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (MAX_ARG_STRLEN)
+
+
+def folder_name(module: str) -> str:
+    """A built-in method's name: its folder's (`slamrun.methods.dso` -> `dso`), so a folder is a method."""
+    return module.rsplit(".", 1)[-1]
+
+
+def image_tag(name: str) -> str:
+    """The tag of a built-in method's image (built from its folder's image/Dockerfile)."""
+    return f"slamrun/{name}:latest"
 
 
 class NoParams(BaseModel):
@@ -48,9 +59,25 @@ class Method(ABC):
     # Log lines that tell why a run produced nothing usable (case-insensitive regular expressions).
     not_initialized_pattern: ClassVar[str | None] = None
     lost_pattern: ClassVar[str | None] = None
+    # Its declaration for the toolchain (slamrun/images/), each read from the class that writes it (declare.declared):
+    sources: ClassVar[tuple[Source, ...]] = ()  # the pinned archives its image (or native build) builds from
+    vocabulary: ClassVar[Vocabulary | None] = None  # the vocabulary its image needs
+    network: ClassVar[Weights | None] = None  # the trained network its image needs (weights file)
+    verify_bound: ClassVar[float] = 0.05  # `slamrun verify`: settled e_align / scene extent it must stay under
+    native_build: ClassVar[NativeMethod | None] = None  # how `slamrun native-build` makes it
 
     def __init__(self, params: BaseModel | dict | None = None):
         self.params = params if isinstance(params, BaseModel) else self.Params.model_validate(params or {})
+
+    @classmethod
+    def folder(cls) -> Path:
+        """The folder of the module that declares this method (a built-in's: slamrun/methods/<name>/)."""
+        return Path(sys.modules[cls.__module__].__file__).resolve().parent
+
+    @classmethod
+    def recipe(cls) -> Path:
+        """Its image's Dockerfile: image/Dockerfile in its folder (it may not exist: a native-only method)."""
+        return cls.folder() / "image" / "Dockerfile"
 
     def configure(self, view: PreparedView, workdir: Path) -> dict[str, str]:
         """The method's own config files: {path relative to the work directory: content}.

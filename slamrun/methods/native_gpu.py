@@ -71,7 +71,6 @@ class NativeGpuMethod(PythonProcess, Method):
     modules = ("torch", "numpy", "cv2")
     image_build: str  # where the image holds the build (its network in weights/)
     weights_name: str  # the network's file name (dpvo.pth, droid.pth)
-    recipe: Path  # the image's Dockerfile
     backend: str = "local"
 
     @abstractmethod
@@ -98,8 +97,8 @@ class NativeGpuMethod(PythonProcess, Method):
 
     def problems(self, backend: str) -> list[str]:
         if backend != "local":
-            if self.recipe.exists():
+            if self.recipe().exists():
                 return []  # a missing image is said by the backend, naming `slamrun images --method NAME`
-            return [f"{self.name}'s image {self.image} has no recipe (no {self.recipe}): use backend: local"]
+            return [f"{self.name}'s image {self.image} has no recipe (no {self.recipe()}): use backend: local"]
         build = Path(self.params.build or self.default_build())
         return native_problems(build, self.params.weights, self.name, self.weights_name)

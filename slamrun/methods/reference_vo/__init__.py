@@ -1,2 +1,41 @@
-"""The reference VO: `vo.py` (the algorithm) and `__main__.py` (the process) need only OpenCV, NumPy and
-SciPy, so a container image can hold them alone; `adapter.py` is the method class the runner uses."""
+"""reference_vo (adapter): this project's own monocular VO (OpenCV + NumPy/SciPy), the harness's self-test and baseline.
+
+Runs as its own process: `python -m slamrun.methods.reference_vo --images ... --times ... --camera ... --out ...`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from slamrun.datasets.view import PreparedView, Profile
+from slamrun.methods.base import Method, PythonProcess, folder_name, image_tag
+
+
+class ReferenceVOParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    max_corners: int = Field(500, ge=50, le=5000, description="Corners tracked per frame.")
+    seed: int = Field(0, description="Seed of OpenCV's RANSAC (the method is otherwise deterministic).")
+
+
+class ReferenceVO(PythonProcess, Method):
+    name = folder_name(__name__)  # its folder's
+    image = image_tag(name)  # built from image/Dockerfile in its folder
+    profile = Profile.rectified
+    native = True
+    modules = ("numpy", "scipy", "cv2")
+    Params = ReferenceVOParams
+    not_initialized_pattern = r"^NOT INITIALIZED"
+    lost_pattern = r"^LOST"
+
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        return [
+            self.python, "-m", "slamrun.methods.reference_vo",
+            "--images", str(view.path(view.images_dir)),
+            "--times", str(view.path(view.times)),
+            "--camera", str(view.path(view.camera)),
+            "--out", str(workdir / self.output_file),
+            "--max-corners", str(self.params.max_corners),
+            "--seed", str(self.params.seed),
+        ]  # fmt: skip

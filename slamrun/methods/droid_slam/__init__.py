@@ -1,0 +1,147 @@
+"""DROID-SLAM (princeton-vl/DROID-SLAM @ 2dfd39f, BSD-3, with lietorch @ 7f68764), on the rectified view; it needs a
+GPU.
+
+Runs as its own process, `python -m slamrun.methods.droid_slam.process ...` (its runner: every `stride`-th frame of the
+view tracked, as demo.py does; then DROID's terminate() (two global bundle adjustments and its trajectory filler) given
+EVERY frame of the view, so every input frame gets a pose, at its original timestamp, as TUM camera-to-world). Its CUDA
+extensions (lietorch_backends, droid_backends) come from one of:
+- `backend: local`: a native build in slamrun's cache, compiled once by `slamrun native-build droid_slam` from the
+  pinned archives with slamrun/methods/droid_slam/image/patches.py, by and for the Python that runs slamrun (PyTorch
+  with CUDA, nvcc);
+- `backend: docker|podman`: the image slamrun/droid_slam (slamrun/methods/droid_slam/image/Dockerfile, `slamrun images
+--method
+  droid_slam`): the same archives and patches, compiled without a GPU for compute capability 7.5 to 9.0, its network
+  in /opt/droid_slam/weights.
+The network (droid.pth) is the one the build holds (`--weights droid.pth=FILE|URL#sha256=HEX`, or `--standin-model`: a
+random-init network from a fixed seed, plumbing only, accuracy meaningless; build.json and every run's log say which),
+or params.weights. The parameters are demo.py's options with its defaults.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from slamrun.datasets.view import PreparedView, Profile
+from slamrun.methods.base import folder_name, image_tag
+from slamrun.methods.declare import NativeMethod, Source, Weights
+from slamrun.methods.native_gpu import NativeGpuMethod, native_root
+
+IMAGE_BUILD = "/opt/droid_slam"
+WEIGHTS_NAME = "droid.pth"
+# The stand-in (image/standin_model.py, the same arguments as its network.sh): its flow head (update.delta) scaled to a
+# mean flow of 8 px on random inputs, above the motion filter's 2.4 px
+STANDIN_SEED = 0
+STANDIN_FLOW_PX = 8.0
+IMAGE = Path(__file__).resolve().parent / "image"  # its image's recipe; the native build's patches are the image's
+IMAGE_WEIGHTS = f"{IMAGE_BUILD}/weights/{WEIGHTS_NAME}"  # where the image holds its network (network.sh)
+
+
+def default_build() -> Path:
+    return native_root() / "droid_slam"
+
+
+class DroidSlamParams(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    weights: str | None = Field(
+        None, description="The network (droid.pth); default: the one the native build (or the image) holds."
+    )
+    build: str | None = Field(
+        None, description="Folder of a native build (default: where `slamrun native-build droid_slam` puts it)."
+    )
+    stride: int = Field(3, ge=1, description="Track every n-th frame (demo.py --stride: 3); every frame gets a pose.")
+    buffer: int = Field(512, ge=16, description="Most keyframes held on the GPU (demo.py --buffer: 512).")
+    beta: float = Field(0.3, ge=0, description="Weight of translation against rotation in frame distances (0.3).")
+    filter_thresh: float = Field(2.4, ge=0, description="Mean flow (px) before a frame is kept (demo.py: 2.4).")
+    warmup: int = Field(8, ge=2, description="Keyframes before the system initialises (demo.py --warmup: 8).")
+    keyframe_thresh: float = Field(4.0, ge=0, description="Distance below which a keyframe is dropped (4.0).")
+    frontend_thresh: float = Field(16.0, ge=0, description="Frontend edges between frames within this distance (16).")
+    frontend_window: int = Field(25, ge=1, description="Frontend optimisation window, keyframes (demo.py: 25).")
+    frontend_radius: int = Field(2, ge=0, description="Frontend edges forced between frames this close (demo.py: 2).")
+    frontend_nms: int = Field(1, ge=0, description="Non-maximum suppression of frontend edges (demo.py: 1).")
+    backend_thresh: float = Field(22.0, ge=0, description="Backend edges between frames within this distance (22).")
+    backend_radius: int = Field(2, ge=0, description="Backend edges forced between frames this close (demo.py: 2).")
+    backend_nms: int = Field(3, ge=0, description="Non-maximum suppression of backend edges (demo.py: 3).")
+    upsample: bool = Field(False, description="Upsample depth maps in the factor graph (demo.py --upsample: off).")
+    motion_damping: float = Field(
+        0.0, ge=0, le=1, description="Damped constant-velocity guess of the next pose (demo.py sets none: 0)."
+    )
+    seed: int | None = Field(None, description="Seed of PyTorch's generators (default: unseeded, as upstream).")
+
+
+class DroidSlam(NativeGpuMethod):
+    name = folder_name(__name__)  # its folder's
+    image = image_tag(name)  # built from image/Dockerfile in its folder
+    # with its submodules at the commits it records: thirdparty/lietorch (Lie groups on PyTorch, compiled with it)
+    # and thirdparty/pytorch_scatter, not compiled (its scatter_sum and scatter_mean, pure Python there, are
+    # dpvo/image/torch_scatter_compat.py's; the tests check them against it)
+    sources = (
+        Source(
+            "droid_slam",
+            "princeton-vl/DROID-SLAM",
+            "2dfd39f0dcad44012ca7bbb8aa70b55edbfa9c99",
+            sha256="03488a61c5741994523bee7a52ec1a9c0b17175e8fd5a8cf16de4c5fdebd8d91",
+            tree="e7828067e7d5343e85473a5bda4f9b62b5dbcd19cfeb83ca8512334ea717e6ea",
+        ),
+        Source(
+            "lietorch",
+            "princeton-vl/lietorch",
+            "7f687644fcea81ab337831749445224503c1290d",
+            sha256="2c9c9be882509068e5ec78721d33ebd1258d1311cae2ee82ab399fc77cb94863",
+            tree="15a27b463eaa0afe8b81101f338c899604d98d1c2c6fe22d9ce100357482fdcb",
+        ),
+        Source(
+            "pytorch_scatter",
+            "rusty1s/pytorch_scatter",
+            "6cf77c420f837a427b0d57965e414d68c1bd89ec",
+            sha256="97e3bddb38fc873a37a8a9f35b1cb08e268ee96effd25dee68dbb9389681e87d",
+            tree="fa24f4f0b8da8c8b98689cdb58b4e1d95489f1a9a93486dd825f8b1e1316ec1f",
+        ),
+    )
+    network = Weights(
+        "droid.pth",
+        "DROID-SLAM's tools/download_model.sh (`gdown 1PpqVt1H4maBa_GbPJp4NwxRsd9jk-elh`, a Google Drive file: "
+        "https://drive.google.com/uc?id=1PpqVt1H4maBa_GbPJp4NwxRsd9jk-elh)",
+        standin=True,
+        arg="DROID_MODEL",
+    )
+    native_build = NativeMethod(
+        name="droid_slam",
+        label="DROID-SLAM",
+        source="droid_slam",
+        parts=(("lietorch", "thirdparty/lietorch"),),
+        patches=IMAGE / "patches.py",
+        setups=(("thirdparty/lietorch", ("lietorch_backends",)), (".", ("droid_backends",))),
+        import_path=("thirdparty/lietorch", "droid_slam", "."),
+        weights_name=WEIGHTS_NAME,
+        standin=IMAGE / "standin_model.py",
+        standin_args=(str(STANDIN_SEED), str(STANDIN_FLOW_PX)),
+        standin_note=f"random init, torch seed {STANDIN_SEED}, {{out}} for a mean flow of {STANDIN_FLOW_PX:g} px",
+        default_build=lambda: default_build(),  # the module's function (the class's method has the same name)
+    )
+    profile = Profile.rectified
+    Params = DroidSlamParams
+    not_initialized_pattern = r"^NOT INITIALIZED"
+    image_build = IMAGE_BUILD
+    weights_name = WEIGHTS_NAME
+
+    def default_build(self) -> Path:
+        return default_build()
+
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        p = self.params
+        argv = [
+            self.python, "-m", "slamrun.methods.droid_slam.process",
+            "--build", self.build_dir(), "--weights", self.weights(),
+            "--images", str(view.path(view.images_dir)), "--times", str(view.path(view.times)),
+            "--camera", str(view.path("camera_pinhole.json")), "--out", str(workdir / self.output_file),
+            "--stride", str(p.stride), "--buffer", str(p.buffer), "--beta", repr(p.beta),
+            "--filter-thresh", repr(p.filter_thresh), "--warmup", str(p.warmup),
+            "--keyframe-thresh", repr(p.keyframe_thresh), "--frontend-thresh", repr(p.frontend_thresh),
+            "--frontend-window", str(p.frontend_window), "--frontend-radius", str(p.frontend_radius),
+            "--frontend-nms", str(p.frontend_nms), "--backend-thresh", repr(p.backend_thresh),
+            "--backend-radius", str(p.backend_radius), "--backend-nms", str(p.backend_nms),
+            "--upsample", "1" if p.upsample else "0", "--motion-damping", repr(p.motion_damping),
+        ]  # fmt: skip
+        return argv + (["--seed", str(p.seed)] if p.seed is not None else [])

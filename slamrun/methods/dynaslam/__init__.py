@@ -1,0 +1,65 @@
+"""DynaSLAM (BertaBescos/DynaSLAM @ 8f894a8): ORB-SLAM2 plus Mask R-CNN segmentation of dynamic objects.
+
+`mono_tum VOCAB SETTINGS SEQDIR [MASKDIR]` must run from the repository root; the image's wrapper
+`dynaslam-run` does that and copies KeyFrameTrajectory.txt into the work directory. Without masks it is
+plain ORB-SLAM2. Mask R-CNN runs on the CPU: the image (Debian 11, tensorflow-cpu 1.15 for Python 2.7) has no
+GPU build, so `gpu: true` is refused rather than claimed. 640x480 is hard-coded upstream.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import Field
+
+from slamrun.datasets.view import PreparedView
+from slamrun.errors import MethodFailure
+from slamrun.methods.base import folder_name, image_tag
+from slamrun.methods.declare import Source, Vocabulary, Weights
+from slamrun.methods.orb_slam2 import OrbSlam2, OrbSlam2Params
+
+
+class DynaSlamParams(OrbSlam2Params):
+    vocabulary: str = Field("/opt/DynaSLAM/Vocabulary/ORBvoc.txt", description="ORB vocabulary (ORBvoc.txt).")
+    masks: bool = Field(True, description="Segment every frame with Mask R-CNN (off: plain ORB-SLAM2).")
+
+
+class DynaSlam(OrbSlam2):
+    name = folder_name(__name__)  # its folder's
+    image = image_tag(name)  # built from image/Dockerfile in its folder
+    sources = (
+        Source(
+            "dynaslam",
+            "BertaBescos/DynaSLAM",
+            "8f894a8b9d63c0a608fd871d63c10796491b9312",
+            sha256="c99080b422cf68887f8fb98705b46279a899267a243f96bf35185d8c15ea7f34",
+            tree="87c56f71a912a1152dfd44d3fbdef9d7171dccc94d8e90619da01c54281c00a9",
+            absent=("Vocabulary/ORBvoc.txt.tar.gz",),
+        ),
+    )
+    vocabulary = Vocabulary("dynaslam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text")
+    network = Weights(
+        "mask_rcnn_coco.h5",
+        "the matterport/Mask_RCNN GitHub release v2.0 (mask_rcnn_coco.h5)",
+        standin=True,
+        arg="MASK_RCNN_MODEL",
+    )
+    binary = "/opt/DynaSLAM/dynaslam-run"
+    Params = DynaSlamParams
+    loop_closure_switch = "env ORB_SLAM2_NO_LOOP=1 (patch in slamrun/methods/dynaslam/image)"
+
+    def configure(self, view: PreparedView, workdir: Path) -> dict[str, str]:
+        if (view.width, view.height) != (640, 480):
+            raise MethodFailure(
+                "crashed", f"DynaSLAM hard-codes 640x480 frames; the view is {view.width}x{view.height}"
+            )
+        return {**super().configure(view, workdir), "masks/.keep": ""}
+
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        argv = [self.exe(), self.params.vocabulary, str(workdir / self.settings_file), str(view.root)]
+        if self.params.masks:
+            argv.append(str(workdir / "masks"))
+        return argv
+
+    def environment(self) -> dict[str, str]:
+        return {**super().environment(), "MPLBACKEND": "Agg", "SLAMRUN_WORKDIR": "/work", "CUDA_VISIBLE_DEVICES": ""}
