@@ -232,7 +232,7 @@ def bench_metrics(tmp: Path) -> None:
 def bench_scheduler(tmp: Path) -> None:
     import yaml
 
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
     from slamrun.engine.spec import DistributedSpec, load_spec
 
@@ -340,15 +340,8 @@ def bench_datasets(tmp: Path) -> None:
     from slamrun.core.camera import rectification_maps, rectified_pinhole
     from slamrun.datasets.cache import prepare
     from slamrun.datasets.layouts import open_sequence
-    from slamrun.datasets.synth import (
-        Renderer,
-        camera_path,
-        default_camera,
-        fov_rays,
-        generate,
-        make_scene,
-        make_texture,
-    )
+    from slamrun.datasets.make_synthetic import generate
+    from slamrun.datasets.synth import Renderer, camera_path, default_camera, fov_rays, make_scene, make_texture
     from slamrun.datasets.view import Direction, Profile
 
     print("datasets: synthetic rendering (one core) and rectified preparation 1280x1024 -> 640x480")
@@ -407,7 +400,7 @@ def bench_datasets(tmp: Path) -> None:
 
 def bench_reference_vo(tmp: Path) -> None:
     from slamrun.datasets.cache import prepare
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.datasets.view import Direction, Profile
 
     print("reference VO at 640x480 (one core)")
@@ -506,7 +499,7 @@ def bench_docker(tmp: Path) -> None:
     from slamrun.backends.docker import DockerBackend
     from slamrun.backends.monitor import ProcessTreeMonitor
     from slamrun.datasets.cache import prepare
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.datasets.view import Direction, Profile
     from slamrun.errors import InfraError
 
@@ -614,7 +607,7 @@ def bench_scale(tmp: Path, n_runs: int = 10_000) -> None:
 
     import yaml
 
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
 
     print(f"scale: a {n_runs:,}-run plan of a no-op method, 2 lanes, through `slamrun campaign`")
     generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))

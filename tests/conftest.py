@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 
 FAKE = Path(__file__).parent / "fixtures" / "fake_method.py"
 # shared/ lies beside the repository (CI clones main next to it); SLAMRUN_SHARED points elsewhere.

@@ -2,7 +2,7 @@
 with its file (and line), before any run, within seconds and bounded memory, with no traceback; what only view
 preparation can find is a dataset error naming the file, never a method's failure.
 
-Every case is a real synthetic sequence of its layout (slamrun.datasets.synth.generate), damaged as a user's or a
+Every case is a real synthetic sequence of its layout (make_synthetic.generate), damaged as a user's or a
 hostile file would be, read by real `slamrun` processes (the hostile ones under an address-space limit).
 """
 
@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 import pytest
 
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.errors import DatasetError
 from tests.conftest import fake_method, write_spec
 from tests.test_campaign import ledger_rows

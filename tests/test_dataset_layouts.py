@@ -19,10 +19,11 @@ from scipy.spatial.transform import Rotation
 from slamrun.core import metrics
 from slamrun.core.trajectory import read_euroc_csv, read_kitti, read_times, read_tum, write_tum
 from slamrun.datasets.cache import prepare
-from slamrun.datasets.euroc import read_sensor_yaml
+from slamrun.datasets.euroc import EUROC_T_BS, read_sensor_yaml
 from slamrun.datasets.kitti import drive
 from slamrun.datasets.layouts import detect, open_sequence, sequence_identity
-from slamrun.datasets.synth import EUROC_T_BS, Synth, camera_path, generate
+from slamrun.datasets.make_synthetic import generate
+from slamrun.datasets.synth import Synth, camera_path
 from slamrun.datasets.view import Direction, Profile
 from slamrun.errors import DatasetError
 

@@ -10,7 +10,7 @@ import pytest
 
 from slamrun.core.trajectory import from_arrays
 from slamrun.datasets.cache import prepare
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.datasets.tum_mono import open_sequence
 from slamrun.datasets.view import Direction, PreparedView, Profile
 from slamrun.errors import DatasetError

@@ -58,7 +58,7 @@ def engine_with_base():
 
 @pytest.fixture(scope="module", params=["docker", "podman"])
 def backend(request):
-    from slamrun.backends import make_local_backend
+    from slamrun.backends.this_machine import make_local_backend
 
     if request.param == "podman" and shutil.which("podman") is None:
         _unavailable("podman is not installed (Debian: apt-get install podman)")
@@ -194,7 +194,7 @@ def test_memory_limit_is_oom(backend, image, tmp_path, view, monkeypatch):
     cwd = tmp_path / "started-here"
     cwd.mkdir()
     monkeypatch.chdir(cwd)
-    from slamrun.backends import make_local_backend
+    from slamrun.backends.this_machine import make_local_backend
 
     started_here = make_local_backend(backend.name)  # its engine's helpers (podman's service) start in `cwd`
     req = _request(tmp_path, view, ["python3", "-c", "x = bytearray(600 * 2**20); print(len(x))"], memory_mb=100)
@@ -286,7 +286,7 @@ def test_unreachable_daemon_is_reported_before_runs(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="module")
 def vo_dataset(tmp_path_factory):
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
 
     root = tmp_path_factory.mktemp("docker_data")
     generate(root / "seq_a", frames=200, seed=3, size=(640, 480))

@@ -10,8 +10,8 @@ import zipfile
 import pytest
 
 from slamrun.cli import main
-from slamrun.datasets.download import fetch, parse_sequences
-from slamrun.datasets.tum_mono import open_sequence
+from slamrun.datasets.download import fetch
+from slamrun.datasets.tum_mono import open_sequence, parse_sequences
 from slamrun.errors import DatasetError
 
 
@@ -118,7 +118,7 @@ def archive_of(folder, kind: str, top: str | None) -> bytes:
 @pytest.fixture(scope="module")
 def published(tmp_path_factory):
     """Synthetic EuRoC, TUM RGB-D and TUM-VI sequences packed as each dataset's site serves them."""
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
 
     root = tmp_path_factory.mktemp("published")
     euroc = generate(root / "MH_01_easy", frames=30, seed=1, size=(160, 120), layout="euroc")

@@ -240,7 +240,7 @@ def test_slamruns_dpvo_process_in_the_image_reads_a_view_and_stops_at_the_missin
     """The image's `python3 -m slamrun.methods.dpvo.process`, as the docker backend runs it, on a real prepared view: it
     reads the frames and the network, imports PyTorch, and exits 3 saying there is no GPU."""
     from slamrun.datasets.cache import prepare
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.datasets.view import Direction, Profile
     from slamrun.methods.dpvo import IMAGE_BUILD, IMAGE_WEIGHTS
 

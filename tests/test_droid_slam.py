@@ -19,7 +19,7 @@ import pytest
 import slamrun.methods
 from slamrun.core.trajectory import read_tum
 from slamrun.datasets.cache import prepare
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.datasets.view import Direction, Profile
 from slamrun.images import native
 from slamrun.images.sources import SOURCES

@@ -242,7 +242,7 @@ def test_slamruns_droid_slam_process_in_the_image_reads_a_view_and_stops_at_the_
     """The image's `python3 -m slamrun.methods.droid_slam.process`, as the docker backend runs it, on a real prepared
     view: it reads the frames and the network, imports PyTorch and exits 3 saying there is no GPU."""
     from slamrun.datasets.cache import prepare
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.datasets.view import Direction, Profile
     from slamrun.methods.droid_slam import DroidSlam
 

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from tests.test_dataset_layouts import EUROC_SENSOR
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -12,7 +12,7 @@ from pydantic import ValidationError
 
 import slamrun.methods
 from slamrun.core.trajectory import read_tum
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
 from slamrun.engine.spec import load_spec
 from slamrun.images.verify import scene_extent

@@ -8,7 +8,7 @@ import pytest
 
 from slamrun.core.trajectory import read_tum
 from slamrun.datasets.layouts import open_sequence
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.errors import DatasetError, TrajectoryFormatError
 
 

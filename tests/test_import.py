@@ -14,7 +14,7 @@ import pandas as pd
 import pytest
 
 from slamrun.cli import main
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.ledger import Ledger
 
 SEQUENCES = ("47", "48", "49")

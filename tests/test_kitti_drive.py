@@ -8,7 +8,8 @@ import numpy as np
 import pandas as pd
 
 from slamrun.datasets.kitti import drive
-from slamrun.datasets.synth import Synth, generate, lap_length
+from slamrun.datasets.make_synthetic import generate
+from slamrun.datasets.synth import Synth, lap_length
 
 
 def test_the_drive_grows_with_the_frames_and_never_faster_than_a_lap_per_100_frames():

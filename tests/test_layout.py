@@ -7,6 +7,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 # lower layers never import higher ones; a layer may import itself
@@ -75,7 +77,8 @@ def test_no_module_imports_a_higher_layer():
 
 
 def test_module_graph_has_no_cycle():
-    graph = {name: imports(path, top_level_only=True) - {name} for name, path in modules().items()}
+    """Counting every import, those inside functions too: a lazy import that closes a circle is still a circle."""
+    graph = {name: imports(path, top_level_only=False) - {name} for name, path in modules().items()}
     state: dict[str, int] = {}
 
     def visit(node: str, stack: list[str]) -> None:
@@ -114,3 +117,22 @@ def test_backends_provide_the_whole_protocol():
     for cls in (LocalBackend, DockerBackend, DaskBackend):
         missing = sorted(n for n in declared if not hasattr(cls, n) and n not in getattr(cls, "__annotations__", {}))
         assert not missing, f"{cls.__name__} lacks {missing}"
+
+
+def test_evaluating_a_file_imports_neither_opencv_nor_yaml_nor_a_method():
+    """`slamrun evaluate --gt FILE` starts lean: no OpenCV (only decoding a frame needs it), no PyYAML (only a YAML
+    file), no method, no engine."""
+    data = Path(__file__).resolve().parents[2] / "shared" / "data" / "evo_test_data"
+    gt, est = data / "fr2_desk_groundtruth.txt", data / "fr2_desk_ORB.txt"
+    if not gt.is_file():
+        pytest.skip(reason=f"{gt} missing: the shared test data lives beside the repository")
+    code = (
+        "import runpy, sys\n"
+        f"sys.argv = ['slamrun', 'evaluate', '--metric', 'ate', '--gt', {str(gt)!r}, {str(est)!r}]\n"
+        "try:\n    runpy.run_module('slamrun.cli', run_name='__main__')\nexcept SystemExit as e:\n    code = e.code\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('cv2', 'yaml') "
+        "or m.startswith(('slamrun.methods', 'slamrun.engine'))), file=sys.stderr)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert "ate_rmse" in out.stdout or "ate" in out.stdout, out.stdout + out.stderr
+    assert out.stderr.strip().splitlines()[-1] == "[]", out.stderr

@@ -13,7 +13,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
 from slamrun.engine.spec import load_spec
 from slamrun.images.build import BuildOptions, build

@@ -285,7 +285,7 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
     ORB-SLAM3 is lost for good and starts a new map (forward: a first map of 10 keyframes or fewer would be reset
     instead; 130 textured frames make more, and both directions split in every run so far), and the run says so
     (the maps in run.json, the largest evaluated, the run marked lost)."""
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
     from slamrun.engine.spec import load_spec
     from slamrun.images.verify import scene_extent

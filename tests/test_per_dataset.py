@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 
 from slamrun.cli import main
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from tests.conftest import fake_method, write_spec
 
 SLAMRUN = [sys.executable, "-m", "slamrun.cli"]

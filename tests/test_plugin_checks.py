@@ -14,9 +14,9 @@ import pytest
 from slamrun.core.trajectory import Trajectory
 from slamrun.datasets import layouts, plugin_checks
 from slamrun.datasets.layouts import _adopt, open_sequence
+from slamrun.datasets.make_synthetic import generate
 from slamrun.datasets.protocol import Layout
 from slamrun.datasets.sequence import Sequence
-from slamrun.datasets.synth import generate
 from slamrun.errors import DatasetError
 
 WHO = "plug-in layout lab (lab-datasets 1.0)"
@@ -154,7 +154,7 @@ def test_a_plugin_whose_recognise_raises_never_breaks_another_plugins_folders(re
 
 def test_a_writer_places_only_the_files_it_declares(tmp_path, monkeypatch):
     """A plug-in writer that staged a file it had not declared in synth_outside replaced a user's data/notes.txt."""
-    from slamrun.datasets import synth as synth_module
+    from slamrun.datasets import make_synthetic
 
     notes = tmp_path / "notes.txt"
     notes.write_text("a user's notes\n")
@@ -168,6 +168,6 @@ def test_a_writer_places_only_the_files_it_declares(tmp_path, monkeypatch):
     lab = plugin(lambda root: None, synth=writer)
     monkeypatch.setattr(layouts, "_plugins", lambda: ({"lab": lab}, {}))
     with pytest.raises(DatasetError, match=f"its writer put {notes} beside .*does not declare; nothing was written"):
-        synth_module.generate(tmp_path / "seq", frames=2, layout="lab")
+        make_synthetic.generate(tmp_path / "seq", frames=2, layout="lab")
     assert notes.read_text() == "a user's notes\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt"]

@@ -52,7 +52,7 @@ def installed(tmp_path):
 
 
 def test_a_plugin_method_registers_runs_and_verifies(installed, tmp_path):
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
 
     pkg, wrapper = installed
     generate(tmp_path / "data" / "room", frames=90, seed=2)

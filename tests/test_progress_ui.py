@@ -172,7 +172,7 @@ def test_live_view_total_eta_resume_and_failed_runs(tmp_path, tiny_dataset):
 def test_plain_lines_carry_the_same_figures(tmp_path, tiny_dataset):
     """The headline every few runs, and each run's line with its main figure whatever the dataset's metrics:
     TUM-Mono's e_align, EuRoC's ATE RMSE (it showed none for an ATE dataset)."""
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
 
     euroc = generate(tmp_path / "euroc" / "V1_tiny", frames=40, seed=1, size=(160, 120), layout="euroc")
     datasets = [

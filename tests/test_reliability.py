@@ -16,7 +16,7 @@ import pytest
 
 from slamrun.analysis.load import evaluated
 from slamrun.analysis.summary import method_summary
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
 from slamrun.engine.spec import load_spec
 from slamrun.errors import DatasetError, SlamRunError

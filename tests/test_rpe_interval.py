@@ -10,7 +10,7 @@ import pytest
 
 from slamrun.core.metrics import NoPairs, RpeInterval, poses_at, rpe
 from slamrun.core.trajectory import Trajectory, read_euroc_csv, read_tum
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.errors import MetricError
 from tests.conftest import SHARED_DATA
 

@@ -12,7 +12,7 @@ from importlib.metadata import version
 import pandas as pd
 import pytest
 
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
 from slamrun.engine.spec import load_spec
 from tests.conftest import write_spec

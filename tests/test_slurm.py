@@ -15,7 +15,7 @@ import psutil
 import pytest
 
 from slamrun.backends.jobqueue import job_name
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
 from slamrun.engine.spec import load_spec
 from slamrun.errors import InfraError, SpecError

@@ -95,7 +95,7 @@ def test_mahalanobis_needs_more_runs_than_metrics():
 def test_a_campaign_with_a_deterministic_method_says_so(tmp_path):
     """reference_vo is deterministic: its two trials on a real synthetic sequence give the same figures; stats
     counts them once and says which method that is, in text and JSON."""
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
     from slamrun.engine.spec import load_spec
     from tests.conftest import write_spec

@@ -6,16 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slamrun.datasets.synth import (
-    MOTION_SLACK,
-    PathShape,
-    Synth,
-    camera_path,
-    generate,
-    lap_length,
-    path_motion,
-    path_shape,
-)
+from slamrun.datasets.make_synthetic import generate
+from slamrun.datasets.synth import MOTION_SLACK, PathShape, Synth, camera_path, lap_length, path_motion, path_shape
 
 
 def test_two_seeds_are_two_motions_written_in_their_files(tmp_path):

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slamrun.datasets.synth import generate
+from slamrun.datasets.make_synthetic import generate
 from slamrun.images.verify import VerifyRow, holds_standin_network, markdown_table, merged, scene_extent
 
 
@@ -96,7 +96,7 @@ def test_the_settled_error_leaves_out_the_segment_the_run_processed_first(tmp_pa
     import pandas as pd
 
     from slamrun.core.trajectory import read_tum, write_tum
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
     from slamrun.engine.spec import load_spec
     from slamrun.images.verify import settled_error

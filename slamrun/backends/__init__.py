@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from slamrun.backends.this_machine import make_local_backend
+
 if TYPE_CHECKING:
     from slamrun.backends.base import Backend
     from slamrun.engine.spec import CampaignSpec
@@ -22,18 +24,3 @@ def make_backend(spec: CampaignSpec) -> Backend:
             return DaskBackend(spec.backend, None, spec.results, local_workers=spec.lanes, jobs=d)
         return DaskBackend(spec.backend, d.address, spec.results, local_workers=spec.lanes)
     return make_local_backend(spec.backend)
-
-
-def make_local_backend(name: str) -> Backend:
-    """The backend that runs a process on this machine: a local process tree, or a Docker or podman container."""
-    if name == "local":
-        from slamrun.backends.local import LocalBackend
-
-        return LocalBackend()
-    if name == "podman":
-        from slamrun.backends.podman import PodmanBackend
-
-        return PodmanBackend()
-    from slamrun.backends.docker import DockerBackend
-
-    return DockerBackend()

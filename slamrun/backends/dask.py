@@ -43,7 +43,7 @@ class _RemoteCancel:
 
 
 def _execute_on_worker(backend_name: str, req: ExecRequest, flag: str) -> ExecResult:
-    from slamrun.backends import make_local_backend
+    from slamrun.backends.this_machine import make_local_backend
 
     try:  # Dask hands a lost worker's task to another one; the campaign retries it in a fresh folder instead
         with open(Path(flag).parent / "worker.txt", "x") as fh:
@@ -103,7 +103,7 @@ def _check_on_worker(backend_name: str, images: dict | None, probe: str) -> str 
     if not Path(probe).exists():
         return f"{host}: cannot see {probe}; the results directory must be on a filesystem shared with the workers"
     try:
-        from slamrun.backends import make_local_backend
+        from slamrun.backends.this_machine import make_local_backend
 
         backend = make_local_backend(backend_name)
         try:
@@ -182,7 +182,7 @@ class DaskBackend(Defaults):
             raise InfraError("Dask workers cannot run the campaign:\n  " + "\n  ".join(bad))
 
     def process_paths(self, view, workdir):
-        from slamrun.backends import make_local_backend
+        from slamrun.backends.this_machine import make_local_backend
 
         return make_local_backend(self.name).process_paths(view, workdir)
 

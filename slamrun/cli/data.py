@@ -90,7 +90,7 @@ def cmd_download(args) -> int:
 
 
 def cmd_synth(args) -> int:
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
     from slamrun.errors import DatasetError
 
     try:

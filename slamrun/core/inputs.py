@@ -10,10 +10,12 @@ from __future__ import annotations
 import os
 import stat
 from pathlib import Path
-
-import yaml
+from typing import TYPE_CHECKING
 
 from slamrun.errors import SlamRunError
+
+if TYPE_CHECKING:
+    import yaml
 
 MiB = 2**20
 YAML_MAX_VALUES = 100_000  # values of a YAML document once its aliases are expanded
@@ -94,6 +96,8 @@ def read_text_bounded(
 def expanded_size(root: yaml.Node) -> int:
     """How many values a YAML node stands for with every alias expanded (an alias is the same node object
     again; a recursive alias counts once). Iterative: any depth."""
+    import yaml
+
     memo: dict[int, int] = {}
     stack: list[tuple[yaml.Node, bool]] = [(root, False)]
     while stack:
@@ -119,6 +123,8 @@ def expanded_size(root: yaml.Node) -> int:
 def parse_yaml(text: str, source: str, error: type[SlamRunError] = SlamRunError, max_values: int = YAML_MAX_VALUES):
     """A YAML document (safe types only) parsed once, with its aliases' expansion and its nesting bounded before
     any value is built; `error` names `source`, the line and what is wrong. Returns (value, root node)."""
+    import yaml  # PyYAML only where a YAML file is read (evaluating trajectory files needs none)
+
     loader = yaml.SafeLoader(text)
     try:
         try:

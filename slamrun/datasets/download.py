@@ -28,7 +28,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 from slamrun.core.archives import ZIP_ERRORS, copy_member, files_of, stated_total
-from slamrun.datasets.tum_mono import parse_sequences  # noqa: F401 - TUM-Mono's numbers, where callers had it
 from slamrun.errors import DatasetError
 
 CHUNK = 1 << 20
@@ -37,22 +36,6 @@ STALL_BYTES = 64 * 1024  # fewer than this in STALL_S seconds is a stalled downl
 UNPACK_RATIO = 100  # an archive may unpack to this many times its size (a sequence's images barely compress), plus:
 UNPACK_SLACK = 64 * 2**20
 MAX_MEMBERS = 200_000  # files in one archive (a TUM-VI or EuRoC sequence: some thousands)
-
-
-def parse_numbers(text: str) -> list[int]:
-    """'1-5,7,10-12' → [1, 2, 3, 4, 5, 7, 10, 11, 12], sorted, each once."""
-    out: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        try:
-            if "-" in part:
-                a, b = (int(v) for v in part.split("-", 1))
-                out += list(range(a, b + 1))
-            elif part:
-                out.append(int(part))
-        except ValueError:
-            raise DatasetError(f"--sequences {text!r}: expected numbers and ranges like 1-5,7") from None
-    return sorted(set(out))
 
 
 def stall_seconds() -> float:

@@ -13,11 +13,12 @@ import zipfile
 import zlib
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from slamrun.core.inputs import MiB, read_bounded, regular_file_problem
 from slamrun.errors import DatasetError
+
+GRAYSCALE, UNCHANGED = 0, -1  # OpenCV's IMREAD_GRAYSCALE and IMREAD_UNCHANGED
 
 # No dataset's frame comes near it: EuRoC's 752x480 and KITTI's 1241x376 PNGs are about 0.4 MB, TUM-Mono's
 # 1280x1024 JPEGs 0.3 MB; even an uncompressed 4096x4096 16-bit PNG is 32 MiB.
@@ -156,7 +157,7 @@ def decode(
     data: bytes,
     where: str,
     size: tuple[int, int] | None,
-    flags: int = cv2.IMREAD_GRAYSCALE,
+    flags: int = GRAYSCALE,
     source: str = "the calibration",
 ) -> np.ndarray:
     """A frame decoded, or DatasetError naming `where` (it does not decode, or is not `size` = (width, height), the
@@ -164,6 +165,8 @@ def decode(
     announced = header_size(data[:HEAD_BYTES])
     if size is not None and announced is not None and announced != size:
         raise DatasetError(size_problem(where, announced, size, source))
+    import cv2  # OpenCV only when a frame is decoded: reading a sequence's lists and times does not need it
+
     try:
         img = cv2.imdecode(np.frombuffer(data, np.uint8), flags)
     except cv2.error:
@@ -197,7 +200,7 @@ def check_files(
             found.append(problem)
     if not found and names:
         try:
-            decode(read_frame(images / names[0]), str(images / names[0]), size, cv2.IMREAD_UNCHANGED, source)
+            decode(read_frame(images / names[0]), str(images / names[0]), size, UNCHANGED, source)
         except DatasetError as exc:
             found.append(str(exc))
     problems.extend(_listed(found))
@@ -227,7 +230,7 @@ def check_members(
     if not found and names:
         try:
             data = read_member(zf, zip_path, names[0])
-            decode(data, f"{zip_path}: member {names[0]}", size, cv2.IMREAD_UNCHANGED, source)
+            decode(data, f"{zip_path}: member {names[0]}", size, UNCHANGED, source)
         except DatasetError as exc:
             found.append(str(exc))
     problems.extend(_listed(found))

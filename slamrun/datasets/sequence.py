@@ -11,13 +11,12 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from slamrun.core.camera import CameraFile, FovCamera, rectification_problem
 from slamrun.core.inputs import read_bounded, read_text_bounded, regular_file_problem
 from slamrun.core.trajectory import Trajectory
-from slamrun.datasets.frames import decode, read_frame, read_head, read_member
+from slamrun.datasets.frames import GRAYSCALE, decode, read_frame, read_head, read_member
 from slamrun.errors import DatasetError, SlamRunError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
@@ -118,7 +117,7 @@ class Sequence:
             for name in self.frame_names:
                 yield name, read_frame(self.images_dir / name)
 
-    def decode(self, name: str, data: bytes, flags: int = cv2.IMREAD_GRAYSCALE) -> np.ndarray:
+    def decode(self, name: str, data: bytes, flags: int = GRAYSCALE) -> np.ndarray:
         """Frame `name` decoded; DatasetError naming it when it does not decode or is not the calibration's size."""
         return decode(data, self.where(name), self.size, flags)
 

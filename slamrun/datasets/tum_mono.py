@@ -15,7 +15,6 @@ import zipfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
 from slamrun.core.camera import CameraFile, read_camera_txt
@@ -232,7 +231,7 @@ def read_pcalib(path: Path) -> np.ndarray:
 
 def _vignette_image(path: Path, size: tuple[int, int] | None = None) -> np.ndarray:
     data = read_bounded(path, frames.MAX_FRAME_BYTES, "the vignette", DatasetError)
-    return frames.decode(data, str(path), size, cv2.IMREAD_UNCHANGED, "camera.txt")
+    return frames.decode(data, str(path), size, frames.UNCHANGED, "camera.txt")
 
 
 def read_vignette(path: Path) -> np.ndarray:
@@ -338,10 +337,24 @@ def write_synthetic(tmp: Path, s: Synth) -> Placed:
 URL = os.environ.get("SLAMRUN_TUM_MONO_URL", "https://vision.in.tum.de/mono/dataset")
 
 
+def parse_numbers(text: str) -> list[int]:
+    """'1-5,7,10-12' → [1, 2, 3, 4, 5, 7, 10, 11, 12], sorted, each once."""
+    out: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            if "-" in part:
+                a, b = (int(v) for v in part.split("-", 1))
+                out += list(range(a, b + 1))
+            elif part:
+                out.append(int(part))
+        except ValueError:
+            raise DatasetError(f"--sequences {text!r}: expected numbers and ranges like 1-5,7") from None
+    return sorted(set(out))
+
+
 def parse_sequences(text: str) -> list[int]:
     """'1-5,7,10-12' → [1, 2, 3, 4, 5, 7, 10, 11, 12] (TUM-Mono numbers 1..50)."""
-    from slamrun.datasets.download import parse_numbers
-
     out = parse_numbers(text)
     bad = [n for n in out if not 1 <= n <= 50]
     if bad:

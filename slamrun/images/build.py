@@ -246,7 +246,7 @@ def training_frames(dest: Path, sequences: int = 3, frames: int = 120) -> None:
     """Frames a vocabulary is trained on: synthetic indoor and outdoor scenes (seeds far from the demo's)."""
     import zipfile
 
-    from slamrun.datasets.synth import generate
+    from slamrun.datasets.make_synthetic import generate
 
     dest.mkdir(parents=True)
     with tempfile.TemporaryDirectory() as tmp:
