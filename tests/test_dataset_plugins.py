@@ -69,7 +69,7 @@ def test_the_plugin_is_listed_with_its_package_and_the_broken_ones_are_named(ins
     assert "not registered: euroc: plug-in" in listed and "is a built-in layout" in listed
     assert "not registered: twice: 'twice' is registered by 2 installed plug-ins" in listed
     assert "not registered: number: plug-in slamrun_dataset_mylab.layout:MAX_GAP_S" in listed
-    assert "is float, not a slamrun.datasets.protocol.Layout" in listed
+    assert "is float, not a slamrun.datasets.Layout" in listed
     assert "not registered: renamed:" in listed and "its layout's name is 'mylab', not 'renamed'" in listed
     # without the package, nothing of it
     assert "mylab" not in slamrun("list-datasets").stdout

@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 # lower layers never import higher ones; a layer may import itself
 LAYERS = [
-    ("slamrun.errors", "slamrun.results"),
+    ("slamrun.errors", "slamrun.results", "slamrun.plugins"),
     ("slamrun.core",),
     ("slamrun.datasets",),
     ("slamrun.methods", "slamrun.backends"),

@@ -33,6 +33,7 @@ from slamrun.datasets.plugin_checks import TIME_LIMITS_S, bounded, checked_reade
 from slamrun.datasets.protocol import METRICS, Layout
 from slamrun.datasets.sequence import Sequence, folder_identity
 from slamrun.errors import DatasetError, SlamRunError, one_line
+from slamrun.plugins import Provider, discover
 
 BUILT_IN: tuple[Layout, ...] = (
     tum_vi.LAYOUT,
@@ -92,23 +93,10 @@ def _adopt(layout: Layout, provider: str) -> Layout:
     )
 
 
-def _provider(ep) -> str:
-    dist = ep.dist
-    if dist is None:
-        return "an unknown distribution"
-    return f"{dist.name or 'an unnamed distribution'} {dist.version or '?'}"
-
-
-def _load(name: str, ep, provider: str, where: str) -> Layout | str:
-    """The entry point's layout, or why it cannot be registered."""
-    try:
-        layout = ep.load()
-    except KeyboardInterrupt:
-        raise
-    except BaseException as exc:  # noqa: BLE001 - sys.exit() or any error of someone else's package
-        return f"plug-in {where} cannot be imported: {one_line(exc)}"
+def _accept(name: str, layout, provider: Provider, where: str) -> Layout | str:
+    """A plug-in's layout, checked (its kind, name, functions, frame list, metrics) and adopted; or why not."""
     if not isinstance(layout, Layout):
-        return f"plug-in {where} is {type(layout).__name__}, not a slamrun.datasets.protocol.Layout"
+        return f"plug-in {where} is {type(layout).__name__}, not a slamrun.datasets.Layout"
     if layout.name != name:
         return f"plug-in {where}: its layout's name is {layout.name!r}, not {name!r}"
     if not (callable(layout.recognise) and callable(layout.read)):
@@ -117,35 +105,15 @@ def _load(name: str, ep, provider: str, where: str) -> Layout | str:
         return f"plug-in {where}: its layout's frame_list must be a relative path"
     if not (isinstance(layout.default_metrics, tuple) and set(layout.default_metrics) <= set(METRICS)):
         return f"plug-in {where}: its layout's default_metrics must be a tuple of {', '.join(METRICS)}"
-    return _adopt(layout, provider)
+    return _adopt(layout, str(provider))
 
 
 @functools.cache
 def _plugins() -> tuple[dict[str, Layout], dict[str, str]]:
-    """(name -> plug-in layout, name -> why it is not registered), loaded once, on first need."""
-    from importlib.metadata import entry_points
-
-    found: dict[str, dict[tuple[str, str], object]] = {}
-    for ep in entry_points(group=PLUGIN_GROUP):
-        found.setdefault(ep.name, {})[(_provider(ep), ep.value)] = ep
-    loaded, errors = {}, {}
-    for name, eps in sorted(found.items()):
-        where = ", ".join(f"{value} from {provider}" for provider, value in eps)
-        if name in _BY_NAME:
-            errors[name] = f"plug-in {where}: {name!r} is a built-in layout"
-        elif len(eps) > 1:
-            errors[name] = (
-                f"{name!r} is registered by {len(eps)} installed plug-ins ({where}), so slamrun cannot tell which "
-                f"one to read it with: uninstall all but one"
-            )
-        else:
-            (provider, _), ep = next(iter(eps.items()))
-            got = _load(name, ep, provider, where)
-            if isinstance(got, Layout):
-                loaded[name] = got
-            else:
-                errors[name] = got
-    return loaded, errors
+    """(name -> plug-in layout, name -> why it is not registered), loaded once, on first need (slamrun/plugins.py:
+    one guard for a broken plug-in of any kind)."""
+    found = discover(PLUGIN_GROUP, _BY_NAME, "layout", _accept)
+    return found.loaded, found.errors
 
 
 def plugin_errors() -> dict[str, str]:

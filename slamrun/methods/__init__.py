@@ -20,17 +20,16 @@ from pathlib import Path
 
 from slamrun.core.suggest import did_you_mean
 from slamrun.datasets.view import Direction, PreparedView, Profile
-from slamrun.errors import one_line
 from slamrun.methods.base import (
     Method,
     NoParams,
-    Provider,
     PythonProcess,
     executable_problem,
     guarded,
     read_tum_output,
     require_poses,
 )
+from slamrun.plugins import Provider, discover
 
 __all__ = [  # the plug-in API, then the registry
     "Method",
@@ -83,53 +82,24 @@ PLUGIN_ERRORS: dict[str, str] = {}  # entry-point name -> why it could not be re
 PLUGINS: dict[str, Provider] = {}  # method name -> the installed distribution that provides it
 
 
-def _load_plugins() -> None:
-    """Register the group's entry points: a name two distributions register is refused (naming both), as is one a
-    built-in has; each other one is imported, checked and registered, or named with why not. Nothing a plug-in does
-    at import (an exception, sys.exit) stops slamrun."""
-    from importlib.metadata import entry_points
-
-    found: dict[str, dict[tuple[Provider, str], object]] = {}
-    for ep in entry_points(group=PLUGIN_GROUP):
-        found.setdefault(ep.name, {})[(_provider(ep), ep.value)] = ep
-    for name, eps in found.items():
-        where = ", ".join(f"{value} from {provider}" for provider, value in eps)
-        if name in REGISTRY:
-            PLUGIN_ERRORS[name] = f"plug-in {where}: {name!r} is taken by a built-in method"
-        elif len(eps) > 1:
-            PLUGIN_ERRORS[name] = (
-                f"{name!r} is registered by {len(eps)} installed plug-ins ({where}), so slamrun cannot tell which "
-                f"one to run: uninstall all but one (pip uninstall {' or '.join(p.distribution for p, _ in eps)})"
-            )
-        else:
-            (provider, _value), ep = next(iter(eps.items()))
-            _register(name, ep, provider, where)
-
-
-def _provider(ep) -> Provider:
-    dist = ep.dist
-    if dist is None:
-        return Provider("an unknown distribution", "?")
-    return Provider(dist.name or "an unnamed distribution", dist.version or "?")
-
-
-def _register(name: str, ep, provider: Provider, where: str) -> None:
-    try:
-        cls = ep.load()
-    except KeyboardInterrupt:
-        raise
-    except BaseException as exc:  # noqa: BLE001 - sys.exit() or any error of someone else's package: named, not raised
-        PLUGIN_ERRORS[name] = f"plug-in {where} cannot be imported: {one_line(exc)}"
-        return
+def _accept(name: str, cls, provider: Provider, where: str) -> type[Method] | str:
+    """A plug-in's class, checked as a built-in's is (a Method subclass, its name, its calls implemented), with its
+    calls guarded; or why not."""
     if not (isinstance(cls, type) and issubclass(cls, Method)):
-        PLUGIN_ERRORS[name] = f"plug-in {where} is not a subclass of slamrun.methods.Method"
-    elif getattr(cls, "name", None) != name:
-        PLUGIN_ERRORS[name] = f"plug-in {where}: its class's name is {getattr(cls, 'name', None)!r}, not {name!r}"
-    elif missing := sorted(getattr(cls, "__abstractmethods__", ())):
-        PLUGIN_ERRORS[name] = f"plug-in {where}: {cls.__name__} does not implement {', '.join(missing)}"
-    else:
-        REGISTRY[name] = guarded(cls, f"plug-in {name} ({provider})")
-        PLUGINS[name] = provider
+        return f"plug-in {where} is not a subclass of slamrun.methods.Method"
+    if getattr(cls, "name", None) != name:
+        return f"plug-in {where}: its class's name is {getattr(cls, 'name', None)!r}, not {name!r}"
+    if missing := sorted(getattr(cls, "__abstractmethods__", ())):
+        return f"plug-in {where}: {cls.__name__} does not implement {', '.join(missing)}"
+    return guarded(cls, f"plug-in {name} ({provider})")
+
+
+def _load_plugins() -> None:
+    """Register the group's entry points (slamrun/plugins.py: one guard for a broken plug-in of any kind)."""
+    found = discover(PLUGIN_GROUP, REGISTRY, "method", _accept)
+    REGISTRY.update(found.loaded)
+    PLUGIN_ERRORS.update(found.errors)
+    PLUGINS.update(found.providers)
 
 
 _load_plugins()

@@ -8,7 +8,6 @@ import re
 import shutil
 import sys
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
 from pathlib import Path
 from typing import ClassVar
 
@@ -183,17 +182,6 @@ def require_poses(traj: Trajectory, path: Path) -> Trajectory:
             raise MethodFailure("no_output", f"{path.name}: all {traj.report.n_rows} rows are NaN or infinite")
         raise MethodFailure("not_initialized", f"{path.name} holds no pose")
     return traj
-
-
-@dataclass(frozen=True)
-class Provider:
-    """The installed distribution a plug-in method comes from."""
-
-    distribution: str
-    version: str
-
-    def __str__(self) -> str:
-        return f"{self.distribution} {self.version}"
 
 
 GUARDED_CALLS = (
