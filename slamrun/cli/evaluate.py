@@ -13,9 +13,9 @@ from pathlib import Path
 from slamrun.core import jsonio
 from slamrun.core.inputs import regular_file_problem
 from slamrun.errors import SlamRunError
+from slamrun.results.vocabulary import METRIC_NAMES
 
 GT_FORMATS = ("tum-mono", "tum", "euroc", "kitti")
-METRIC_CHOICES = ("tum-mono", "ate", "rpe", "kitti")
 RPE_UNITS = ("frames", "s", "m", "evo-f", "evo-m")  # slamrun.core.metrics.RPE_UNITS (not imported: a quick --help)
 
 
@@ -44,7 +44,7 @@ def add_commands(sub) -> None:
     e.add_argument(
         "--metric",
         action="append",
-        choices=METRIC_CHOICES,
+        choices=METRIC_NAMES,
         help="a metric (repeat for several); default: the dataset's (a folder's layout: tum-mono for TUM-Mono, ate "
         "and rpe, and kitti for KITTI), for a file its format's (tum-mono for a TUM file)",
     )
@@ -197,8 +197,6 @@ def _options(args, gt, metrics: tuple[str, ...]):
         "delta_unit": args.delta_unit or default.unit,
     }
     if gt.is_folder:
-        from slamrun.engine.execute import evaluate
-
         return Options(
             metrics=metrics,
             alignment=args.align or "sim3",
@@ -206,7 +204,7 @@ def _options(args, gt, metrics: tuple[str, ...]):
             est_format=args.est_format,
             times=times,
             frame_times=frames,
-            campaign=evaluate,
+            campaign=True,  # each file as a campaign evaluates a run (core.metric_table.campaign_figures)
             **rpe,
         )
     return Options(

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import ctypes
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -24,43 +24,29 @@ import numpy as np
 from slamrun.core import metrics
 from slamrun.core.evaluation import TumMonoResult, tum_mono_file, tum_mono_many
 from slamrun.core.inputs import regular_file_problem
+from slamrun.core.metric_table import METRICS, Context, campaign_figures
+from slamrun.core.metric_table import metric as metric_named
 from slamrun.core.metrics import DEFAULT_TOLERANCE_S
 from slamrun.core.trajectory import Trajectory, read_kitti, read_tum_many
 from slamrun.errors import MetricError, TrajectoryFormatError
 from slamrun.results.vocabulary import (
-    ATE_COLUMNS,
     EVALUATE_FIELDS,
-    KITTI_COLUMNS,
-    RPE_COLUMNS,
-    TUM_MONO_METRICS,
     EvalStatus,
 )
 
-METRICS = ("tum-mono", "ate", "rpe", "kitti")
 NO_PAIRS = "no_pairs"  # a metric the path is too short for (RPE's interval, KITTI's 100 m): among others, only noted
 GROUP = 32  # TUM-Mono estimates evaluated together (their arrays stay in the CPU's cache)
 MAX_FILE_BYTES = 256 * 2**20  # a trajectory or ground-truth file: a million poses are about 100 MB
 # the figures a campaign records per metric (results.csv's columns)
-CAMPAIGN_FIELDS = {
-    "tum-mono": (*TUM_MONO_METRICS[:3], "e_s_sym", *TUM_MONO_METRICS[3:]),
-    "ate": ATE_COLUMNS,
-    "rpe": RPE_COLUMNS,
-    "kitti": KITTI_COLUMNS,
-}
-
-# (ground truth, estimate, metrics, alignment, RPE interval, frame times) -> (figures with eval_status, why a
-# metric is missing)
-CampaignEvaluation = Callable[
-    [Trajectory, Trajectory, tuple[str, ...], str, metrics.RpeInterval, np.ndarray | None], tuple[dict, str]
-]
+CAMPAIGN_FIELDS = {name: m.columns for name, m in METRICS.items()}
 
 
 @dataclass(frozen=True)
 class Options:
     """Which metrics, and how: the alignment, RPE's interval, the association tolerance; estimates as TUM files, or
     as KITTI pose files whose rows are the frames at `times`; `frame_times`, the sequence's frames (RPE in frames
-    counts them). With `campaign`, each file is evaluated by that function (a campaign's per-run evaluation: its
-    metrics, alignment and association) instead."""
+    counts them). With `campaign`, each file is evaluated as a campaign evaluates a run (metric_table.campaign_figures:
+    its metrics, alignment and association) instead."""
 
     metrics: tuple[str, ...] = ("tum-mono",)
     alignment: str = "sim3"
@@ -70,7 +56,7 @@ class Options:
     est_format: str = "tum"
     times: tuple[float, ...] | None = None
     frame_times: tuple[float, ...] | None = None
-    campaign: CampaignEvaluation | None = None
+    campaign: bool = False
 
     @property
     def frames(self) -> np.ndarray | None:
@@ -90,7 +76,7 @@ def file_problem(path: str | Path, limit: int, what: str) -> str | None:
 
 def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     """One estimate's figures for `opts.metrics` (status ok), or its status and why not."""
-    if opts.campaign is not None:
+    if opts.campaign:
         return _campaign_fields(gt, traj, opts)
     if len(opts.metrics) > 1:
         return _merged(gt, traj, opts)
@@ -101,15 +87,9 @@ def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
 def _single(gt: Trajectory, traj: Trajectory, metric: str, opts: Options) -> dict:
     if metric == "tum-mono":
         return _tum_mono_fields(tum_mono_file(gt, traj))
+    ctx = Context(opts.alignment, opts.tolerance_s, opts.delta, opts.delta_unit, opts.frames)
     try:
-        if metric == "ate":
-            res = metrics.ate(gt, traj, opts.alignment, opts.tolerance_s)
-        elif metric == "rpe":
-            res = metrics.rpe(gt, traj, opts.delta, opts.delta_unit, opts.alignment, opts.tolerance_s, opts.frames)
-        elif metric == "kitti":
-            res = metrics.kitti(gt, traj, opts.alignment, tolerance_s=opts.tolerance_s)
-        else:
-            raise MetricError(f"unknown metric {metric!r}; known: {', '.join(METRICS)}")
+        res = metric_named(metric).result(gt, traj, ctx)
     except MetricError as exc:
         status = NO_PAIRS if isinstance(exc, metrics.NoPairs) else "failed"
         return {"status": status, "n_poses": len(traj), "detail": str(exc)}
@@ -119,9 +99,8 @@ def _single(gt: Trajectory, traj: Trajectory, metric: str, opts: Options) -> dic
 def _campaign_fields(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     """The campaign's figures of one estimate: every field of the metrics asked for (null where missing). Its
     status is the campaign's eval_status, or failed where no figure at all came out."""
-    assert opts.campaign is not None
     interval = metrics.RpeInterval(opts.delta, opts.delta_unit)
-    figures, detail = opts.campaign(gt, traj, opts.metrics, opts.alignment, interval, opts.frames)
+    figures, detail = campaign_figures(gt, traj, opts.metrics, opts.alignment, interval, opts.frames)
     fields = {k: figures.get(k) for m in opts.metrics for k in CAMPAIGN_FIELDS[m]}
     status = figures.get("eval_status", EvalStatus.ok.value)
     if status == EvalStatus.ok.value and all(v is None for v in fields.values()):
@@ -150,7 +129,7 @@ def _merged(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
 def _unreadable(exc: TrajectoryFormatError, opts: Options) -> dict:
     """A file that could not be read: every figure it would have had present, null."""
     d = {"status": "unreadable", "detail": str(exc)}
-    if opts.campaign is not None:
+    if opts.campaign:
         return {"status": "unreadable", **dict.fromkeys(k for m in opts.metrics for k in CAMPAIGN_FIELDS[m]), **d}
     if opts.metrics == ("tum-mono",):
         return dict.fromkeys(EVALUATE_FIELDS) | d
@@ -195,7 +174,7 @@ def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory, opts: Option
         if isinstance(traj, TrajectoryFormatError):
             flush()
             out.append({"file": str(path), **_unreadable(traj, opts)})
-        elif opts.metrics == ("tum-mono",) and opts.campaign is None:
+        elif opts.metrics == ("tum-mono",) and not opts.campaign:
             group.append((path, traj))
             if len(group) == GROUP:
                 flush()

@@ -14,12 +14,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from slamrun.core.metrics import RpeInterval
+from slamrun.results.vocabulary import METRIC_NAMES
 
 if TYPE_CHECKING:  # the synthetic writers import the renderer (scipy) only when a sequence is generated
     from slamrun.datasets.sequence import Sequence
     from slamrun.datasets.synth import Synth
 
-METRICS = ("tum-mono", "ate", "rpe", "kitti")  # the metrics a layout's default_metrics may name
+METRICS = METRIC_NAMES  # the metrics a layout's default_metrics may name (core/metric_table.py)
 
 # (staged file, its place): files a synthetic writer puts beside the sequence's folder, moved there once the
 # folder is in place (KITTI's poses/NN.txt)

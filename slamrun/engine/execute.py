@@ -22,7 +22,8 @@ from slamrun.backends.base import Backend, ExecRequest, ExecResult, disk_reserve
 from slamrun.backends.logcap import tail
 from slamrun.backends.machine import machine, package_versions, packages_text
 from slamrun.core import jsonio, metrics
-from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S, tum_mono
+from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S
+from slamrun.core.metric_table import campaign_figures
 from slamrun.core.trajectory import Trajectory, write_tum
 from slamrun.datasets.cache import verify_view
 from slamrun.datasets.view import PreparedView
@@ -32,13 +33,12 @@ from slamrun.errors import (
     BackendUnreachable,
     InfraError,
     MethodFailure,
-    MetricError,
     StorageError,
     TrajectoryFormatError,
     storage_problem,
 )
 from slamrun.methods.base import Method
-from slamrun.results.vocabulary import TUM_MONO_METRICS, UNDER_MIN_COVERAGE, EvalStatus
+from slamrun.results.vocabulary import UNDER_MIN_COVERAGE, EvalStatus
 
 METHOD_ERROR = "method_error"  # in Launched.extra: (kind, message) of a method that failed before its process started
 
@@ -192,7 +192,7 @@ def finish_attempt(
             values["n_poses"] = len(traj)
             values["coverage"] = metrics.coverage(traj, view.original_timestamps())
             if groundtruth is not None:
-                figures, detail = evaluate(
+                figures, detail = campaign_figures(
                     groundtruth, traj, run.metrics, run.alignment, run.rpe, view.original_timestamps()
                 )
                 values.update(figures)
@@ -284,47 +284,6 @@ def config_path_problem(rel) -> str | None:
     if not path.parts:
         return "no file name"
     return None
-
-
-def evaluate(
-    gt: Trajectory,
-    traj: Trajectory,
-    wanted: tuple[str, ...],
-    alignment: str,
-    rpe: metrics.RpeInterval = metrics.RpeInterval(),
-    frame_times: np.ndarray | None = None,
-) -> tuple[dict, str]:
-    """A finished run's metrics (the dataset's `metrics:`, RPE at the interval `rpe` of the sequence whose frames
-    are at `frame_times`) and eval_status, and why a metric is missing. TUM-Mono's figures or ATE/RPE that cannot
-    be computed make the evaluation incomplete; a path shorter than RPE's interval or KITTI's 100 m is the data's
-    limit, only noted (coverage says how much of the sequence was tracked)."""
-    values: dict = {}
-    status, notes = EvalStatus.ok, []
-    if "tum-mono" in wanted:
-        ev = tum_mono(gt, traj)
-        status = ev.status
-        if ev.status is EvalStatus.ok:
-            values.update({k: getattr(ev, k) for k in TUM_MONO_METRICS} | {"e_s_sym": ev.e_s_sym})
-        else:
-            notes.append(f"evaluation {ev.status.value}: {ev.detail}")
-    for name in (m for m in wanted if m != "tum-mono"):
-        try:
-            if name == "ate":
-                a = metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).translation
-                values.update(ate_rmse=a.rmse, ate_mean=a.mean, ate_median=a.median, ate_max=a.max)
-            elif name == "rpe":
-                values["rpe_interval"] = str(rpe)
-                r = metrics.rpe(gt, traj, rpe.delta, rpe.unit, alignment, ASSOCIATION_TOLERANCE_S, frame_times)
-                values.update(rpe_t_rmse=r.translation.rmse, rpe_r_rmse=r.rotation_deg.rmse, rpe_pairs=r.pairs)
-            elif name == "kitti":
-                k = metrics.kitti(gt, traj, alignment, tolerance_s=ASSOCIATION_TOLERANCE_S)
-                values.update(kitti_t_pct=k.t_pct, kitti_r_deg_m=k.r_deg_per_m)
-        except MetricError as exc:
-            notes.append(f"{name}: {exc}")
-            if name != "kitti" and not isinstance(exc, metrics.NoPairs) and status is EvalStatus.ok:
-                status = EvalStatus.incomplete
-    values["eval_status"] = status.value
-    return values, "; ".join(notes)
 
 
 @contextmanager

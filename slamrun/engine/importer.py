@@ -41,10 +41,11 @@ import numpy as np
 from slamrun.core import jsonio, metrics
 from slamrun.core.archives import ZIP_ERRORS, files_of, read_member
 from slamrun.core.inputs import read_bounded, regular_file_problem
+from slamrun.core.metric_table import campaign_figures
 from slamrun.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_tum, write_tum
 from slamrun.datasets.layouts import open_sequence, sequence_identity
 from slamrun.datasets.view import Direction
-from slamrun.engine.execute import evaluate, foreign_timestamps_of
+from slamrun.engine.execute import foreign_timestamps_of
 from slamrun.engine.folders import path_part_problem
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.paths import RunPaths
@@ -442,7 +443,9 @@ def _record(key: RunKey, source: str, sha256: str, ds, seq, gt, traj: Trajectory
         if traj.report.n_nonfinite_dropped:
             values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the file dropped"
         if gt is not None:
-            figures, detail = evaluate(gt, traj, tuple(ds.metrics), ds.alignment, ds.rpe_interval, seq.timestamps)
+            figures, detail = campaign_figures(
+                gt, traj, tuple(ds.metrics), ds.alignment, ds.rpe_interval, seq.timestamps
+            )
             values.update(figures)
             if detail and not values["message"]:
                 values["message"] = detail

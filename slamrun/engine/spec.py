@@ -32,6 +32,7 @@ from slamrun.engine.folders import (
     path_part_problem,
 )
 from slamrun.errors import DatasetError, SlamRunError, SpecError
+from slamrun.results.vocabulary import METRIC_NAMES
 
 
 class Strict(BaseModel):
@@ -108,7 +109,7 @@ class DatasetSpec(Strict):
         return v
 
     synthetic: SynthSpec | None = Field(None, description="Generate missing sequences with `slamrun synth`.")
-    metrics: list[Literal["tum-mono", "ate", "rpe", "kitti"]] | None = Field(
+    metrics: list[Literal[METRIC_NAMES]] | None = Field(
         None,
         min_length=1,
         description="Metrics of each run against the ground truth: TUM-Mono's six, ATE, RPE (at `rpe:`), "

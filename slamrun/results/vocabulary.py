@@ -51,6 +51,8 @@ class EvalStatus(StrEnum):
 
 
 # TUM-Mono's figures as the benchmark defines them (docs/tum-mono.md)
+# the metrics a spec, a layout or `evaluate --metric` may name; how each is computed: core/metric_table.py
+METRIC_NAMES = ("tum-mono", "ate", "rpe", "kitti")
 TUM_MONO_METRICS = ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse")
 # ATE, RPE and KITTI's segment errors as a campaign records them
 ATE_COLUMNS = ("ate_rmse", "ate_mean", "ate_median", "ate_max")
