@@ -7,6 +7,7 @@ from pathlib import Path
 
 from slamrun.cli.console import console
 from slamrun.core import jsonio
+from slamrun.core.formats import FORMATS
 
 
 def add_commands(sub) -> None:
@@ -43,7 +44,7 @@ def add_commands(sub) -> None:
         help="regular expression with the named groups sequence, direction (fw|bw|forward|backward) and trial, "
         "searched in each file's path (default: the study's <code>_<fw|bw>/sequence_SS_R.txt)",
     )
-    im.add_argument("--format", default="tum", choices=["tum", "kitti", "euroc"], help="the files' trajectory format")
+    im.add_argument("--format", default="tum", choices=list(FORMATS), help="the files' trajectory format")
     im.set_defaults(func=cmd_import)
 
 

@@ -11,11 +11,12 @@ import sys
 from pathlib import Path
 
 from slamrun.core import jsonio
+from slamrun.core.formats import FORMATS
 from slamrun.core.inputs import regular_file_problem
 from slamrun.errors import SlamRunError
 from slamrun.results.vocabulary import METRIC_NAMES
 
-GT_FORMATS = ("tum-mono", "tum", "euroc", "kitti")
+GT_FORMATS = ("tum-mono", *FORMATS)  # TUM-Mono's groundtruthSync.txt, and the trajectory formats
 RPE_UNITS = ("frames", "s", "m", "evo-f", "evo-m")  # slamrun.core.metrics.RPE_UNITS (not imported: a quick --help)
 
 

@@ -23,11 +23,12 @@ import numpy as np
 
 from slamrun.core import metrics
 from slamrun.core.evaluation import TumMonoResult, tum_mono_file, tum_mono_many
+from slamrun.core.formats import read_trajectory
 from slamrun.core.inputs import regular_file_problem
 from slamrun.core.metric_table import METRICS, Context, campaign_figures
 from slamrun.core.metric_table import metric as metric_named
 from slamrun.core.metrics import DEFAULT_TOLERANCE_S
-from slamrun.core.trajectory import Trajectory, read_kitti, read_tum_many
+from slamrun.core.trajectory import Trajectory, read_tum_many
 from slamrun.errors import MetricError, TrajectoryFormatError
 from slamrun.results.vocabulary import (
     EVALUATE_FIELDS,
@@ -155,7 +156,7 @@ def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | Traje
 
 def _read_kitti(path: str | Path, opts: Options) -> Trajectory | TrajectoryFormatError:
     try:
-        return read_kitti(path, np.asarray(opts.times))
+        return read_trajectory(path, "kitti", np.asarray(opts.times))
     except TrajectoryFormatError as exc:
         return exc
 

@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from slamrun.core.batch_eval import MAX_FILE_BYTES, file_problem
+from slamrun.core.formats import FORMATS, read_trajectory
 from slamrun.core.inputs import read_text_bounded
 from slamrun.core.metrics import RpeInterval
-from slamrun.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_times, read_tum
+from slamrun.core.trajectory import Trajectory, read_times
 from slamrun.datasets.euroc import EUROC_GT, asl_file_note, asl_folder
 from slamrun.datasets.layouts import (
     BUILT_IN,
@@ -33,13 +34,12 @@ from slamrun.datasets.layouts import (
 from slamrun.datasets.tum_vi import TUMVI_GT
 from slamrun.errors import DatasetError
 
-FILE_FORMATS = ("tum-mono", "tum", "euroc", "kitti")
-FORMAT_NAMES = {
+FORMAT_NAMES = {  # the trajectory formats (core/formats.py), and TUM-Mono's ground-truth file
     "tum-mono": "a TUM-Mono groundtruthSync.txt ('timestamp tx ty tz qx qy qz qw' rows, NaN rows kept)",
-    "tum": "a TUM trajectory ('timestamp tx ty tz qx qy qz qw' rows)",
-    "euroc": "an EuRoC/ASL state csv (#timestamp [ns], p_RS_R xyz, q_RS wxyz, ...)",
+    **FORMATS,
     "kitti": "KITTI poses (12 numbers a row: the 3x4 pose, one row per frame of --times)",
 }
+FILE_FORMATS = tuple(FORMAT_NAMES)
 # the metrics a ground-truth file is evaluated with when --metric is not given: its dataset's
 FILE_DEFAULT_METRICS = {
     "tum-mono": ("tum-mono",),
@@ -177,14 +177,9 @@ def _first_row(path: Path) -> str:
 
 
 def _read_file(path: Path, fmt: str, times: np.ndarray | None) -> Trajectory:
-    if fmt == "tum-mono":
+    if fmt == "tum-mono":  # a ground-truth form only: NaN rows kept
         return read_groundtruth_sync(path)
-    if fmt == "euroc":
-        return read_euroc_csv(path)
-    if fmt == "kitti":
-        assert times is not None
-        return read_kitti(path, times)
-    return read_tum(path)
+    return read_trajectory(path, fmt, times)
 
 
 def read_groundtruth_sync(path: Path) -> Trajectory:

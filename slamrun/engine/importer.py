@@ -40,9 +40,10 @@ import numpy as np
 
 from slamrun.core import jsonio, metrics
 from slamrun.core.archives import ZIP_ERRORS, files_of, read_member
+from slamrun.core.formats import read_trajectory
 from slamrun.core.inputs import read_bounded, regular_file_problem
 from slamrun.core.metric_table import campaign_figures
-from slamrun.core.trajectory import Trajectory, read_euroc_csv, read_kitti, read_tum, write_tum
+from slamrun.core.trajectory import Trajectory, write_tum
 from slamrun.datasets.layouts import open_sequence, sequence_identity
 from slamrun.datasets.view import Direction
 from slamrun.engine.execute import foreign_timestamps_of
@@ -292,12 +293,7 @@ def _trajectory(source: str, data: bytes, fmt: str, frames: np.ndarray) -> Traje
         f.write(data)
         f.flush()
         try:
-            if fmt == "kitti":
-                traj = read_kitti(f.name, frames)
-            elif fmt == "euroc":
-                traj = read_euroc_csv(f.name)
-            else:
-                traj = read_tum(f.name)
+            traj = read_trajectory(f.name, fmt, frames)
         except TrajectoryFormatError as exc:
             raise ImportRefused(f"{source}: {str(exc).split(': ', 1)[-1]}") from None
     return traj
