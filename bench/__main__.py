@@ -234,7 +234,8 @@ def bench_scheduler(tmp: Path) -> None:
 
     from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import DistributedSpec, load_spec
+    from slamrun.engine.spec import DistributedSpec
+    from slamrun.engine.spec_file import load_spec
 
     print("scheduler: per-run overhead with a no-op method, against a bare spawn of the same command")
     generate(tmp / "data" / "s", frames=30, seed=0, size=(64, 48))
@@ -303,7 +304,7 @@ def bench_plan_status(tmp: Path) -> None:
     from slamrun.engine.export import results_frame
     from slamrun.engine.ledger import Ledger
     from slamrun.engine.plan import plan
-    from slamrun.engine.spec import validate_spec
+    from slamrun.engine.spec_file import validate_spec
 
     print("plan and status of a 10,000-run campaign")
     raw = {
@@ -691,7 +692,7 @@ def bench_serve(tmp: Path, seconds: float = 30.0, rate: float = 20.0, viewers: i
     from slamrun.engine.ledger import Ledger
     from slamrun.engine.plan import plan
     from slamrun.engine.session import read_figures
-    from slamrun.engine.spec import validate_spec
+    from slamrun.engine.spec_file import validate_spec
     from slamrun.serve.snapshot import snapshot
 
     name = "live"

@@ -183,7 +183,7 @@ def test_bad_data_never_reaches_a_method(seq, tmp_path, layout, damage, named):
     and `not_initialized`; a 1e308 translation gave `done` with ATE = Inf. The campaign now refuses the sequence
     before any run, naming the file: nothing is written, nothing charged."""
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     root = seq(layout)
     damage(root)
@@ -307,7 +307,7 @@ def test_a_frame_only_view_preparation_finds_broken_is_a_dataset_error_never_the
     as it was. Now the view's preparation decodes every frame: the run is infra naming the frame, never a method's
     failure, and a good frame elsewhere is not affected."""
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     root = seq("kitti")
     frame = root / "image_0/000008.png"

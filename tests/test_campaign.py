@@ -21,7 +21,7 @@ import pytest
 from slamrun.backends.local import LocalBackend
 from slamrun.engine.campaign import run_campaign
 from slamrun.engine.ledger import ResultsLock
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import InfraError
 from tests.conftest import fake_method, mount_tmpfs, one_sequence, write_spec
 

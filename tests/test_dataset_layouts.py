@@ -116,7 +116,7 @@ def test_each_layout_end_to_end_equals_the_same_sequence_in_tum_mono_layout(layo
     1e-9 in both directions says the views are the same, whichever method reads them; colmap backward is tested in
     test_native_methods.py.)"""
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import write_spec
 
     datasets = []
@@ -332,7 +332,7 @@ def test_bad_input_is_named_with_its_file(layouts, tmp_path):
 def test_a_spec_names_bad_sequences_before_any_run(layouts, tmp_path):
     """`validate` and the campaign's check: a wrong layout and a missing calibration, every problem at once."""
     from slamrun.engine.campaign import check_sequences
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import write_spec
 
     euroc = tmp_path / "euroc" / "V1"

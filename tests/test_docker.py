@@ -27,7 +27,7 @@ from slamrun.datasets.cache import prepare
 from slamrun.datasets.view import Direction, Profile
 from slamrun.engine.campaign import run_campaign
 from slamrun.engine.ledger import Ledger
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import InfraError
 from tests.conftest import one_sequence, write_spec
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import DaemonUnreachable
 from tests.conftest import one_sequence, write_spec
 from tests.test_campaign import ledger_rows

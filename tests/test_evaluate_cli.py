@@ -68,7 +68,7 @@ def campaign(tmp_path_factory) -> tuple[Path, pd.DataFrame]:
     """A small real campaign: reference_vo, forward and backward, one trial, on one synthetic sequence of each
     layout (each dataset with its layout's default metrics). Returns the data folder and results.csv."""
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import write_spec
 
     root = tmp_path_factory.mktemp("evaluate_campaign")

@@ -14,7 +14,7 @@ import slamrun.methods
 from slamrun.core.trajectory import read_tum
 from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.images.verify import scene_extent
 from tests.conftest import one_sequence, write_spec
 

@@ -24,7 +24,7 @@ import yaml
 from slamrun.backends.local import LocalBackend
 from slamrun.backends.monitor import Gpu, host_gpus
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec, validate_spec
+from slamrun.engine.spec_file import load_spec, validate_spec
 from slamrun.errors import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -444,6 +444,7 @@ def test_podman_before_5_4_is_refused_for_a_gpu_method_before_any_run(tmp_path, 
 
 def test_the_gpu_request_is_the_engines_own():
     import docker
+
     from slamrun.backends.docker import DockerBackend
     from slamrun.backends.podman import PodmanBackend
 

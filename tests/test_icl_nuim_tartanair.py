@@ -252,7 +252,7 @@ HALF_S = {"delta": 0.5, "unit": "s"}
 def campaign(sequences, tmp_path_factory) -> tuple[Path, pd.DataFrame]:
     """reference_vo and colmap, forward and backward, on both sequences."""
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import write_spec
 
     root = tmp_path_factory.mktemp("campaign")
@@ -387,7 +387,7 @@ def test_synth_names_an_unknown_layout(tmp_path):
 @pytest.mark.parametrize("name", ["icl-tartanair-demo.yaml", "icl-nuim.yaml"])
 def test_the_example_specs_load(name):
     import slamrun.methods
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     spec = load_spec(ROOT / "configs" / name, check_files=False)
     assert [d.layout for d in spec.datasets] == ["icl-nuim", "tartanair"]

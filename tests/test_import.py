@@ -49,7 +49,7 @@ def campaign(shared_data, tmp_path_factory) -> Path:
     import yaml
 
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import fake_method
 
     root = tmp_path_factory.mktemp("import")
@@ -183,7 +183,7 @@ def test_bad_input_is_named_and_nothing_is_imported_halfway(campaign, shared_dat
 
 def test_imported_runs_survive_a_resumed_campaign_and_a_lost_ledger(campaign, shared_data, tmp_path):
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     study = shared_data / "study_trajectories"
     assert main(["import", str(study), "--campaign", str(campaign), "--as", "study:keep"]) == 0

@@ -403,7 +403,7 @@ def json_source(row: dict) -> str:
 def test_imported_labels_never_meet_a_method_the_spec_runs(campaign, shared_data, tmp_path, capsys):  # noqa: F811
     """An imported label is SOURCE:NAME and a spec's label holds no ':', so an import and a spec never pool
     their runs in one row (was: `--as reference_vo` accepted, a spec label `study:dso` accepted)."""
-    from slamrun.engine.spec import validate_spec
+    from slamrun.engine.spec_file import validate_spec
     from slamrun.errors import SpecError
 
     study = shared_data / "study_trajectories"

@@ -31,7 +31,7 @@ def test_kittis_synthetic_drive_has_segments_at_the_default_frame_count(tmp_path
     report says so in one line instead of dropping the column silently."""
     from slamrun.analysis.report import write_report
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import fake_method, write_spec
 
     data = tmp_path / "dataset" / "sequences"

@@ -29,7 +29,7 @@ def test_a_campaign_and_status_in_such_a_folder(tiny_dataset, tmp_path):
     import sys
 
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import fake_method, one_sequence, write_spec
 
     results = tmp_path / "res#1?x%41"

@@ -15,7 +15,7 @@ import pytest
 
 from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.images.build import BuildOptions, build
 from slamrun.images.verify import scene_extent
 from tests.conftest import UPSTREAM, require_upstream, write_spec

@@ -307,7 +307,7 @@ def test_failure_cases(tmp_path, views):
 
 
 def test_local_backend_needs_a_local_build(tiny_dataset, tmp_path):
-    from slamrun.engine.spec import validate_spec
+    from slamrun.engine.spec_file import validate_spec
     from slamrun.errors import SpecError
 
     build = tmp_path / "mono_tum"  # a local build: a program that exists
@@ -395,7 +395,7 @@ def test_loop_closure_switch_where_the_study_used_one(name):
 
 def test_paper_spec_is_the_full_study():
     from slamrun.engine.plan import plan
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     spec = load_spec(ROOT / "configs" / "paper.yaml", check_files=False)
     runs = plan(spec)
@@ -420,7 +420,7 @@ def test_paper_spec_turns_loop_closure_off_where_the_study_did():
     """The study disabled loop closure in ORB-SLAM2, DF-ORB-SLAM, DynaSLAM, LDSO and DSM only (shared/docs/
     study.md); LSD-SLAM ran with its own default, global mapping on (`_doSLAM` true), so the paper spec asks
     for it. slamrun's own default stays off for every method that has a switch."""
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     for name in ("paper.yaml", "paper-timing.yaml"):
         spec = load_spec(ROOT / "configs" / name, check_files=False)

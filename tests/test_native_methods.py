@@ -12,7 +12,7 @@ import pytest
 
 from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from tests.conftest import one_sequence, write_spec
 
 

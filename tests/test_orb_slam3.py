@@ -287,7 +287,7 @@ def test_real_orb_slam3_forward_backward_and_a_run_split_into_two_maps(tmp_path)
     (the maps in run.json, the largest evaluated, the run marked lost)."""
     from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from slamrun.images.verify import scene_extent
     from tests.conftest import write_spec
 

@@ -217,7 +217,7 @@ def _counts(out: str) -> dict[tuple[str, str], list[int]]:
 
 def test_dry_run_counts_are_exact(tmp_path, tiny_dataset, capsys):
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(label="m")], trials=2, lanes=1, report=False)
     out = _dry(capsys, spec, tmp_path)  # new

@@ -18,7 +18,7 @@ from slamrun.analysis.load import evaluated
 from slamrun.analysis.summary import method_summary
 from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import DatasetError, SlamRunError
 from tests.conftest import fake_method, one_sequence, write_spec
 from tests.test_campaign import ledger_rows

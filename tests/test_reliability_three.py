@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from tests.conftest import fake_method, one_sequence, write_spec
 from tests.test_campaign import ledger_rows
 

@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import SpecError
 from tests.conftest import fake_method, mount_tmpfs, one_sequence, write_spec
 from tests.test_campaign import ledger_rows

@@ -166,7 +166,7 @@ def test_a_campaign_with_ate_and_rpe_has_their_table_and_the_paths(tmp_path, tin
     ground truth (axes labelled with their units, equal aspect, a legend of what is drawn), rendered in a real
     browser."""
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import fake_method, write_spec
 
     datasets = [

@@ -119,7 +119,7 @@ def test_a_campaign_records_its_interval_and_pairs_and_evaluate_reproduces_them(
     import pandas as pd
 
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import write_spec
 
     data = tmp_path / "data"
@@ -152,7 +152,7 @@ def test_a_campaign_records_its_interval_and_pairs_and_evaluate_reproduces_them(
 
 
 def test_a_bad_rpe_key_in_a_spec_is_named(tiny_dataset, tmp_path):
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from slamrun.errors import SpecError
     from tests.conftest import write_spec
 

@@ -17,7 +17,7 @@ import pytest
 from slamrun.backends.jobqueue import job_name
 from slamrun.datasets.make_synthetic import generate
 from slamrun.engine.campaign import run_campaign
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import InfraError, SpecError
 from tests import slurm_cluster
 from tests.conftest import fake_method, write_spec

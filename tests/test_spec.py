@@ -7,7 +7,7 @@ import yaml
 
 from slamrun.cli import main
 from slamrun.engine.plan import plan
-from slamrun.engine.spec import load_spec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import SpecError
 from tests.conftest import fake_method, write_spec
 

@@ -97,7 +97,7 @@ def test_a_campaign_with_a_deterministic_method_says_so(tmp_path):
     counts them once and says which method that is, in text and JSON."""
     from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from tests.conftest import write_spec
 
     data = tmp_path / "data"

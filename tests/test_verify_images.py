@@ -98,7 +98,7 @@ def test_the_settled_error_leaves_out_the_segment_the_run_processed_first(tmp_pa
     from slamrun.core.trajectory import read_tum, write_tum
     from slamrun.datasets.make_synthetic import generate
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
     from slamrun.images.verify import settled_error
     from tests.conftest import write_spec
 

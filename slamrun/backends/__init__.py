@@ -10,17 +10,19 @@ from typing import TYPE_CHECKING
 from slamrun.backends.this_machine import make_local_backend
 
 if TYPE_CHECKING:
+    from pathlib import Path
+
     from slamrun.backends.base import Backend
-    from slamrun.engine.spec import CampaignSpec
+    from slamrun.backends.distributed import DistributedSpec
 
 
-def make_backend(spec: CampaignSpec) -> Backend:
-    """The backend a spec asks for: on a Dask cluster when it has `distributed:`, else on this machine."""
-    if spec.distributed is not None:
+def make_backend(backend: str, results: Path, lanes: int, distributed: DistributedSpec | None = None) -> Backend:
+    """The backend a spec asks for (its `backend:`, `results:`, `lanes:` and `distributed:`, not the whole spec): on a
+    Dask cluster when it has `distributed:`, else on this machine."""
+    if distributed is not None:
         from slamrun.backends.dask import DaskBackend
 
-        d = spec.distributed
-        if d.cluster is not None:
-            return DaskBackend(spec.backend, None, spec.results, local_workers=spec.lanes, jobs=d)
-        return DaskBackend(spec.backend, d.address, spec.results, local_workers=spec.lanes)
-    return make_local_backend(spec.backend)
+        if distributed.cluster is not None:
+            return DaskBackend(backend, None, results, local_workers=lanes, jobs=distributed)
+        return DaskBackend(backend, distributed.address, results, local_workers=lanes)
+    return make_local_backend(backend)

@@ -23,7 +23,7 @@ from slamrun.backends.machine import machine, package_versions
 from slamrun.errors import InfraError, SchedulerUnreachable
 
 if TYPE_CHECKING:
-    from slamrun.engine.spec import DistributedSpec
+    from slamrun.backends.distributed import DistributedSpec
 
 SILENCE_MARGIN_S = 120.0  # beyond a run's timeout, how long to wait for a worker's answer
 WORKER_SILENCE_S = 20.0  # a worker without a heartbeat to the scheduler for this long is hung (stopped, frozen)

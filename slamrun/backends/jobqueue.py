@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 from slamrun.errors import InfraError
 
 if TYPE_CHECKING:
-    from slamrun.engine.spec import DistributedSpec
+    from slamrun.backends.distributed import DistributedSpec
 
 # per batch system: dask-jobqueue's class, and the commands slamrun needs on this machine
 SYSTEMS = {

@@ -80,8 +80,8 @@ HOST_PRESSURE = Path("/proc/pressure/cpu")
 
 
 def host_pressure_s(path: Path = HOST_PRESSURE) -> float | None:
-    """The machine's CPU pressure so far (PSI, `some`): seconds in which at least one runnable task waited for a CPU;
-    None where the kernel does not keep it."""
+    """The machine's CPU pressure so far (PSI, `some`): seconds in which at least one runnable task waited for a CPU,
+    the CPUs averaged weighted by their busy time; None where the kernel does not keep it."""
     try:
         some = next(line for line in path.read_text().splitlines() if line.startswith("some "))
         return int(some.rsplit("total=", 1)[1]) / 1e6

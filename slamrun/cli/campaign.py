@@ -45,7 +45,7 @@ def add_commands(sub) -> None:
 def cmd_campaign(args) -> int:
     from slamrun.cli.display import LiveProgress
     from slamrun.engine.campaign import run_campaign
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     spec = load_spec(args.spec, results=args.results)  # the flag is checked as the spec's key is
     updates = {}
@@ -117,7 +117,7 @@ def cmd_campaign(args) -> int:
 
 
 def cmd_plan(args) -> int:
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     return _print_dry_run(load_spec(args.spec, results=args.results))
 
@@ -217,7 +217,7 @@ def cmd_status(args) -> int:
 def cmd_validate(args) -> int:
     from slamrun.engine.campaign import check_sequences
     from slamrun.engine.plan import plan
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     spec = load_spec(args.spec)
     for warning in check_sequences(spec, skip_ungenerated=True):
@@ -241,7 +241,7 @@ def cmd_prepare(args) -> int:
     from slamrun.datasets.cache import disk_usage
     from slamrun.engine.campaign import ensure_datasets, prepare_views
     from slamrun.engine.plan import plan
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     spec = load_spec(args.spec)
     ensure_datasets(spec)

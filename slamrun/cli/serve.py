@@ -55,7 +55,7 @@ def served_folder(path: Path) -> Path:
     """The folder to serve: `path`, or where `path` is a file, the results folder of the spec it is."""
     if not path.is_file():
         return path
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     results = load_spec(path, check_files=False, check_gpu=False).results
     print(f"slamrun serve: {path} is a spec; serving its results folder {results}", file=sys.stderr, flush=True)

@@ -32,7 +32,8 @@ from slamrun.engine.preparer import ViewPreparer
 from slamrun.engine.recovery import collect_leftovers, import_finished, recover
 from slamrun.engine.scheduler import Event, Scheduler
 from slamrun.engine.session import session_record
-from slamrun.engine.spec import CampaignSpec, output_problems
+from slamrun.engine.spec import CampaignSpec
+from slamrun.engine.spec_file import output_problems
 from slamrun.errors import BackendUnreachable, DatasetError, LedgerLostError, StorageError, storage_problem
 from slamrun.results.vocabulary import is_infra
 
@@ -178,7 +179,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         added = ledger.sync_plan(runs)
         recovered["imported"] += import_finished(ledger, runs, results) + reimport_lost(ledger, results)
         images = {m.run_label: slamrun.methods.get(m.name)(m.params).image for m in spec.methods}
-        backend = backend or make_backend(spec)
+        backend = backend or make_backend(spec.backend, spec.results, spec.lanes, spec.distributed)
         try:
             backend.check(images)
         except BaseException:

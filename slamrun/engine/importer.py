@@ -51,7 +51,8 @@ from slamrun.engine.folders import path_part_problem
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.paths import RunPaths
 from slamrun.engine.plan import RunKey
-from slamrun.engine.spec import CampaignSpec, load_spec
+from slamrun.engine.spec import CampaignSpec
+from slamrun.engine.spec_file import load_spec
 from slamrun.errors import SlamRunError, TrajectoryFormatError
 from slamrun.results.vocabulary import IMPORTED, UNDER_MIN_COVERAGE
 

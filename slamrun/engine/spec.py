@@ -5,33 +5,23 @@ Relative paths in a spec file are resolved against the folder that holds the spe
 
 from __future__ import annotations
 
-import os
 import re
 import typing
 from enum import StrEnum
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 import slamrun.methods
-from slamrun.backends.monitor import host_gpus
-from slamrun.core.inputs import expanded_size, read_text_bounded
+from slamrun.backends.distributed import DistributedSpec, walltime_seconds  # noqa: F401 - the spec's part
 from slamrun.core.suggest import did_you_mean
-from slamrun.datasets.generated import target_problem
 from slamrun.datasets.layouts import get as get_layout
-from slamrun.datasets.layouts import holds_sequence
 from slamrun.datasets.view import Direction
 from slamrun.engine.folders import (
-    CACHE,
-    RESULTS,
-    cache_overlap_problem,
-    campaign_owner_problem,
-    output_folder_problem,
     path_part_problem,
 )
-from slamrun.errors import DatasetError, SlamRunError, SpecError
+from slamrun.errors import DatasetError
 from slamrun.results.vocabulary import METRIC_NAMES
 
 
@@ -186,78 +176,6 @@ class MethodSpec(Strict):
 JOB_START_S = 60  # a worker job's own start-up, before it can take a run
 
 
-def walltime_seconds(text: str) -> int:
-    """A walltime in Slurm's forms (M, M:S, H:M:S, D-H, D-H:M, D-H:M:S) in seconds; ValueError otherwise."""
-    days, dash, clock = text.strip().rpartition("-")
-    parts = clock.split(":")
-    if (dash and not days.isdigit()) or not all(p.isdigit() for p in parts) or len(parts) > 3:
-        raise ValueError(f"walltime {text!r} is not one of M, M:S, H:M:S, D-H, D-H:M, D-H:M:S")
-    values = [int(p) for p in parts]
-    if dash:  # D-H, D-H:M, D-H:M:S
-        h, m, sec = (values + [0, 0])[:3]
-    elif len(values) == 3:
-        h, m, sec = values
-    elif len(values) == 2:  # M:S
-        h, m, sec = 0, *values
-    else:  # M
-        h, m, sec = 0, values[0], 0
-    return int(days or 0) * 86400 + h * 3600 + m * 60 + sec
-
-
-class DistributedSpec(Strict):
-    """Runs executed by a distributed engine's workers instead of this machine's lanes: a Dask scheduler
-    someone started (`address`), or Dask workers slamrun submits as batch jobs (`cluster`: Slurm, PBS, SGE,
-    LSF through dask-jobqueue) and cancels when the campaign ends."""
-
-    engine: Literal["dask"] = Field("dask", description="The engine: a Dask distributed cluster.")
-    address: str | None = Field(
-        None,
-        description="Scheduler address (tcp://host:8786), or 'local' for `lanes` worker processes on this "
-        "machine (loopback only; for trying it out). Results and view cache must be on a filesystem every "
-        "worker sees at the same path.",
-    )
-    cluster: Literal["slurm", "pbs", "sge", "lsf"] | None = Field(
-        None, description="Submit the workers as batch jobs of this scheduler (dask-jobqueue), instead of `address`."
-    )
-    queue: str | None = Field(None, description="Partition (Slurm) or queue the worker jobs go to.")
-    account: str | None = Field(None, description="Account the jobs are charged to.")
-    cores: int = Field(2, ge=1, description="CPU cores per worker job; a worker runs one run at a time.")
-    memory: str = Field("8GB", pattern=r"^\d+(\.\d+)?\s*[KMGT]i?B$", description="Memory per worker job, e.g. 8GB.")
-    walltime: str = Field("12:00:00", description="Walltime of one worker job; longer than timeout_s + stop_grace_s.")
-    job_directives: list[str] = Field(
-        default_factory=list, description="Extra batch directives, e.g. ['--gres=gpu:1'] (Slurm: #SBATCH lines)."
-    )
-    job_prologue: list[str] = Field(
-        default_factory=list, description="Shell lines a job runs before its worker (module load, source a venv)."
-    )
-    python: str | None = Field(None, description="The workers' Python with slamrun installed (default: this one).")
-    interface: str | None = Field(
-        None, description="Network interface the scheduler and workers listen on (e.g. ib0; lo on one machine)."
-    )
-    min_workers: int = Field(1, ge=1, description="Worker jobs kept alive (a lost one is replaced).")
-    max_workers: int | None = Field(None, ge=1, description="Most worker jobs at once (default: lanes).")
-    worker_wait_s: float = Field(
-        600.0, gt=0, description="How long to wait for the first worker job to start before giving up (with why)."
-    )
-    log_directory: Path | None = Field(None, description="The jobs' stdout/stderr (default: results/jobs).")
-
-    @model_validator(mode="after")
-    def _address_or_cluster(self) -> DistributedSpec:
-        if (self.address is None) == (self.cluster is None):
-            raise ValueError(
-                "give either address (a running Dask scheduler, or 'local') or cluster (slurm, pbs, sge, lsf)"
-            )
-        if self.cluster is not None:
-            walltime_seconds(self.walltime)
-        if self.max_workers is not None and self.max_workers < self.min_workers:
-            raise ValueError(f"max_workers {self.max_workers} is below min_workers {self.min_workers}")
-        return self
-
-    @property
-    def walltime_s(self) -> int:
-        return walltime_seconds(self.walltime)
-
-
 class CampaignSpec(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Campaign name.")
     results: Path | None = Field(None, description="Results directory (default: results/<name>).")
@@ -381,92 +299,10 @@ def _number_name(value: int | float, raw: dict, loc: tuple) -> str:
     return f'{value} is a number to YAML, not a folder name: quote it: "{name}"'
 
 
-MAX_SPEC_BYTES = 2**20  # a spec is a page of YAML
-MAX_SPEC_VALUES = 100_000  # values in the document once its aliases are expanded
-
-
-def load_spec(
-    path: str | Path, check_files: bool = True, results: Path | None = None, check_gpu: bool = True
-) -> CampaignSpec:
-    """Read, validate and resolve a spec file; raises SpecError listing every problem, each with its line.
-    `results` (the command line's --results) replaces the spec's results folder and is checked as it is;
-    `check_gpu=False` accepts methods that need a GPU on a host without one (reading a campaign, not running it)."""
-    path = Path(path)
-    try:  # a regular file of at most a page: a FIFO or a device is refused without blocking on it
-        text = read_text_bounded(path, MAX_SPEC_BYTES, "spec file")
-    except SlamRunError as exc:
-        raise SpecError(str(path), [str(exc).removeprefix(f"{path}: ")]) from None
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        if node is not None and (n := expanded_size(node)) > MAX_SPEC_VALUES:
-            raise SpecError(
-                str(path),
-                [f"its YAML aliases expand to {n:,} values (at most {MAX_SPEC_VALUES:,}): an alias bomb? Write it out"],
-            )
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        raise SpecError(str(path), [f"{where}not valid YAML ({getattr(exc, 'problem', exc)})"]) from None
-    except RecursionError:
-        raise SpecError(str(path), ["YAML nested too deeply to be a spec"]) from None
-    if not isinstance(raw, dict):
-        raise SpecError(str(path), ["expected a mapping at the top (name, datasets, methods, ...)"])
-    try:
-        return validate_spec(
-            raw,
-            base_dir=path.resolve().parent,
-            source=str(path),
-            check_files=check_files,
-            results=results,
-            check_gpu=check_gpu,
-        )
-    except SpecError as exc:
-        raise SpecError(exc.source, _by_line([_with_line(p, node) for p in exc.problems])) from None
-
-
-def _by_line(problems: list[str]) -> list[str]:
-    """Problems in the order of their lines in the file (those without a line last, in their order)."""
-
-    def line(problem: str) -> int:
-        found = re.match(r"line (\d+): ", problem)
-        return int(found.group(1)) if found else 1 << 30
-
-    return sorted(problems, key=line)
-
-
-def _with_line(problem: str, root: yaml.Node | None) -> str:
-    """'methods[0].params.x: msg' -> 'line 12: methods[0].params.x: msg', the line of the deepest part of the
-    location that the document has."""
-    where, sep, msg = problem.partition(": ")
-    if not sep or root is None or where.startswith("-"):  # a command-line flag's problem has no line
-        return problem
-    node, line = root, None
-    for key, index in re.findall(r"([A-Za-z_][\w-]*)|\[(\d+)\]", where):
-        if isinstance(node, yaml.MappingNode) and key:
-            node = next((v for k, v in node.value if getattr(k, "value", None) == key), None)
-        elif isinstance(node, yaml.SequenceNode) and index and int(index) < len(node.value):
-            node = node.value[int(index)]
-        else:
-            node = None
-        if node is None:
-            break
-        line = node.start_mark.line + 1
-    return f"line {line}: {problem}" if line else problem
-
-
-def validate_spec(
-    raw: dict,
-    base_dir: Path,
-    source: str = "<spec>",
-    check_files: bool = True,
-    results: Path | None = None,
-    check_gpu: bool = True,
-) -> CampaignSpec:
-    """The spec, or SpecError listing every problem. `check_gpu`: a method that needs a GPU is a problem on a host
-    that has none, where this host runs the runs (not when a cluster's or a remote scheduler's workers do)."""
+def schema_problems(raw: dict) -> tuple[CampaignSpec | None, list[str]]:
+    """The spec as a schema alone (nothing on this machine is looked at: no folder, no GPU, no engine): the model, or
+    None, and every problem of its keys, its methods' names and parameters, labels and sequence names."""
     problems: list[str] = []
-    gpu_here = _GpuHere(check_gpu and runs_on_this_host(raw))
     try:
         spec = CampaignSpec.model_validate(raw)
     except ValidationError as exc:
@@ -474,9 +310,8 @@ def validate_spec(
             problems.append(f"{_loc(err['loc'])}: {_message(err, CampaignSpec, 'key', raw)}")
         spec = None
     # Method checks also run when other parts failed, so that every problem is listed at once.
-    raw_methods = raw.get("methods") if isinstance(raw.get("methods"), list) else []
     labels: dict[str, int] = {}
-    for i, m in enumerate(raw_methods):
+    for i, m in enumerate(raw_methods(raw)):
         if not isinstance(m, dict) or not isinstance(m.get("name"), str):
             continue
         try:
@@ -485,78 +320,28 @@ def validate_spec(
             problems.append(f"methods[{i}].name: {exc.args[0]}")
             continue
         try:
-            params = cls.Params.model_validate(m.get("params") or {})
+            cls.Params.model_validate(m.get("params") or {})
         except ValidationError as exc:
             for err in exc.errors():
                 problems.append(f"methods[{i}].params.{_loc(err['loc'])}: {_message(err, cls.Params, 'parameter')}")
-        else:
-            backend = raw.get("backend", "local")
-            method = cls(params)
-            found = method.problems(backend) + method.launch_problems() + method.executable_problems(backend)
-            if method.needs_gpu and gpu_here.missing():
-                found.append(f"{m['name']} needs a GPU; this host has none (neither NVML nor nvidia-smi answers)")
-            elif method.needs_gpu and gpu_here.check and backend == "podman":
-                from slamrun.backends.podman import gpu_problem
-
-                found += filter(None, [gpu_problem(m["name"])])
-            problems += [f"methods[{i}]: {p}" for p in found]
         label = m.get("label") or m["name"]
         if label in labels:
             problems.append(f"methods[{i}].label: {label!r} used by methods[{labels[label]}] too; give a label")
         labels[label] = i
-    names = _name_problems(raw)
-    problems += names
+    problems += _name_problems(raw)
     if spec is not None:
-        spec = _resolve(spec, base_dir, results)
-        if check_files and not names:
-            problems += _file_problems(spec, "--results" if results is not None else "results")
         seen: dict[str, str] = {}
         for d, ds in enumerate(spec.datasets):
             for s, seq in enumerate(ds.sequences):
                 if seq in seen:
                     problems.append(f"datasets[{d}].sequences[{s}]: {seq!r} also in dataset {seen[seq]!r}")
                 seen[seq] = ds.name
-    if problems:
-        raise SpecError(source, problems)
-    assert spec is not None
-    return spec
+    return spec, problems
 
 
-def runs_on_this_host(raw: dict) -> bool:
-    """Whether the spec's runs execute on this host: no `distributed`, or Dask workers on this machine."""
-    d = raw.get("distributed")
-    return not isinstance(d, dict) or d.get("address") == "local"
-
-
-class _GpuHere:
-    """Whether this host lacks a GPU, asked once (NVML, then nvidia-smi) and only when a method needs one."""
-
-    def __init__(self, check: bool):
-        self.check = check
-        self._gpus: list[str] | None = None
-
-    def missing(self) -> bool:
-        if not self.check:
-            return False
-        if self._gpus is None:
-            self._gpus = host_gpus()
-        return not self._gpus
-
-
-def _resolve(spec: CampaignSpec, base: Path, results_flag: Path | None = None) -> CampaignSpec:
-    """Absolute paths; `results_flag` (--results, relative to the working directory) replaces the results folder
-    (the default cache stays beside the spec's own results)."""
-
-    def res(p: Path) -> Path:
-        p = Path(os.path.expanduser(str(p)))
-        return p if p.is_absolute() else (base / p).resolve()
-
-    results = res(spec.results) if spec.results else (Path.cwd() / "results" / spec.name).resolve()
-    cache = res(spec.cache) if spec.cache else results.parent / ".cache" / "views"
-    if results_flag is not None:
-        results = Path(os.path.expanduser(str(results_flag))).resolve()
-    datasets = [ds.model_copy(update={"path": res(ds.path)}) for ds in spec.datasets]
-    return spec.model_copy(update={"results": results, "cache": cache, "datasets": datasets})
+def raw_methods(raw: dict) -> list:
+    """The spec's `methods:` list as written (empty when it is not a list)."""
+    return raw.get("methods") if isinstance(raw.get("methods"), list) else []
 
 
 def _name_problems(raw: dict) -> list[str]:
@@ -580,66 +365,6 @@ def _name_problems(raw: dict) -> list[str]:
                 "SOURCE:NAME` (their runs and this method's would be pooled in one row); choose a label without ':'"
             )
     return problems
-
-
-def output_problems(spec: CampaignSpec, results_source: str = "results") -> list[str]:
-    """Why the campaign may not write where the resolved spec says (results, view cache), each with the key or flag
-    that named the folder: the one guard of every door to where a campaign writes. Reads only."""
-    problems = []
-    if why := output_folder_problem(spec.results, RESULTS) or campaign_owner_problem(spec.results, spec.name):
-        problems.append(f"{results_source}: {why}")
-    datasets = [ds.path for ds in spec.datasets]
-    if why := cache_overlap_problem(spec.cache, spec.results, datasets) or output_folder_problem(spec.cache, CACHE):
-        problems.append(f"cache: {why}")
-    return problems
-
-
-def _file_problems(spec: CampaignSpec, results_source: str = "results") -> list[str]:
-    problems = output_problems(spec, results_source)
-    for d, ds in enumerate(spec.datasets):
-        if ds.synthetic is not None:
-            if get_layout(ds.layout).synth is None:
-                problems.append(f"datasets[{d}].synthetic: layout {ds.layout} has no synthetic writer")
-                continue
-            if ds.path.exists() and not ds.path.is_dir():
-                problems.append(f"datasets[{d}].path: {ds.path} exists and is not a folder")
-                continue
-            for s, seq in enumerate(ds.sequences):
-                folder = ds.path / seq
-                if not holds_sequence(folder) and (why := target_problem(folder)):
-                    problems.append(f"datasets[{d}].sequences[{s}]: {why}")
-                if (check := get_layout(ds.layout).synth_name_problem) is not None and (why := check(seq)):
-                    problems.append(f"datasets[{d}].sequences[{s}]: {why}")
-            continue
-        if not ds.path.is_dir():
-            problems.append(f"datasets[{d}].path: folder {ds.path} not found (download it: slamrun dataset download)")
-            continue
-        missing = [(s, seq) for s, seq in enumerate(ds.sequences) if not (ds.path / seq).is_dir()]
-        present = _sequence_folders(ds.path) if missing else []
-        for s, seq in missing:
-            problems.append(
-                f"datasets[{d}].sequences[{s}]: {ds.path / seq} not found{did_you_mean(seq, present)} "
-                f"({_listing(ds.path, present)})"
-            )
-    return problems
-
-
-LISTED = 8  # folder names a "not found" lists
-
-
-def _sequence_folders(path: Path) -> list[str]:
-    """The folders in a dataset folder (not hidden), sorted."""
-    try:
-        return sorted(p.name for p in path.iterdir() if p.is_dir() and not p.name.startswith("."))
-    except OSError:
-        return []
-
-
-def _listing(path: Path, names: list[str]) -> str:
-    if not names:
-        return f"{path} holds no folder"
-    more = f" and {len(names) - LISTED} more" if len(names) > LISTED else ""
-    return f"{path} holds {', '.join(names[:LISTED])}{more}"
 
 
 def json_schema() -> dict:

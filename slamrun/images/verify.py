@@ -220,7 +220,7 @@ def verify_spec(
 ) -> list[VerifyRow]:
     """The same verification for the methods of a spec (built-in, plug-in or external, with their parameters and
     the spec's backend): a campaign on the synthetic rooms per method, one row each. No image is built here."""
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     spec = load_spec(spec_path)
     results = Path(results or DEFAULT_RESULTS).resolve()
@@ -276,7 +276,7 @@ def _campaign(
 ) -> None:
     from slamrun.engine.campaign import run_campaign
     from slamrun.engine.ledger import Ledger
-    from slamrun.engine.spec import load_spec
+    from slamrun.engine.spec_file import load_spec
 
     data = results / "data" if frames == FRAMES else results / f"data-{frames}"  # the rooms at that length
     spec = {
