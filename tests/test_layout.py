@@ -136,3 +136,16 @@ def test_evaluating_a_file_imports_neither_opencv_nor_yaml_nor_a_method():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert "ate_rmse" in out.stdout or "ate" in out.stdout, out.stdout + out.stderr
     assert out.stderr.strip().splitlines()[-1] == "[]", out.stderr
+
+
+def test_no_function_runs_over_80_lines():
+    """A function a reader holds in one screen: none in slamrun/ is longer than 80 lines (the image recipes' scripts,
+    upstream's style, aside)."""
+    long = []
+    for name, path in modules().items():
+        if "/image/" in path.as_posix() or "/recipes/" in path.as_posix():
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.end_lineno - node.lineno >= 80:
+                long.append(f"{name}.{node.name}: {node.end_lineno - node.lineno + 1} lines")
+    assert not long, long

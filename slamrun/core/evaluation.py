@@ -247,6 +247,15 @@ class _Moments(NamedTuple):
 
 def _tum_mono_usual(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResult | None]:
     """The batched part of `tum_mono_many`: each estimate's result, or None where it is not the usual case."""
+    found = _usual_segments(gt, ests)
+    if found is None:
+        return [None] * len(ests)
+    return _segment_fits(ests, *found)
+
+
+def _usual_segments(gt: Trajectory, ests: list[Trajectory]) -> tuple | None:
+    """The estimates of the usual case (every pose at a GT row, both segments long enough, finite) and their
+    segments' rows: (files, rows per segment, estimate rows (3, n), GT rows (3, n)); None when there is none."""
     gt_t, n_gt = gt.timestamps, len(gt.timestamps)
     rows = np.fromiter((len(e) for e in ests), int, len(ests))
     starts = _first_rows(rows)
@@ -269,7 +278,7 @@ def _tum_mono_usual(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResul
             candidate[k] = False  # a pose in both segments (an even GT row count with a finite middle row)
     files = np.flatnonzero(candidate)
     if len(files) == 0:
-        return [None] * len(ests)
+        return None
     # the segments' rows of every candidate, [start 1, end 1, start 2, end 2, ...], those with a finite GT row
     seg_len = np.column_stack((hi_s - lo_s, hi_e - lo_e))[files].ravel()
     seg_at = np.column_stack((starts + lo_s, starts + lo_e))[files].ravel()
@@ -279,26 +288,24 @@ def _tum_mono_usual(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResul
     enough = (n_valid >= MIN_SEGMENT_POSES).all(axis=1)
     files, n_seg = files[enough], n_valid[enough].ravel()
     if len(files) == 0:
-        return [None] * len(ests)
+        return None
     in_files = np.repeat(np.repeat(enough, 2), seg_len)
     keep = valid[in_files]
     parts = [ests[k].positions[a:b] for k in files for a, b in ((lo_s[k], hi_s[k]), (lo_e[k], hi_e[k]))]
     # coordinates first, (3, rows): every sum below runs along contiguous memory
     e_rows = np.ascontiguousarray(np.concatenate(parts)[keep].T)
     g_rows = np.ascontiguousarray(gt.positions[match[idx[in_files][keep]]].T)
+    return files, n_seg, e_rows, g_rows
+
+
+def _segment_fits(
+    ests: list[Trajectory], files: np.ndarray, n_seg: np.ndarray, e_rows: np.ndarray, g_rows: np.ndarray
+) -> list[TumMonoResult | None]:
+    """Each usual estimate's Sim(3) fits of its segments and of both together, and TUM-Mono's figures from them."""
     n_both = n_seg[0::2] + n_seg[1::2]
     first_seg, first_both = _first_rows(n_seg), _first_rows(n_both)
 
-    def moments(n: np.ndarray, first: np.ndarray) -> _Moments:
-        """The moments of the groups of n rows from `first`."""
-        mu_e = np.add.reduceat(e_rows, first, axis=1) / n
-        mu_g = np.add.reduceat(g_rows, first, axis=1) / n
-        ec, gc = e_rows - np.repeat(mu_e, n, axis=1), g_rows - np.repeat(mu_g, n, axis=1)
-        cov = np.add.reduceat((gc[:, None, :] * ec[None, :, :]).reshape(9, -1), first, axis=1)
-        var = np.add.reduceat(np.einsum("ij,ij->j", ec, ec), first)
-        return _Moments(mu_e.T, mu_g.T, ec, gc, cov.T.reshape(-1, 3, 3), var)
-
-    seg, both = moments(n_seg, first_seg), moments(n_both, first_both)
+    seg, both = _moments(e_rows, g_rows, n_seg, first_seg), _moments(e_rows, g_rows, n_both, first_both)
     n_files = len(files)
     rots, scales = _umeyama(np.concatenate((seg.cov, both.cov)), np.concatenate((seg.var, both.var)))
     with np.errstate(all="ignore"):  # a degenerate fit gives NaN or inf: that file takes `tum_mono`
@@ -337,3 +344,13 @@ def _tum_mono_usual(gt: Trajectory, ests: list[Trajectory]) -> list[TumMonoResul
             if all(math.isfinite(v) for v in values):
                 out[k] = TumMonoResult(EvalStatus.ok, *values, n_poses=len(p))
     return out
+
+
+def _moments(e_rows: np.ndarray, g_rows: np.ndarray, n: np.ndarray, first: np.ndarray) -> _Moments:
+    """The moments of the groups of n rows from `first`."""
+    mu_e = np.add.reduceat(e_rows, first, axis=1) / n
+    mu_g = np.add.reduceat(g_rows, first, axis=1) / n
+    ec, gc = e_rows - np.repeat(mu_e, n, axis=1), g_rows - np.repeat(mu_g, n, axis=1)
+    cov = np.add.reduceat((gc[:, None, :] * ec[None, :, :]).reshape(9, -1), first, axis=1)
+    var = np.add.reduceat(np.einsum("ij,ij->j", ec, ec), first)
+    return _Moments(mu_e.T, mu_g.T, ec, gc, cov.T.reshape(-1, 3, 3), var)

@@ -14,6 +14,7 @@ import os
 import secrets
 import shutil
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -250,85 +251,13 @@ def _build(
     t_first, t_last = float(t_orig[0]), float(t_orig[-1])
     t_view = t_orig[order] if direction is Direction.forward else t_first + t_last - t_orig[order]
     exposure = seq.exposures_ms[order] if seq.exposures_ms is not None else np.ones(n)
-    images = out / PreparedView.images_dir
-    images.mkdir()
-
-    cam = seq.camera
+    (out / PreparedView.images_dir).mkdir()
+    frames = _FrameWriter(seq, order, out, workers, mirror)
     if profile is Profile.native and seq.fov:  # the original frames and the FOV (or pinhole) calibration
-        ext = Path(seq.frame_names[0]).suffix.lower()
-        names = [f"{i:06d}{ext}" for i in range(n)]
-        inverse = {orig: i for i, orig in enumerate(order)}
-
-        def copy(item: tuple[int, tuple[str, bytes]]) -> None:
-            j, (name, data) = item
-            seq.decode(name, data, cv2.IMREAD_UNCHANGED)  # a frame a method cannot read is the dataset's problem
-            (images / names[inverse[j]]).write_bytes(data)
-
-        if mirror is None or not _link_reversed(mirror, images, names):
-            with ThreadPoolExecutor(max(1, workers)) as pool:
-                list(pool.map(copy, enumerate(seq.read_bytes())))
-        if seq.camera_txt is not None:
-            shutil.copyfile(seq.camera_txt, out / PreparedView.camera)
-        else:
-            write_camera_txt(out / PreparedView.camera, cam.camera, cam.output_mode, (cam.out_width, cam.out_height))
-        for opt in (seq.pcalib, seq.vignette):
-            if opt is not None and opt.exists():
-                shutil.copyfile(opt, out / opt.name)
-        width, height, pinhole = cam.camera.width, cam.camera.height, None
+        names, width, height, pinhole = frames.native()
     else:  # rectified; also the native view of a camera model that methods' calibration files cannot express
-        mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
-        problem = rectification_problem(cam)
-        if problem is not None:
-            raise DatasetError(f"{seq.root}: {problem}")
-        dst = rectified_pinhole(cam.camera, mode, cam.out_width, cam.out_height)
-        map_x, map_y = rectification_maps(cam.camera, dst)
-        if not (np.isfinite(map_x).all() and np.isfinite(map_y).all()):
-            raise DatasetError(f"{seq.root}: the camera cannot be rectified: its rectification maps are not finite")
-        names = [f"{i:06d}.{frame_format}" for i in range(n)]
-        inverse = {orig: i for i, orig in enumerate(order)}
-
-        def work(item: tuple[int, tuple[str, bytes]]) -> None:
-            j, (name, data) = item
-            img = seq.decode(name, data)
-            rect = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
-            params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if frame_format == "png" else []
-            cv2.imwrite(str(images / names[inverse[j]]), rect, params)
-
-        if mirror is None or not _link_reversed(mirror, images, names):
-            with ThreadPoolExecutor(max(1, workers)) as pool:
-                list(pool.map(work, enumerate(seq.read_bytes())))
-        (out / PreparedView.camera).write_text(dst.camera_txt())
-        width, height, pinhole = dst.width, dst.height, (dst.fx, dst.fy, dst.cx, dst.cy)
-        (out / "camera_pinhole.json").write_text(
-            json.dumps(
-                {
-                    "width": dst.width,
-                    "height": dst.height,
-                    "fx": dst.fx,
-                    "fy": dst.fy,
-                    "cx": dst.cx,
-                    "cy": dst.cy,
-                    "K": dst.K().tolist(),
-                    "distortion": [0.0, 0.0, 0.0, 0.0, 0.0],
-                },
-                indent=1,
-            )
-        )
-
-    with open(out / PreparedView.times, "w") as f:
-        for i in range(n):
-            f.write(f"{i:06d} {t_view[i]:.6f} {exposure[i]:.6f}\n")
-    with open(out / "original_times.txt", "w") as f:
-        f.writelines(f"{v!r}\n" for v in t_orig.tolist())
-    with open(out / PreparedView.times_single, "w") as f:
-        f.writelines(f"{t_view[i]:.6f}\n" for i in range(n))
-    with open(out / PreparedView.rgb, "w") as f:
-        f.write(
-            f"# prepared view of {seq.name} ({direction.value})\n# frames in presentation order\n# timestamp filename\n"
-        )
-        f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
-    with open(out / PreparedView.images_list, "w") as f:
-        f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
+        names, width, height, pinhole = frames.rectified(frame_format)
+    _write_lists(out, seq, direction, t_orig, t_view, exposure, names)
     meta = {
         "sequence": seq.name,
         "source": str(seq.root),
@@ -346,6 +275,99 @@ def _build(
         "layout": seq.layout,
     }
     (out / "view.json").write_text(json.dumps(meta, indent=1))
+
+
+class _FrameWriter:
+    """A view's frames, in the view's order (`order`: the sequence's frame each view frame is), written into
+    `out`/images on `workers` threads, or hard-linked from `mirror` (the other direction's view)."""
+
+    def __init__(self, seq: Sequence, order: np.ndarray, out: Path, workers: int, mirror: Path | None):
+        self.seq, self.out, self.workers, self.mirror = seq, out, workers, mirror
+        self.images = out / PreparedView.images_dir
+        self.inverse = {orig: i for i, orig in enumerate(order)}
+
+    def _each(self, names: list[str], write: Callable[[Path, str, bytes], None]) -> None:
+        if self.mirror is not None and _link_reversed(self.mirror, self.images, names):
+            return
+
+        def one(item: tuple[int, tuple[str, bytes]]) -> None:
+            j, (name, data) = item
+            write(self.images / names[self.inverse[j]], name, data)
+
+        with ThreadPoolExecutor(max(1, self.workers)) as pool:
+            list(pool.map(one, enumerate(self.seq.read_bytes())))
+
+    def native(self) -> tuple[list[str], int, int, None]:
+        """The original frames, each checked to decode, and the sequence's calibration files."""
+        seq, cam, out = self.seq, self.seq.camera, self.out
+        ext = Path(seq.frame_names[0]).suffix.lower()
+        names = [f"{i:06d}{ext}" for i in range(seq.n_frames)]
+
+        def copy(dest: Path, name: str, data: bytes) -> None:
+            seq.decode(name, data, cv2.IMREAD_UNCHANGED)  # a frame a method cannot read is the dataset's problem
+            dest.write_bytes(data)
+
+        self._each(names, copy)
+        if seq.camera_txt is not None:
+            shutil.copyfile(seq.camera_txt, out / PreparedView.camera)
+        else:
+            write_camera_txt(out / PreparedView.camera, cam.camera, cam.output_mode, (cam.out_width, cam.out_height))
+        for opt in (seq.pcalib, seq.vignette):
+            if opt is not None and opt.exists():
+                shutil.copyfile(opt, out / opt.name)
+        return names, cam.camera.width, cam.camera.height, None
+
+    def rectified(self, frame_format: str) -> tuple[list[str], int, int, tuple[float, float, float, float]]:
+        """The frames rectified to the pinhole camera of the sequence's, and that camera's files."""
+        seq, cam, out = self.seq, self.seq.camera, self.out
+        mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
+        problem = rectification_problem(cam)
+        if problem is not None:
+            raise DatasetError(f"{seq.root}: {problem}")
+        dst = rectified_pinhole(cam.camera, mode, cam.out_width, cam.out_height)
+        map_x, map_y = rectification_maps(cam.camera, dst)
+        if not (np.isfinite(map_x).all() and np.isfinite(map_y).all()):
+            raise DatasetError(f"{seq.root}: the camera cannot be rectified: its rectification maps are not finite")
+        names = [f"{i:06d}.{frame_format}" for i in range(seq.n_frames)]
+        params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if frame_format == "png" else []
+
+        def rectify(dest: Path, name: str, data: bytes) -> None:
+            rect = cv2.remap(seq.decode(name, data), map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            cv2.imwrite(str(dest), rect, params)
+
+        self._each(names, rectify)
+        (out / PreparedView.camera).write_text(dst.camera_txt())
+        pinhole = {"width": dst.width, "height": dst.height, "fx": dst.fx, "fy": dst.fy, "cx": dst.cx, "cy": dst.cy}
+        described = pinhole | {"K": dst.K().tolist(), "distortion": [0.0, 0.0, 0.0, 0.0, 0.0]}
+        (out / "camera_pinhole.json").write_text(json.dumps(described, indent=1))
+        return names, dst.width, dst.height, (dst.fx, dst.fy, dst.cx, dst.cy)
+
+
+def _write_lists(
+    out: Path,
+    seq: Sequence,
+    direction: Direction,
+    t_orig: np.ndarray,
+    t_view: np.ndarray,
+    exposure: np.ndarray,
+    names: list[str],
+) -> None:
+    """The view's frame lists and times, in every form the methods read."""
+    n = len(names)
+    with open(out / PreparedView.times, "w") as f:
+        for i in range(n):
+            f.write(f"{i:06d} {t_view[i]:.6f} {exposure[i]:.6f}\n")
+    with open(out / "original_times.txt", "w") as f:
+        f.writelines(f"{v!r}\n" for v in t_orig.tolist())
+    with open(out / PreparedView.times_single, "w") as f:
+        f.writelines(f"{t_view[i]:.6f}\n" for i in range(n))
+    with open(out / PreparedView.rgb, "w") as f:
+        f.write(
+            f"# prepared view of {seq.name} ({direction.value})\n# frames in presentation order\n# timestamp filename\n"
+        )
+        f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
+    with open(out / PreparedView.images_list, "w") as f:
+        f.writelines(f"{t_view[i]:.6f} {PreparedView.images_dir}/{names[i]}\n" for i in range(n))
 
 
 def disk_usage(path: Path, seen: set[tuple[int, int]] | None = None) -> int:

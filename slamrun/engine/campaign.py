@@ -165,29 +165,13 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
     lock = ResultsLock(results)
     lock.acquire()
     try:
-        claim_results_folder(results)
-        claim_output_folder(spec.cache, CACHE)
-        ledger = Ledger(results / "ledger.sqlite")
-        ledger.set_meta("campaign", spec.name)
-        if not ledger.meta("results_id"):  # this results folder's identity, on its containers (moves with it)
-            ledger.set_meta("results_id", uuid.uuid4().hex)
-        ledger.set_meta("spec", spec.model_dump(mode="json"))
-        (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
+        ledger = _open_ledger(spec)
         docker_here = spec.backend in ("docker", "podman") and spec.distributed is None
         recovered = recover(ledger, results, keep_attempts=docker_here)
         runs = plan(spec)
         added = ledger.sync_plan(runs)
         recovered["imported"] += import_finished(ledger, runs, results) + reimport_lost(ledger, results)
-        images = {m.run_label: slamrun.methods.get(m.name)(m.params).image for m in spec.methods}
-        backend = backend or make_backend(spec.backend, spec.results, spec.lanes, spec.distributed)
-        try:
-            backend.check(images)
-        except BaseException:
-            backend.close()  # a cluster's jobs end with it
-            raise
-        described = {label: backend.describe_image(tag) for label, tag in images.items() if tag}
-        if any(d is not None for d in described.values()):  # which image, from which sources, made these results
-            (results / "images.json").write_text(jsonio.dumps(described, indent=1))
+        backend = _start_backend(spec, backend)
         pending = set(ledger.pending_keys())
         removed = remove_damaged(spec.cache)
         if removed:
@@ -199,17 +183,9 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         gts = load_groundtruths(runs) if spec.evaluate else {}
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
         # containers left by a killed runner or a lost daemon
-        n = collect_leftovers(
-            backend,
-            (spec.name, ledger.meta("results_id")),
-            ledger,
-            runs,
-            sched.methods,
-            views.get,
-            gts,
-            results,
-            int(spec.log_cap_mb * 2**20),
-        )
+        leftovers = (spec.name, ledger.meta("results_id"))
+        cap = int(spec.log_cap_mb * 2**20)
+        n = collect_leftovers(backend, leftovers, ledger, runs, sched.methods, views.get, gts, results, cap)
         if n:
             log(f"collected {n} run(s) whose container finished while the runner or the daemon was away")
         recovered["collected"] = n
@@ -223,41 +199,9 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         finally:
             views.close()
             backend.close()
-            try:
-                if not pending and isinstance(previous, dict) and previous.get("runs_from"):
-                    # nothing ran: the last session that ran something keeps its span (status, serve, the report)
-                    ended = {**previous, "ended_at": previous.get("ended_at") or previous.get("runs_to")}
-                else:
-                    ended = {
-                        **session,
-                        "ended_at": time.time(),
-                        "runs_from": sched.started_at,
-                        "runs_to": sched.ended_at,
-                    }
-                ledger.set_meta("session", ended)
-            except Exception:  # noqa: BLE001 - a lost ledger or a full disk: status then sees the process gone
-                pass
+            _end_session(ledger, session, previous, sched, ran=bool(pending))
         remove_damaged(spec.cache)  # no run in flight any more
-        from slamrun.engine.export import export  # pandas: imported after the runs, not before the first one starts
-
-        if isinstance(sched.fatal_error, LedgerLostError):
-            ledger.close()
-            raise sched.fatal_error
-        if isinstance(sched.fatal_error, BackendUnreachable):
-            export(ledger, results)
-            ledger.close()
-            raise sched.fatal_error
-        try:
-            csv = export(ledger, results)
-        except Exception as exc:
-            why = storage_problem(exc)
-            if not (isinstance(sched.fatal_error, StorageError) or why):
-                raise
-            sched.fatal_error = sched.fatal_error or StorageError(f"{results}: {why} ({exc})", why)
-        if isinstance(sched.fatal_error, StorageError):
-            ledger.close()
-            why = sched.fatal_error.why
-            raise StorageError(f"{sched.fatal_error}\n{_storage_advice(spec, why)}", why)
+        csv = _export(spec, ledger, sched)
         counts = ledger.counts()
         infra = sum(1 for r in ledger.rows(state="failed") if is_infra(r["state"], r["failure"]))
         ledger.close()
@@ -266,3 +210,71 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         return CampaignResult(results, csv, counts, recovered, added, infra, stopped and left > 0, stopped)
     finally:
         lock.release()
+
+
+def _open_ledger(spec: CampaignSpec) -> Ledger:
+    """The results folder claimed, its ledger opened with the campaign's name, identity and resolved spec."""
+    results = spec.results
+    claim_results_folder(results)
+    claim_output_folder(spec.cache, CACHE)
+    ledger = Ledger(results / "ledger.sqlite")
+    ledger.set_meta("campaign", spec.name)
+    if not ledger.meta("results_id"):  # this results folder's identity, on its containers (moves with it)
+        ledger.set_meta("results_id", uuid.uuid4().hex)
+    ledger.set_meta("spec", spec.model_dump(mode="json"))
+    (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
+    return ledger
+
+
+def _start_backend(spec: CampaignSpec, backend):
+    """The backend (the spec's, unless one is given), its methods' images checked and described in images.json."""
+    images = {m.run_label: slamrun.methods.get(m.name)(m.params).image for m in spec.methods}
+    backend = backend or make_backend(spec.backend, spec.results, spec.lanes, spec.distributed)
+    try:
+        backend.check(images)
+    except BaseException:
+        backend.close()  # a cluster's jobs end with it
+        raise
+    described = {label: backend.describe_image(tag) for label, tag in images.items() if tag}
+    if any(d is not None for d in described.values()):  # which image, from which sources, made these results
+        (spec.results / "images.json").write_text(jsonio.dumps(described, indent=1))
+    return backend
+
+
+def _end_session(ledger: Ledger, session: dict, previous, sched: Scheduler, ran: bool) -> None:
+    """The session's span in the ledger (status, serve, the report read it); where nothing ran, the last session
+    that ran something keeps its span."""
+    try:
+        if not ran and isinstance(previous, dict) and previous.get("runs_from"):
+            ended = {**previous, "ended_at": previous.get("ended_at") or previous.get("runs_to")}
+        else:
+            ended = {**session, "ended_at": time.time(), "runs_from": sched.started_at, "runs_to": sched.ended_at}
+        ledger.set_meta("session", ended)
+    except Exception:  # noqa: BLE001 - a lost ledger or a full disk: status then sees the process gone
+        pass
+
+
+def _export(spec: CampaignSpec, ledger: Ledger, sched: Scheduler) -> Path:
+    """results.csv written after the runs; a fatal error of the campaign raised after what can be kept is kept."""
+    from slamrun.engine.export import export  # pandas: imported after the runs, not before the first one starts
+
+    results = spec.results
+    if isinstance(sched.fatal_error, LedgerLostError):
+        ledger.close()
+        raise sched.fatal_error
+    if isinstance(sched.fatal_error, BackendUnreachable):
+        export(ledger, results)
+        ledger.close()
+        raise sched.fatal_error
+    try:
+        csv = export(ledger, results)
+    except Exception as exc:
+        why = storage_problem(exc)
+        if not (isinstance(sched.fatal_error, StorageError) or why):
+            raise
+        sched.fatal_error = sched.fatal_error or StorageError(f"{results}: {why} ({exc})", why)
+    if isinstance(sched.fatal_error, StorageError):
+        ledger.close()
+        why = sched.fatal_error.why
+        raise StorageError(f"{sched.fatal_error}\n{_storage_advice(spec, why)}", why)
+    return csv

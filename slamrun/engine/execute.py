@@ -86,19 +86,19 @@ def launch_run(
         started = time.time()
         pview, pwork = backend.process_paths(view, raw)  # as the method's process sees them
         try:  # the method's own calls: what they raise (a plug-in's bug too) is its failure, recorded as a result
-            for rel, content in config_files(method, pview, pwork):
-                target = raw / rel
-                target.parent.mkdir(parents=True, exist_ok=True)
-                if isinstance(content, bytes):
-                    target.write_bytes(content)
-                else:
-                    target.write_text(content)
+            _write_config(raw, config_files(method, pview, pwork))
             argv = method.command(pview, pwork)
             env = method.environment()
         except MethodFailure as exc:
             RunPaths.log(stage).write_text(f"slamrun: the run was not started: {exc}\n")
             failed = {"backend": backend.name, "engine": backend.engine, METHOD_ERROR: [exc.kind, str(exc)]}
             return Launched(ExecResult(exit_code=None, wall_s=0.0), started, failed)
+        labels = {
+            "slamrun.campaign": campaign,
+            "slamrun.results": results_id,  # which results folder: another folder's run of the campaign is not ours
+            "slamrun.run": run.key.id,
+            "slamrun.attempt": str(attempt),
+        }
         req = ExecRequest(
             argv=argv,
             workdir=raw,
@@ -114,12 +114,7 @@ def launch_run(
             needs_gpu=method.needs_gpu,
             modules=method.modules,
             env=env,
-            labels={
-                "slamrun.campaign": campaign,
-                "slamrun.results": results_id,  # which results folder: another folder's run of the campaign is not ours
-                "slamrun.run": run.key.id,
-                "slamrun.attempt": str(attempt),
-            },
+            labels=labels,
             token=paths.token(attempt),
         )
         try:
@@ -132,15 +127,31 @@ def launch_run(
         if result.cancelled:
             shutil.rmtree(stage, ignore_errors=True)
             return RunOutcome("cancelled", {})
-        extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
-        extra["engine"] = backend.engine
-        extra["machine"] = result.machine or machine()  # a Dask worker's own, else this one
-        if backend.name == "local" and method.modules:  # in an image, the image's labels say what it holds
-            versions = result.packages if result.packages is not None else package_versions(method.modules)
-            extra["package_versions"] = versions
-        if method.image and (image := backend.describe_image(method.image)) is not None:
-            extra["image"] = image  # its sources, vocabulary, weights
+        extra = _launch_record(argv, cpus, backend, method, result)
         return Launched(result, started, extra)
+
+
+def _write_config(raw: Path, files: list[tuple[Path, str | bytes]]) -> None:
+    for rel, content in files:
+        target = raw / rel
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if isinstance(content, bytes):
+            target.write_bytes(content)
+        else:
+            target.write_text(content)
+
+
+def _launch_record(argv: list[str], cpus, backend: Backend, method: Method, result: ExecResult) -> dict:
+    """What ran where, for run.json: the argv, CPUs, backend and engine, the machine, the packages or image."""
+    extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
+    extra["engine"] = backend.engine
+    extra["machine"] = result.machine or machine()  # a Dask worker's own, else this one
+    if backend.name == "local" and method.modules:  # in an image, the image's labels say what it holds
+        versions = result.packages if result.packages is not None else package_versions(method.modules)
+        extra["package_versions"] = versions
+    if method.image and (image := backend.describe_image(method.image)) is not None:
+        extra["image"] = image  # its sources, vocabulary, weights
+    return extra
 
 
 def finish_attempt(
@@ -161,95 +172,142 @@ def finish_attempt(
         raw = RunPaths.raw(stage)
         log_tail = tail(RunPaths.log(stage))
         extra = dict(extra)
-        if refused := extra.pop(METHOD_ERROR, None):  # the method failed before its process could start
-            failure, message, traj = refused[0], refused[1], None
-        else:
-            try:
-                failure, message, traj = _classify(result, method, raw, view, log_tail)
-            except MethodFailure as exc:  # a plug-in's accepts_exit or failure_from_log raised
-                failure, message, traj = exc.kind, str(exc), None
-        if failure and failure != "output_limit" and _out_of_space(raw, log_tail):
-            if (size := folder_bytes(raw)) >= disk_reserve_bytes(raw):  # it filled the disk itself
-                failure, message, traj = "output_limit", f"it filled the disk ({size / 2**20:.0f} MB written)", None
-        if failure == "output_limit":  # its output is removed: it may not keep the disk
-            shutil.rmtree(raw, ignore_errors=True)
-            raw.mkdir()
-        elif failure and _out_of_space(raw, log_tail):  # the method failed because the disk is full, not by itself
-            shutil.rmtree(stage, ignore_errors=True)
-            raise StorageError(f"{run.key.id}: the disk is full ({failure}: {message})")
-        if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
-            damaged = verify_view(view.root, view.build_id)  # the build it started with, whole
-            if damaged:
-                shutil.rmtree(stage, ignore_errors=True)
-                raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
+        failure, message, traj = _judged(extra.pop(METHOD_ERROR, None), result, method, raw, view, log_tail)
+        _not_the_methods_fault(run, view, stage, failure, message, log_tail)
         values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
         values["host"] = (extra.get("machine") or {}).get("name")
         values["packages"] = packages_text(extra.get("package_versions") or {})
         if traj is None or not len(traj):
             values["fps"] = None  # frames per second of processing: nothing was processed to a pose
-        if traj is not None and len(traj):
-            write_tum(RunPaths.trajectory(stage), traj)
-            values["n_poses"] = len(traj)
-            values["coverage"] = metrics.coverage(traj, view.original_timestamps())
-            if groundtruth is not None:
-                figures, detail = campaign_figures(
-                    groundtruth, traj, run.metrics, run.alignment, run.rpe, view.original_timestamps()
-                )
-                values.update(figures)
-                if detail and not values["message"]:
-                    values["message"] = detail
-        if failure is None and values.get("eval_status") == EvalStatus.incomplete.value:
-            failure = "lost"  # too few poses in a segment to evaluate: the method did not track the sequence
-            values.update(failure=failure, message=f"too few poses to evaluate ({values['message']})")
-        if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
-            recovered = values.get("eval_status") == EvalStatus.ok.value
-            failure = None if recovered else "lost"
-            values["failure"] = failure
-        share = values.get("coverage")
-        if failure is None and run.min_coverage and share is not None and share < run.min_coverage:
-            failure = "lost"  # it tracked too little of the sequence for its accuracy to be compared
-            message = f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {run.min_coverage:g}"
-            values.update(failure=failure, message=message)
+        else:
+            _evaluated(run, view, stage, traj, groundtruth, values)
+        _settle_failure(run, values)
         if traj is not None and traj.report.n_nonfinite_dropped and not values["message"]:
             values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the output dropped"
-        state = "failed" if failure else "done"
+        state = "failed" if values["failure"] else "done"
         values["ended_at"] = time.time()
-        record = {
-            "key": run.key.id,
-            "label": run.key.label,
-            "method": run.method,
-            "dataset": run.dataset,
-            "sequence": run.key.sequence,
-            "data": run.key.data,
-            "direction": run.key.direction.value,
-            "trial": run.key.trial,
-            "settings": run.key.settings,
-            "params": method.params.model_dump(mode="json"),
-            "provider": slamrun.methods.provider_record(run.method),  # which package's implementation made this run
-            "state": state,
-            "attempt": attempt,
-            "started_at": started,
-            "view": str(view.root),
-            "sequence_dir": str(run.sequence_dir),
-            "timed_out": result.timed_out,
-            "oom": result.oom,
-            "log_truncated": result.log_truncated,
-            "trajectory_report": traj.report.__dict__ if traj is not None else None,
-            **extra,
-            **values,
-        }
+        record = _record(run, method, view, attempt, started, result, traj, state, extra, values)
         RunPaths.run_json(stage).write_text(jsonio.dumps(record, indent=1))
-        final = paths.final
-        if final.exists():  # a finished run is never overwritten
-            earlier = finished_record(final, run.key.id)
-            if earlier is not None:  # it finished in an earlier attempt: that one stands, this one is dropped
-                shutil.rmtree(stage, ignore_errors=True)
-                return RunOutcome(earlier["state"], {**earlier, "run_dir": str(final)})
-            final.rename(final.with_name(f".{final.name}.incomplete-{int(time.time())}"))  # kept for a look
-        final.parent.mkdir(parents=True, exist_ok=True)
-        os.rename(stage, final)
-        values["run_dir"] = str(final)
-        return RunOutcome(state, values)
+        return _placed(paths, stage, run, state, values)
+
+
+def _judged(refused, result: ExecResult, method: Method, raw: Path, view: PreparedView, log_tail: str):
+    """(failure, message, trajectory) of a finished process; a method that filled the disk is `output_limit`, its
+    output removed (it may not keep the disk)."""
+    if refused:  # the method failed before its process could start
+        failure, message, traj = refused[0], refused[1], None
+    else:
+        try:
+            failure, message, traj = _classify(result, method, raw, view, log_tail)
+        except MethodFailure as exc:  # a plug-in's accepts_exit or failure_from_log raised
+            failure, message, traj = exc.kind, str(exc), None
+    if failure and failure != "output_limit" and _out_of_space(raw, log_tail):
+        if (size := folder_bytes(raw)) >= disk_reserve_bytes(raw):  # it filled the disk itself
+            failure, message, traj = "output_limit", f"it filled the disk ({size / 2**20:.0f} MB written)", None
+    if failure == "output_limit":
+        shutil.rmtree(raw, ignore_errors=True)
+        raw.mkdir()
+    return failure, message, traj
+
+
+def _not_the_methods_fault(run: PlannedRun, view: PreparedView, stage: Path, failure, message, log_tail: str) -> None:
+    """A failure the machine caused is raised as such, never charged: the disk full under the method (StorageError),
+    its input view changed during the run (InfraError)."""
+    if failure and failure != "output_limit" and _out_of_space(RunPaths.raw(stage), log_tail):
+        shutil.rmtree(stage, ignore_errors=True)
+        raise StorageError(f"{run.key.id}: the disk is full ({failure}: {message})")
+    if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
+        damaged = verify_view(view.root, view.build_id)  # the build it started with, whole
+        if damaged:
+            shutil.rmtree(stage, ignore_errors=True)
+            raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
+
+
+def _evaluated(
+    run: PlannedRun, view: PreparedView, stage: Path, traj: Trajectory, groundtruth: Trajectory | None, values: dict
+) -> None:
+    """The trajectory written, its poses and coverage counted, its metrics against the ground truth (if any)."""
+    write_tum(RunPaths.trajectory(stage), traj)
+    values["n_poses"] = len(traj)
+    values["coverage"] = metrics.coverage(traj, view.original_timestamps())
+    if groundtruth is not None:
+        figures, detail = campaign_figures(
+            groundtruth, traj, run.metrics, run.alignment, run.rpe, view.original_timestamps()
+        )
+        values.update(figures)
+        if detail and not values["message"]:
+            values["message"] = detail
+
+
+def _settle_failure(run: PlannedRun, values: dict) -> None:
+    """The failure the evaluation decides: too few poses to evaluate, a loss it recovered from, too little coverage."""
+    failure = values["failure"]
+    if failure is None and values.get("eval_status") == EvalStatus.incomplete.value:
+        failure = "lost"  # too few poses in a segment to evaluate: the method did not track the sequence
+        values.update(failure=failure, message=f"too few poses to evaluate ({values['message']})")
+    if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
+        recovered = values.get("eval_status") == EvalStatus.ok.value
+        failure = None if recovered else "lost"
+        values["failure"] = failure
+    share = values.get("coverage")
+    if failure is None and run.min_coverage and share is not None and share < run.min_coverage:
+        failure = "lost"  # it tracked too little of the sequence for its accuracy to be compared
+        message = f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {run.min_coverage:g}"
+        values.update(failure=failure, message=message)
+
+
+def _record(
+    run: PlannedRun,
+    method: Method,
+    view: PreparedView,
+    attempt: int,
+    started: float,
+    result: ExecResult,
+    traj: Trajectory | None,
+    state: str,
+    extra: dict,
+    values: dict,
+) -> dict:
+    """The run's run.json: what ran, on what, and what came out."""
+    return {
+        "key": run.key.id,
+        "label": run.key.label,
+        "method": run.method,
+        "dataset": run.dataset,
+        "sequence": run.key.sequence,
+        "data": run.key.data,
+        "direction": run.key.direction.value,
+        "trial": run.key.trial,
+        "settings": run.key.settings,
+        "params": method.params.model_dump(mode="json"),
+        "provider": slamrun.methods.provider_record(run.method),  # which package's implementation made this run
+        "state": state,
+        "attempt": attempt,
+        "started_at": started,
+        "view": str(view.root),
+        "sequence_dir": str(run.sequence_dir),
+        "timed_out": result.timed_out,
+        "oom": result.oom,
+        "log_truncated": result.log_truncated,
+        "trajectory_report": traj.report.__dict__ if traj is not None else None,
+        **extra,
+        **values,
+    }
+
+
+def _placed(paths: RunPaths, stage: Path, run: PlannedRun, state: str, values: dict) -> RunOutcome:
+    """The staging folder renamed into the run's folder; a run that finished in an earlier attempt stands."""
+    final = paths.final
+    if final.exists():  # a finished run is never overwritten
+        earlier = finished_record(final, run.key.id)
+        if earlier is not None:  # it finished in an earlier attempt: that one stands, this one is dropped
+            shutil.rmtree(stage, ignore_errors=True)
+            return RunOutcome(earlier["state"], {**earlier, "run_dir": str(final)})
+        final.rename(final.with_name(f".{final.name}.incomplete-{int(time.time())}"))  # kept for a look
+    final.parent.mkdir(parents=True, exist_ok=True)
+    os.rename(stage, final)
+    values["run_dir"] = str(final)
+    return RunOutcome(state, values)
 
 
 def config_files(method: Method, view: PreparedView, workdir: Path) -> list[tuple[Path, str | bytes]]:

@@ -21,6 +21,39 @@ import numpy as np
 def run(argv: list[str] | None = None) -> int:
     import pycolmap
 
+    a = _parse(argv)
+
+    threads = len(os.sched_getaffinity(0))
+    cam = json.loads(a.camera.read_text())
+    times = np.loadtxt(a.times, ndmin=2)[:, 1]
+    names = sorted(f.name for f in a.images.iterdir() if f.suffix.lower() in (".png", ".jpg"))
+    if len(names) != len(times):
+        print(f"colmap: {len(names)} images but {len(times)} timestamps", file=sys.stderr)
+        return 1
+    chosen = names[:: a.stride]
+    if names[-1] not in chosen:
+        chosen.append(names[-1])
+    db = a.workdir / "database.db"
+    sparse = a.workdir / "sparse"
+    sparse.mkdir(exist_ok=True)
+
+    t0, t1, t2 = _features_and_matches(pycolmap, a, cam, db, chosen, threads)
+    if a.mapper == "global":
+        models = pycolmap.global_mapping(db, a.images, sparse, options=_global_options(pycolmap, a, threads))
+    else:
+        models = pycolmap.incremental_mapping(db, a.images, sparse, options=_incremental_options(pycolmap, a, threads))
+    t3 = time.perf_counter()
+    print(f"extraction {t1 - t0:.1f} s, matching {t2 - t1:.1f} s, mapping {t3 - t2:.1f} s; {len(models)} model(s)")
+    if not models:
+        print(f"NOT INITIALIZED: {a.mapper} mapping built no model from {len(chosen)} frames")
+        a.out.write_text("")
+        return 2
+    rows = _write_poses(max(models.values(), key=lambda r: r.num_reg_images()), names, times, a.out)
+    print(f"registered {len(rows)} of {len(chosen)} frames in the largest of {len(models)} model(s)")
+    return 0
+
+
+def _parse(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="colmap")
     for name in ("--images", "--times", "--camera", "--out", "--workdir"):
         ap.add_argument(name, type=Path, required=True)
@@ -37,22 +70,11 @@ def run(argv: list[str] | None = None) -> int:
     ):
         ap.add_argument(name, type=int, default=default)
     ap.add_argument("--mapper", choices=("incremental", "global"), default="incremental")
-    a = ap.parse_args(argv)
+    return ap.parse_args(argv)
 
-    threads = len(os.sched_getaffinity(0))
-    cam = json.loads(a.camera.read_text())
-    times = np.loadtxt(a.times, ndmin=2)[:, 1]
-    names = sorted(f.name for f in a.images.iterdir() if f.suffix.lower() in (".png", ".jpg"))
-    if len(names) != len(times):
-        print(f"colmap: {len(names)} images but {len(times)} timestamps", file=sys.stderr)
-        return 1
-    chosen = names[:: a.stride]
-    if names[-1] not in chosen:
-        chosen.append(names[-1])
-    db = a.workdir / "database.db"
-    sparse = a.workdir / "sparse"
-    sparse.mkdir(exist_ok=True)
 
+def _features_and_matches(pycolmap, a: argparse.Namespace, cam: dict, db: Path, chosen: list[str], threads: int):
+    """SIFT features of the chosen frames and their sequential matches into `db`; the times at each step."""
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = "PINHOLE"
     # COLMAP puts the centre of the first pixel at (0.5, 0.5); the view's K at (0, 0).
@@ -80,17 +102,11 @@ def run(argv: list[str] | None = None) -> int:
     pairing.quadratic_overlap = False
     pycolmap.match_sequential(db, matching_options=matching, pairing_options=pairing, device=pycolmap.Device.cpu)
     t2 = time.perf_counter()
-    if a.mapper == "global":
-        models = pycolmap.global_mapping(db, a.images, sparse, options=_global_options(pycolmap, a, threads))
-    else:
-        models = pycolmap.incremental_mapping(db, a.images, sparse, options=_incremental_options(pycolmap, a, threads))
-    t3 = time.perf_counter()
-    print(f"extraction {t1 - t0:.1f} s, matching {t2 - t1:.1f} s, mapping {t3 - t2:.1f} s; {len(models)} model(s)")
-    if not models:
-        print(f"NOT INITIALIZED: {a.mapper} mapping built no model from {len(chosen)} frames")
-        a.out.write_text("")
-        return 2
-    rec = max(models.values(), key=lambda r: r.num_reg_images())
+    return t0, t1, t2
+
+
+def _write_poses(rec, names: list[str], times: np.ndarray, out: Path) -> list:
+    """The registered frames' poses (camera-to-world) at their original times, as TUM rows, into `out`."""
     index = {n: i for i, n in enumerate(names)}
     rows = []
     for img in rec.images.values():
@@ -102,11 +118,10 @@ def run(argv: list[str] | None = None) -> int:
         q = _quat(R)
         rows.append((times[index[img.name]], *c, *q))
     rows.sort()
-    with open(a.out, "w") as f:
+    with open(out, "w") as f:
         for r in rows:
             f.write(" ".join(f"{v:.9f}" for v in r) + "\n")
-    print(f"registered {len(rows)} of {len(chosen)} frames in the largest of {len(models)} model(s)")
-    return 0
+    return rows
 
 
 def _incremental_options(pycolmap, a: argparse.Namespace, threads: int):

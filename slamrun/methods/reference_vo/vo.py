@@ -87,6 +87,76 @@ class Keyframe:
     obs: dict[int, np.ndarray] = field(default_factory=dict)  # track id → pixel
 
 
+class _WindowProblem:
+    """A window's bundle adjustment as least_squares sees it: the unknowns (a rotation increment and a translation
+    per free camera, then the points), the reprojection residuals and their analytic sparse Jacobian."""
+
+    def __init__(self, R0, t0, X0, n_fixed: int, cams, pts_idx, uv, K) -> None:
+        self.R0, self.t0, self.n_fixed = R0, t0, n_fixed
+        self.n_free, self.n_pts = len(R0) - n_fixed, len(X0)
+        self.cams, self.pts_idx, self.uv = cams, pts_idx, uv
+        self.fx, self.fy, self.cx, self.cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+        n_free, n_obs = self.n_free, len(uv)
+        self.x0 = np.concatenate([np.zeros(3 * n_free), t0[n_fixed:].ravel(), X0.ravel()])
+        self.fo = fo = np.flatnonzero(cams >= n_fixed)
+        cam_col = 6 * (cams[fo] - n_fixed)  # rotation columns, then 3 translation columns after 3*n_free
+        pt_col = 6 * n_free + 3 * pts_idx
+        # Sparsity pattern (fixed): per observation, 2 rows x (3 point + 6 camera) columns.
+        rows_u, rows_v = np.arange(n_obs), n_obs + np.arange(n_obs)
+        pr = np.concatenate([np.repeat(rows_u, 3), np.repeat(rows_v, 3)])
+        pc_cols = np.concatenate([(pt_col[:, None] + np.arange(3)).ravel()] * 2)
+        rot_cols = (cam_col // 2)[:, None] + np.arange(3)  # 3 rotation columns per free camera
+        tr_cols = 3 * n_free + (cam_col // 2)[:, None] + np.arange(3)
+        cr = np.concatenate([np.repeat(rows_u[fo], 6), np.repeat(rows_v[fo], 6)])
+        cc = np.concatenate([np.hstack([rot_cols, tr_cols]).ravel()] * 2)
+        self.rows, self.cols = np.concatenate([pr, cr]), np.concatenate([pc_cols, cc])
+        self.shape = (2 * n_obs, len(self.x0))
+
+    def unpack(self, x):
+        n_free, n_fixed = self.n_free, self.n_fixed
+        d = x[: 3 * n_free].reshape(n_free, 3)
+        R = self.R0.copy()
+        t = self.t0.copy()
+        if n_free:
+            R[n_fixed:] = rodrigues_batch(d) @ self.R0[n_fixed:]
+            t[n_fixed:] = x[3 * n_free : 6 * n_free].reshape(n_free, 3)
+        return R, t, x[6 * n_free :].reshape(self.n_pts, 3)
+
+    def camera_frame(self, x):
+        R, t, X = self.unpack(x)
+        rx = np.einsum("nij,nj->ni", R[self.cams], X[self.pts_idx])
+        return R, rx, rx + t[self.cams]
+
+    def residuals(self, x):
+        _, _, pc = self.camera_frame(x)
+        z = np.maximum(pc[:, 2], 1e-6)
+        uv = self.uv
+        return np.concatenate(
+            [self.fx * pc[:, 0] / z + self.cx - uv[:, 0], self.fy * pc[:, 1] / z + self.cy - uv[:, 1]]
+        )
+
+    def jacobian(self, x):
+        from scipy.sparse import csr_matrix
+
+        R, rx, pc = self.camera_frame(x)
+        fx, fy, fo = self.fx, self.fy, self.fo
+        z = np.maximum(pc[:, 2], 1e-6)
+        du = np.stack([fx / z, np.zeros_like(z), -fx * pc[:, 0] / z**2], 1)  # d u / d pc
+        dv = np.stack([np.zeros_like(z), fy / z, -fy * pc[:, 1] / z**2], 1)
+        Rc = R[self.cams]
+        ju_p = np.einsum("nj,nji->ni", du, Rc)  # d u / d X = du @ R
+        jv_p = np.einsum("nj,nji->ni", dv, Rc)
+
+        # d pc / d rotation increment = -[R X]x ; d pc / d t = I
+        def rot(dd):
+            return np.cross(rx[fo], dd[fo])  # the row vector d @ (-[a]x) equals a x d
+
+        ju_c = np.hstack([rot(du), du[fo]])
+        jv_c = np.hstack([rot(dv), dv[fo]])
+        data = np.concatenate([ju_p.ravel(), jv_p.ravel(), ju_c.ravel(), jv_c.ravel()])
+        return csr_matrix((data, (self.rows, self.cols)), shape=self.shape)
+
+
 class VisualOdometry:
     def __init__(self, K: np.ndarray, settings: Settings | None = None):
         self.K = K
@@ -340,7 +410,6 @@ class VisualOdometry:
         """
         window = self.keyframes[-self.s.ba_window :]
         n_fixed = min(2, len(window))
-        n_free = len(window) - n_fixed
         counts: dict[int, int] = {}
         for kf in window:
             for i in kf.obs:
@@ -360,73 +429,13 @@ class VisualOdometry:
         cams, pts_idx, uv = np.array(cams), np.array(pts_idx), np.array(uv, float)
         R0 = np.array([kf.R for kf in window])
         t0 = np.array([kf.t for kf in window])
-        n_pts = len(pids)
-        x0 = np.concatenate(
-            [np.zeros(3 * n_free), t0[n_fixed:].ravel(), np.array([self.points[p] for p in pids]).ravel()]
-        )
-        fx, fy, cx, cy = self.K[0, 0], self.K[1, 1], self.K[0, 2], self.K[1, 2]
-        n_obs = len(uv)
-        free_obs = cams >= n_fixed
-        fo = np.flatnonzero(free_obs)
-        cam_col = 6 * (cams[fo] - n_fixed)  # rotation columns, then 3 translation columns after 3*n_free
-        pt_col = 6 * n_free + 3 * pts_idx
-
-        def unpack(x):
-            d = x[: 3 * n_free].reshape(n_free, 3)
-            R = R0.copy()
-            t = t0.copy()
-            if n_free:
-                R[n_fixed:] = rodrigues_batch(d) @ R0[n_fixed:]
-                t[n_fixed:] = x[3 * n_free : 6 * n_free].reshape(n_free, 3)
-            return R, t, x[6 * n_free :].reshape(n_pts, 3)
-
-        def camera_frame(x):
-            R, t, X = unpack(x)
-            rx = np.einsum("nij,nj->ni", R[cams], X[pts_idx])
-            return R, rx, rx + t[cams]
-
-        def residuals(x):
-            _, _, pc = camera_frame(x)
-            z = np.maximum(pc[:, 2], 1e-6)
-            return np.concatenate([fx * pc[:, 0] / z + cx - uv[:, 0], fy * pc[:, 1] / z + cy - uv[:, 1]])
-
-        # Sparsity pattern (fixed): per observation, 2 rows x (3 point + 6 camera) columns.
-        rows_u, rows_v = np.arange(n_obs), n_obs + np.arange(n_obs)
-        pr = np.concatenate([np.repeat(rows_u, 3), np.repeat(rows_v, 3)])
-        pc_cols = np.concatenate([(pt_col[:, None] + np.arange(3)).ravel()] * 2)
-        rot_cols = (cam_col // 2)[:, None] + np.arange(3)  # 3 rotation columns per free camera
-        tr_cols = 3 * n_free + (cam_col // 2)[:, None] + np.arange(3)
-        cr = np.concatenate([np.repeat(rows_u[fo], 6), np.repeat(rows_v[fo], 6)])
-        cc = np.concatenate([np.hstack([rot_cols, tr_cols]).ravel()] * 2)
-        from scipy.sparse import csr_matrix
-
-        def jacobian(x):
-            R, rx, pc = camera_frame(x)
-            z = np.maximum(pc[:, 2], 1e-6)
-            du = np.stack([fx / z, np.zeros_like(z), -fx * pc[:, 0] / z**2], 1)  # d u / d pc
-            dv = np.stack([np.zeros_like(z), fy / z, -fy * pc[:, 1] / z**2], 1)
-            Rc = R[cams]
-            ju_p = np.einsum("nj,nji->ni", du, Rc)  # d u / d X = du @ R
-            jv_p = np.einsum("nj,nji->ni", dv, Rc)
-
-            # d pc / d rotation increment = -[R X]x ; d pc / d t = I
-            def rot(dd):
-                a = rx[fo]
-                d = dd[fo]
-                return np.cross(a, d)  # the row vector d @ (-[a]x) equals a x d
-
-            ju_c = np.hstack([rot(du), du[fo]])
-            jv_c = np.hstack([rot(dv), dv[fo]])
-            data = np.concatenate([ju_p.ravel(), jv_p.ravel(), ju_c.ravel(), jv_c.ravel()])
-            rows = np.concatenate([pr, cr])
-            cols = np.concatenate([pc_cols, cc])
-            return csr_matrix((data, (rows, cols)), shape=(2 * n_obs, len(x0)))
-
-        r0 = residuals(x0)
+        X0 = np.array([self.points[p] for p in pids])
+        ba = _WindowProblem(R0, t0, X0, n_fixed, cams, pts_idx, uv, self.K)
+        r0 = ba.residuals(ba.x0)
         sol = least_squares(
-            residuals,
-            x0,
-            jac=jacobian,
+            ba.residuals,
+            ba.x0,
+            jac=ba.jacobian,
             loss="huber",
             f_scale=1.5,
             x_scale="jac",
@@ -440,7 +449,7 @@ class VisualOdometry:
             for p in set(np.array(pids)[pts_idx[before > 4.0]].tolist()):
                 self.points.pop(p, None)
             return
-        R, t, X = unpack(sol.x)
+        R, t, X = ba.unpack(sol.x)
         for ci in range(n_fixed, len(window)):
             window[ci].R, window[ci].t = R[ci], t[ci]
             self.poses[window[ci].frame] = (R[ci], t[ci])
