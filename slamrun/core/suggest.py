@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import difflib
 from collections.abc import Iterable
 
 
@@ -15,6 +14,8 @@ def closest(name: str, known: Iterable[str]) -> str | None:
     key = name.lower()
     if key in by_lower:
         return by_lower[key]
+    import difflib  # only when a name is not known
+
     hits = difflib.get_close_matches(key, list(by_lower), n=1, cutoff=0.6)
     return by_lower[hits[0]] if hits else None
 

@@ -4,7 +4,6 @@ ground truth at the frames' times. The view cache builds prepared views from it,
 
 from __future__ import annotations
 
-import hashlib
 import math
 import zipfile
 from collections.abc import Callable, Iterator
@@ -299,6 +298,8 @@ def implausible_line(path: Path, columns: tuple[int, ...]) -> tuple[int, float] 
 def folder_identity(key_files: list[Path], images_dir: Path, names: list[str]) -> str:
     """A digest of a sequence whose frames are files: the key files in full, the frames by name, size and first
     4 KiB (independent of paths and dates, so a moved or copied dataset keeps its runs). Never blocks."""
+    import hashlib  # here: reading a ground-truth file (evaluate) never needs it
+
     h = hashlib.sha256()
     for p in key_files:
         h.update(p.name.encode() + b"\0" + key_bytes(p) + b"\0")
