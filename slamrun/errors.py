@@ -44,6 +44,11 @@ class InfraError(SlamRunError):
     """An infrastructure fault (image missing, daemon gone, disk full): retried, never the method's result."""
 
 
+class Contended(InfraError):
+    """A run lost (or never initialised) while its threads waited for a CPU longer than the spec's contention_pct:
+    the machine's load, not the method, is the likelier cause. Retried as an infrastructure fault."""
+
+
 class BackendUnreachable(InfraError):
     """The engine runs go through stopped answering: the campaign stops starting runs until it is back (runs not
     started stay pending, never `infra`)."""

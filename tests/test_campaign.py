@@ -335,8 +335,9 @@ def test_status_cli(tmp_path, tiny_dataset):
     out, _ = proc.communicate(timeout=60)
     assert proc.returncode == 0
     rows = [[c.strip() for c in line.strip("│ ").split("│")] for line in out.splitlines() if line.count("│") > 6]
-    rate = {(r[0], r[1]): r[-1] for r in rows}
+    rate = {(r[0], r[1]): r[-2] for r in rows}  # success %, then the mean CPU wait of the finished runs
     assert rate[("crashy", "forward")] == "0" and rate[("external", "backward")] == "100"
+    assert all(r[-1].isdigit() for r in rows if r[0] in ("crashy", "external")), rows
     assert "8/8" in out and "campaign not running" in out
 
 

@@ -80,3 +80,66 @@ def test_every_run_records_its_wait_and_the_machines_pressure(tmp_path: Path, ti
         assert df.host_cpu_pressure_pct.between(0, 100.5).all()
     table = resources_table(df.assign(method=df.get("method", "external")))
     assert "CPU wait %" in table.columns and "machine CPU pressure %" in table.columns
+
+
+def test_a_real_time_method_starved_by_a_hog_is_contended_and_retried(tmp_path: Path, hog_on_one_cpu):
+    """A live-camera method (a frame every 50 ms, 48 ms of CPU each: alone it keeps up) on a lane whose one CPU two
+    hogs share falls behind and loses tracking: its threads waited for the CPU (over a contention_pct of 15 %), so
+    the loss is the machine's: retried, then recorded `contended`, never in its success rate; ready again at the
+    next start."""
+    from slamrun.datasets.make_synthetic import generate
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.ledger import Ledger
+    from slamrun.engine.spec_file import load_spec
+
+    generate(tmp_path / "data" / "seq_a", frames=120, seed=1, size=(160, 120))  # 6 s of camera: a wait measured well
+    second = subprocess.Popen([sys.executable, "-c", "while True: pass"], preexec_fn=pinned(hog_on_one_cpu))
+    events = []
+    live = ["--work", "0.048", "--max-lag", "0.8"]  # 48 ms of CPU a frame; lost 0.8 s behind the camera
+    realtime = fake_method("realtime", label="live", lost_pattern=r"^LOST", extra=live)
+    spec = write_spec(
+        tmp_path, tmp_path / "data", [realtime], datasets=one_sequence(tmp_path / "data"), lanes=1, cpus_per_lane=1,
+        directions=["forward"], retries=1, evaluate=False, contention_pct=15,
+    )  # fmt: skip
+    assert sorted(os.sched_getaffinity(0))[0] == hog_on_one_cpu  # the lane's CPU is the hogs'
+    try:
+        res = run_campaign(load_spec(spec), on_event=lambda kind, run, lane, info: events.append((kind, info)))
+    finally:
+        second.kill()
+        second.wait()
+    (row,) = Ledger(res.results / "ledger.sqlite", read_only=True).rows()
+    assert (row["state"], row["failure"]) == ("failed", "contended"), {k: row[k] for k in ("wall_s", "cpu_wait_pct")}
+    assert "waited for a CPU" in row["message"] and "not charged to the method" in row["message"]
+    assert [kind for kind, _ in events].count("retry") == 1  # retried once (retries: 1), contended again
+    df = pd.read_csv(res.results_csv)
+    assert list(df.failure) == ["contended"] and res.infra_failures == 1
+    assert Ledger(res.results / "ledger.sqlite").reset_infra_failures() == 1  # the next start runs it again
+
+
+def test_a_method_that_loses_tracking_by_itself_is_charged(tmp_path: Path, tiny_dataset):
+    """The same loss with its threads hardly waiting (it sleeps, then says LOST) is the method's own: `lost`."""
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec_file import load_spec
+
+    lost = fake_method("lost", sleep=2.0, label="lost", lost_pattern=r"^LOST")
+    spec = write_spec(
+        tmp_path, tiny_dataset, [lost], datasets=one_sequence(tiny_dataset), directions=["forward"], evaluate=False,
+        contention_pct=15,
+    )  # fmt: skip
+    res = run_campaign(load_spec(spec), on_event=None)
+    df = pd.read_csv(res.results_csv)
+    assert list(df.failure) == ["lost"] and (df.cpu_wait_pct < 15).all(), df[["failure", "cpu_wait_pct"]]
+    assert res.infra_failures == 0
+
+
+def test_the_report_says_how_the_runs_shared_the_machine_and_counts_those_under_contention():
+    from slamrun.analysis.tables import resources_table
+    from slamrun.engine.session import measurement_conditions
+
+    df = pd.DataFrame({"method": ["a", "a", "b"], "fps": [30.0, 20.0, 10.0], "cpu_wait_pct": [2.0, 40.0, 16.0]})
+    table = resources_table(df, contention_pct=15)
+    assert list(table["runs with CPU wait > 15 %"]) == [1, 1] and "runs with" not in " ".join(resources_table(df))
+    assert measurement_conditions({"measurement": "exclusive"}).startswith("exclusive: one run at a time")
+    assert measurement_conditions({"measurement": "parallel", "lanes": 2, "cpus_per_lane": 1}) == (
+        "parallel: 2 lane(s) of 1 CPU(s) each side by side"
+    )

@@ -21,7 +21,7 @@ from slamrun.analysis.colours import method_colours  # noqa: E402
 from slamrun.analysis.paths import SequencePaths  # noqa: E402
 from slamrun.analysis.stats import StudyStats  # noqa: E402
 from slamrun.core.ticks import log_steps  # noqa: E402
-from slamrun.results.vocabulary import INFRA, LABELS  # noqa: E402
+from slamrun.results.vocabulary import INFRA_FAILURES, LABELS  # noqa: E402
 
 # best, median and worst run: told apart by colour and by line style (colour-blind safe, also in grey print)
 PICK_STYLES = {"best": ("#1b9e77", "-", 1.6), "median": ("#7570b3", "--", 1.3), "worst": ("#d95f02", ":", 1.6)}
@@ -166,7 +166,7 @@ def heatmap_cells(
         i, j = methods.index(method), where[(seq, direction, trial)]
         if st == "done" and np.isfinite(value):
             values[i, j], kinds[i, j] = value, 0
-        elif st == "failed" and why != INFRA:
+        elif st == "failed" and why not in INFRA_FAILURES:
             kinds[i, j] = FAILED
         else:
             kinds[i, j] = NO_VALUE

@@ -135,6 +135,7 @@ def provenance_html(p: Provenance, root: Path, results: Path) -> str:
         ("slamrun", f"version {esc(p.version)}, commit {esc(p.commit)}"),
         ("backend", esc(p.backend)),
         ("runs ran on", esc(p.runs_host)),
+        *([("measurement", esc(p.measurement))] if p.measurement else []),
         ("report written on", "<br>".join(f"{esc(k)}: {esc(v)}" for k, v in p.host.items())),
         *((esc(k), esc(v)) for k, v in p.dates.items()),
         *((esc(k), esc(v)) for k, v in p.runs.items()),

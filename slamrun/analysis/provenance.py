@@ -18,6 +18,7 @@ import pandas as pd
 
 from slamrun.backends.machine import cpu_model
 from slamrun.core.inputs import load_yaml_file, read_text_bounded
+from slamrun.engine.session import measurement_conditions
 from slamrun.errors import SlamRunError
 
 SPEC_FILE = "spec.resolved.yaml"
@@ -41,6 +42,8 @@ class Provenance:
     runs: dict[str, str]
     packages: dict[str, str] = field(default_factory=dict)  # run label -> the Python packages its runs ran on
     notes: list[str] = field(default_factory=list)
+    measurement: str = ""  # under which measurement the resources were taken (parallel with N lanes, exclusive)
+    contention_pct: float | None = None  # the spec's threshold of cpu_wait_pct for `contended` runs
 
 
 def provenance(results: Path, df: pd.DataFrame) -> Provenance:
@@ -66,6 +69,8 @@ def provenance(results: Path, df: pd.DataFrame) -> Provenance:
         packages=_packages(df),
         dates=_dates(meta),
         runs=_runs(df, meta.get("session")),
+        measurement=measurement_conditions(spec),
+        contention_pct=(spec or {}).get("contention_pct"),
     )
 
 

@@ -30,6 +30,7 @@ RUNS_COLUMNS = {
     "done": "done",
     "failed": "failed (method)",
     "infra": "infra",
+    "contended": "of which contended",
     "pending": "pending",
     "success_pct": "success %",
     "failure_pct": "failure %",
@@ -37,8 +38,8 @@ RUNS_COLUMNS = {
     "not_evaluable": "not evaluable",
 }
 RUNS_CAPTION = (
-    "Counts of runs per method; success and failure rates over the method's results (infrastructure failures and "
-    "unfinished runs left out); then each kind of the method's failures."
+    "Counts of runs per method; success and failure rates over the method's results (infrastructure failures, "
+    "contended runs among them, and unfinished runs left out); then each kind of the method's failures."
 )
 
 
@@ -93,6 +94,7 @@ def _write_report(
     options = {"level": level, "adjust": adjust, "alpha": alpha, "trajectory_sequences": trajectory_sequences}
     options["colours"] = method_colours(df.method) if "method" in df.columns else None
     prov = provenance(results, df)
+    options |= {"measurement": prov.measurement, "contention_pct": prov.contention_pct}
     sections = [Section("Provenance", page.provenance_html(prov, out, results))]
     if len(groups) == 1:
         name, part = next(iter(groups.items()))
@@ -198,6 +200,8 @@ def dataset_report(
     alpha: float = 0.05,
     trajectory_sequences: int = 2,
     colours: dict[str, str] | None = None,
+    measurement: str = "",
+    contention_pct: float | None = None,
 ) -> list[Section]:
     """The study's report of one dataset's runs into `out` (statistics*.json, tables/, figures/, views/): its
     sections, their links relative to `root` (the folder of index.html). `dataset` labels captions and titles."""
@@ -224,10 +228,17 @@ def dataset_report(
             Section("Statistics", "<p>Fewer than two methods with evaluated runs: no group comparison.</p>")
         )
 
-    res = tables.resources_table(df[df.status.isin(["done", "failed"])]) if "status" in df else pd.DataFrame()
+    finished = df[df.status.isin(["done", "failed"])] if "status" in df else pd.DataFrame()
+    res = tables.resources_table(finished, contention_pct) if not finished.empty else pd.DataFrame()
     if not res.empty:
         title = "Resources: means per run (Table 2 layout)"
-        caption = "Means over each method's finished runs (done or failed) of the resources the runner measured."
+        caption = "Means over each method's finished runs (done or failed) of the resources the runner measured"
+        caption += f", taken under measurement {measurement}." if measurement else "."
+        if contention_pct is not None and "cpu_wait_pct" in finished.columns:
+            caption += (
+                f" Runs whose threads waited for a CPU more than {contention_pct:g} % of their wall time had their "
+                "FPS and CPU figures taken under contention: counted per method."
+            )
         sections.append(Section(title, page.table(res, tab_dir, root, "table2_resources", title + where, caption)))
     # the campaign's accuracy figure per run: TUM-Mono's e_align, else ATE (datasets without TUM-Mono's metrics)
     main = main_metric(df)

@@ -12,7 +12,7 @@ import pandas as pd
 
 from slamrun.analysis.load import by_dataset, evaluated, main_metric
 from slamrun.results.summary import tally
-from slamrun.results.vocabulary import INFRA, METHOD_FAILURES, SUMMARY_METRICS
+from slamrun.results.vocabulary import INFRA_FAILURES, METHOD_FAILURES, SUMMARY_METRICS
 
 POOLED_COLUMNS = ("method", "runs", "done", "failed", "infra", "pending", "success_pct", "failure_pct")
 
@@ -31,6 +31,7 @@ def method_summary(df: pd.DataFrame) -> pd.DataFrame:
             "done": t.done,
             "failed": t.failed,
             "infra": t.infra,
+            "contended": t.contended,  # of the infra failures: lost while waiting for a CPU (counted apart)
             "pending": t.pending,
             "success_pct": np.nan if t.success_pct is None else t.success_pct,
             "failure_pct": np.nan if t.failure_pct is None else t.failure_pct,
@@ -72,7 +73,7 @@ def sequence_ranks(df: pd.DataFrame) -> pd.DataFrame:
         results = part
         if "status" in part.columns:
             failure = part["failure"] if "failure" in part.columns else pd.Series(None, index=part.index)
-            results = part[(part["status"] == "done") | ((part["status"] == "failed") & (failure != INFRA))]
+            results = part[(part["status"] == "done") | ((part["status"] == "failed") & ~failure.isin(INFRA_FAILURES))]
         medians = evaluated(part, [metric]).groupby(["sequence", "method"])[metric].median()
         for sequence, g in results.groupby("sequence", sort=True):
             methods = sorted(g["method"].astype(str).unique())

@@ -123,11 +123,13 @@ def cmd_plan(args) -> int:
 
 
 def _print_dry_run(spec) -> int:
+    from rich.table import Table
+
     from slamrun.engine.dryrun import dry_run
     from slamrun.engine.progress import duration
+    from slamrun.engine.spec_file import cpu_warnings
 
     d = dry_run(spec)
-    from rich.table import Table
 
     t = Table(title=f"{spec.name}: what `slamrun campaign` would run (nothing was run or written)")
     for c in ("method", "direction", "runs", "new", "pending", "done", "failed"):
@@ -151,6 +153,8 @@ def _print_dry_run(spec) -> int:
         )
     else:
         console.print("every view it needs is prepared")
+    for warning in cpu_warnings(spec):
+        console.print(f"warning: {warning}")
     if d.to_run:
         basis = f" ({d.eta_basis}, from this results folder's timings)" if d.eta_s is not None else ""
         console.print(
@@ -217,10 +221,10 @@ def cmd_status(args) -> int:
 def cmd_validate(args) -> int:
     from slamrun.engine.campaign import check_sequences
     from slamrun.engine.plan import plan
-    from slamrun.engine.spec_file import load_spec
+    from slamrun.engine.spec_file import cpu_warnings, load_spec
 
     spec = load_spec(args.spec)
-    for warning in check_sequences(spec, skip_ungenerated=True):
+    for warning in check_sequences(spec, skip_ungenerated=True) + cpu_warnings(spec):
         console.print(f"warning: {warning}")
     from slamrun.datasets.layouts import holds_sequence
 

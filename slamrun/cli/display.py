@@ -18,7 +18,7 @@ from rich.text import Text
 
 from slamrun.engine.progress import Figures, Tracker, duration, one_line
 from slamrun.engine.session import read_tracker
-from slamrun.results.vocabulary import MAIN_METRICS
+from slamrun.results.vocabulary import INFRA_FAILURES, MAIN_METRICS
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -47,15 +47,17 @@ def headline(f: Figures, width: int = 40) -> Table:
 
 def group_table(f: Figures) -> Table:
     t = Table(title=f"{f.campaign}: runs per method and direction")
-    for c in ("method", "direction", "pending", "running", "done", "failed", "infra", "success %"):
+    for c in ("method", "direction", "pending", "running", "done", "failed", "infra", "success %", "CPU wait %"):
         t.add_column(c, justify="left" if c in ("method", "direction") else "right")
     for g in f.per_group:
         rate = "-" if g["success_pct"] is None else f"{g['success_pct']:.0f}"
+        wait = "-" if g.get("cpu_wait_pct") is None else f"{g['cpu_wait_pct']:.0f}"
         t.add_row(
             g["method"],
             g["direction"],
             *(str(g[k]) for k in ("pending", "running", "done", "failed", "infra")),
             rate,
+            wait,
         )
     return t
 
@@ -192,7 +194,7 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
     for r in failed[:limit]:
         log = (
             str(Path(r["run_dir"]) / "log.txt")
-            if r.get("run_dir") and r.get("failure") != "infra"
+            if r.get("run_dir") and r.get("failure") not in INFRA_FAILURES
             else (r.get("message") or "")[:80]
         )
         where = (str(r.get("dataset")),) if several else ()
@@ -211,7 +213,7 @@ def method_table(summary: pd.DataFrame, title: str) -> Table:
     medians = [f"median_{m}" for m in SUMMARY_MEDIANS]
     medians = [c for c in medians if summary[c].notna().any()] or medians[:4]  # the metrics the dataset has
     cols = ["method", "runs", "done", "failed", "success_pct", *medians, "median_fps"]
-    fails = [k for k in FAILURES if summary[k].sum() > 0]
+    fails = [k for k in (*FAILURES, "infra") if k in summary and summary[k].sum() > 0 and k not in cols]
     t = Table(title=title)
     for c in cols + fails:
         t.add_column(c.replace("median_", "med "), justify="right" if c != "method" else "left")

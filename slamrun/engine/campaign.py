@@ -33,7 +33,7 @@ from slamrun.engine.recovery import collect_leftovers, import_finished, recover
 from slamrun.engine.scheduler import Event, Scheduler
 from slamrun.engine.session import session_record
 from slamrun.engine.spec import CampaignSpec
-from slamrun.engine.spec_file import output_problems
+from slamrun.engine.spec_file import cpu_warnings, output_problems
 from slamrun.errors import BackendUnreachable, DatasetError, LedgerLostError, StorageError, storage_problem
 from slamrun.results.vocabulary import is_infra
 
@@ -160,7 +160,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
     if problems := output_problems(spec):  # every door to a campaign (spec, --results, a caller's spec) ends here
         raise FolderRefused("\n".join(problems))
     ensure_datasets(spec, log)
-    for warning in check_sequences(spec):
+    for warning in check_sequences(spec) + cpu_warnings(spec):
         log(f"warning: {warning}")
     lock = ResultsLock(results)
     lock.acquire()

@@ -31,6 +31,7 @@ from slamrun.engine.paths import RunPaths, finished_record
 from slamrun.engine.plan import PlannedRun
 from slamrun.errors import (
     BackendUnreachable,
+    Contended,
     InfraError,
     MethodFailure,
     StorageError,
@@ -38,7 +39,7 @@ from slamrun.errors import (
     storage_problem,
 )
 from slamrun.methods.base import Method
-from slamrun.results.vocabulary import UNDER_MIN_COVERAGE, EvalStatus
+from slamrun.results.vocabulary import CONTENDABLE, UNDER_MIN_COVERAGE, EvalStatus
 
 METHOD_ERROR = "method_error"  # in Launched.extra: (kind, message) of a method that failed before its process started
 
@@ -164,9 +165,11 @@ def finish_attempt(
     started: float,
     groundtruth: Trajectory | None,
     extra: dict,
+    contention_pct: float | None = None,
 ) -> RunOutcome:
     """What a finished process left in its staging folder, read, evaluated, recorded in run.json and renamed
-    into place. Also used to collect a container that finished while the Docker daemon was away."""
+    into place. Also used to collect a container that finished while the Docker daemon was away. A loss with
+    more CPU wait than `contention_pct` is raised as Contended (the machine's load), never recorded as the method's."""
     with _os_errors_as_infra(run, paths, attempt):
         stage = paths.staging(attempt)
         raw = RunPaths.raw(stage)
@@ -182,6 +185,7 @@ def finish_attempt(
         else:
             _evaluated(run, view, stage, traj, groundtruth, values)
         _settle_failure(run, values)
+        _not_contended(run, stage, values, contention_pct)
         if traj is not None and traj.report.n_nonfinite_dropped and not values["message"]:
             values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the output dropped"
         state = "failed" if values["failure"] else "done"
@@ -254,6 +258,20 @@ def _settle_failure(run: PlannedRun, values: dict) -> None:
         failure = "lost"  # it tracked too little of the sequence for its accuracy to be compared
         message = f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {run.min_coverage:g}"
         values.update(failure=failure, message=message)
+
+
+def _not_contended(run: PlannedRun, stage: Path, values: dict, contention_pct: float | None) -> None:
+    """A loss while the run's threads waited for a CPU longer than `contention_pct` of its wall time is raised as
+    Contended (its attempt removed), to be retried; a loss with less wait stays the method's."""
+    wait = values.get("cpu_wait_pct")
+    if contention_pct is None or values["failure"] not in CONTENDABLE or wait is None or wait <= contention_pct:
+        return
+    shutil.rmtree(stage, ignore_errors=True)
+    raise Contended(
+        f"{run.key.id}: {values['failure']} while its threads waited for a CPU {wait:.0f} % of its wall time (over "
+        f"contention_pct {contention_pct:g}; the machine's CPU pressure {values.get('host_cpu_pressure_pct')} %): "
+        "the machine's load, not charged to the method"
+    )
 
 
 def _record(

@@ -290,7 +290,7 @@ class Ledger:
         with self._lock:
             cur = self._db.execute(
                 "UPDATE runs SET state = 'pending', attempts = 0, failure = NULL, message = NULL "
-                "WHERE state = 'failed' AND failure = 'infra'"
+                "WHERE state = 'failed' AND failure IN ('infra', 'contended')"
             )
             return cur.rowcount
 
@@ -363,7 +363,9 @@ class Ledger:
         except sqlite3.OperationalError:  # an empty ledger opened read-only has no tables yet
             return []
 
-    PROGRESS_COLUMNS = ("key", "label", "dataset", "sequence", "direction", "state", "failure", "wall_s", "started_at")
+    PROGRESS_COLUMNS = (
+        "key", "label", "dataset", "sequence", "direction", "state", "failure", "wall_s", "started_at", "cpu_wait_pct"
+    )  # fmt: skip
 
     def progress_rows(self) -> list[dict]:
         """The active runs with only what the progress figures read (slamrun.engine.progress.Tracker)."""

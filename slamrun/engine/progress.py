@@ -195,6 +195,7 @@ class Tracker:
         self.rows: dict[str, dict] = {}
         self.groups: dict[tuple[str, str], Counter] = defaultdict(Counter)
         self.failures: Counter = Counter()
+        self.waits: dict[tuple[str, str], list[float]] = defaultdict(lambda: [0.0, 0])  # CPU wait %: sum, runs
         self.walls = WallTimes()
         self.left: Counter = Counter()  # (label, sequence) -> runs left
         self.running: dict = {}  # key -> (group, started_at) of the runs running now (a lane's worth each)
@@ -202,7 +203,9 @@ class Tracker:
         self.session_runs = 0
         self.unknown = 0
         for i, r in enumerate(rows):
-            row = {k: r.get(k) for k in ("label", "direction", "state", "failure", "wall_s", "started_at")}
+            row = {
+                k: r.get(k) for k in ("label", "direction", "state", "failure", "wall_s", "started_at", "cpu_wait_pct")
+            }
             row["group"], row["key"] = run_group(r), r.get("key", i)
             self.rows[row["key"]] = row
             self._count(row, +1)
@@ -224,6 +227,10 @@ class Tracker:
         self.groups[(row["label"], row["direction"])][cat] += sign
         if cat == "failed":
             self.failures[row["failure"]] += sign
+        if cat in ("done", "failed") and row.get("cpu_wait_pct") is not None:
+            wait = self.waits[(row["label"], row["direction"])]
+            wait[0] += sign * float(row["cpu_wait_pct"])
+            wait[1] += sign
         group = row["group"]
         if cat in ("pending", "running", "infra"):
             self.left[group] += sign
@@ -241,6 +248,11 @@ class Tracker:
         if finished and self.started and row["started_at"] and row["started_at"] >= self.started:
             self.busy += sign * float(row["wall_s"] or 0.0)
             self.session_runs += sign
+
+    def _mean_wait(self, label: str, direction: str) -> float | None:
+        """The mean CPU wait (% of wall time) of the group's finished runs, where they recorded one."""
+        total, n = self.waits.get((label, direction), (0.0, 0))
+        return total / n if n > 0 else None
 
     def figures(self, now: float | None = None) -> Figures:
         totals: Counter = Counter()
@@ -260,6 +272,7 @@ class Tracker:
                     "failed": c["failed"],
                     "infra": c["infra"],
                     "success_pct": 100.0 * c["done"] / results if results else None,
+                    "cpu_wait_pct": self._mean_wait(label, direction),
                 }
             )
         ended = self.session.get("runs_to") or self.session.get("ended_at")

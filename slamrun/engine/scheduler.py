@@ -27,6 +27,7 @@ from slamrun.engine.preparer import ViewPreparer
 from slamrun.engine.spec import CampaignSpec
 from slamrun.errors import (
     BackendUnreachable,
+    Contended,
     DatasetError,
     InfraError,
     LedgerLostError,
@@ -35,7 +36,7 @@ from slamrun.errors import (
     storage_problem,
 )
 from slamrun.methods import get as get_method
-from slamrun.results.vocabulary import INFRA
+from slamrun.results.vocabulary import CONTENDED, INFRA
 
 
 @dataclass(frozen=True)
@@ -141,10 +142,11 @@ class Scheduler:
                 # a bug: keep the traceback, record it, let the other runs go on
                 self._record_infra(run, lane, traceback.format_exc())
 
-    def _record_infra(self, run: PlannedRun, lane: Lane, message: str) -> None:
-        """The run failed for infrastructure reasons (not the method's result): recorded, retried next start."""
-        self.ledger.finish(run.key.id, "failed", {"failure": INFRA, "message": message[-2000:]})
-        self.on_event("finished", run, lane, {"state": "failed", "failure": INFRA, "message": message})
+    def _record_infra(self, run: PlannedRun, lane: Lane, message: str, failure: str = INFRA) -> None:
+        """The run failed for infrastructure reasons (not the method's result; `contended`: the machine's load):
+        recorded, retried next start."""
+        self.ledger.finish(run.key.id, "failed", {"failure": failure, "message": message[-2000:]})
+        self.on_event("finished", run, lane, {"state": "failed", "failure": failure, "message": message})
 
     def _stop_for_storage(self, run: PlannedRun, lane: Lane, error: StorageError, requeue: bool) -> None:
         """No new runs. A row the ledger cannot update stays `running`: the next start recovers it (imports
@@ -249,7 +251,16 @@ class Scheduler:
         gt = self.groundtruths.get(str(run.sequence_dir)) if self.spec.evaluate else None
         try:
             outcome = finish_attempt(
-                run, method, view, paths, attempt, launched.result, launched.started, gt, launched.extra
+                run,
+                method,
+                view,
+                paths,
+                attempt,
+                launched.result,
+                launched.started,
+                gt,
+                launched.extra,
+                self.spec.contention_pct,
             )
             self.ledger.finish(run.key.id, outcome.state, outcome.values)
             self.on_event("finished", run, lane, {"state": outcome.state, **outcome.values})
@@ -266,7 +277,7 @@ class Scheduler:
                     self._queue.appendleft(run)
                     self._qcond.notify_all()
                 return
-            self._record_infra(run, lane, str(exc))
+            self._record_infra(run, lane, str(exc), CONTENDED if isinstance(exc, Contended) else INFRA)
         except Exception as exc:
             if why := storage_problem(exc):
                 self._stop_for_storage(run, lane, StorageError(f"{run.key.id}: {why} ({exc})", why), requeue=False)

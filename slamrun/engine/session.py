@@ -67,3 +67,15 @@ def read_figures(results: Path, now: float | None = None) -> Figures | None:
     ledger does not exist yet."""
     tracker = read_tracker(results)
     return None if tracker is None else tracker.figures(now or time.time())
+
+
+def measurement_conditions(spec: dict | None) -> str:
+    """How the runs shared the machine, as the spec said: one at a time (exclusive), or N lanes side by side."""
+    if not spec:
+        return ""
+    if spec.get("measurement") == "exclusive":
+        return "exclusive: one run at a time, every CPU of the runner"
+    lanes, per = spec.get("lanes") or 1, spec.get("cpus_per_lane")
+    where = ", on a Dask cluster's workers" if spec.get("distributed") else ""
+    cpus = f" of {per} CPU(s) each" if per else " (the runner's CPUs split between them)"
+    return f"parallel: {lanes} lane(s){cpus} side by side{where}"

@@ -22,7 +22,7 @@ from slamrun.engine.folders import (
     path_part_problem,
 )
 from slamrun.errors import DatasetError
-from slamrun.results.vocabulary import METRIC_NAMES
+from slamrun.results.vocabulary import CONTENTION_PCT, METRIC_NAMES
 
 
 class Strict(BaseModel):
@@ -198,6 +198,14 @@ class CampaignSpec(Strict):
         "parallel", description="exclusive: one run at a time, nothing else (for timing)."
     )
     retries: int = Field(2, ge=0, description="Retries of infrastructure failures (never of method failures).")
+    contention_pct: float | None = Field(
+        None,
+        gt=0,
+        description="A run lost or never initialised while its threads waited for a CPU longer than this share of "
+        f"its wall time (cpu_wait_pct) is `contended`: retried, and counted apart as infrastructure failures are, "
+        f"never in the method's rate ({CONTENTION_PCT:g} measured to separate them on a shared machine; README). "
+        "Default null: every loss is the method's.",
+    )
     retry_backoff_s: float = Field(5.0, ge=0, description="First retry delay; doubles each retry.")
     evaluate: bool = Field(True, description="Evaluate each finished run against the ground truth.")
     stop_grace_s: float = Field(30.0, ge=0, description="On SIGINT/SIGTERM, time in-flight runs get to finish.")

@@ -122,6 +122,8 @@ def validate_spec(
     problems += method_problems(raw, GpuHere(check_gpu and runs_on_this_host(raw)))
     if spec is not None:
         spec = _resolve(spec, base_dir, results)
+        if check_files and runs_on_this_host(raw):  # this machine runs it (not only reading or planning it)
+            problems += cpu_fit(spec)[0]
         if check_files and not _name_problems(raw):
             problems += _file_problems(spec, "--results" if results is not None else "results")
     if problems:
@@ -152,6 +154,42 @@ def method_problems(raw: dict, gpu_here: GpuHere) -> list[str]:
             found += filter(None, [gpu_problem(m["name"])])
         problems += [f"methods[{i}]: {p}" for p in found]
     return problems
+
+
+def cpu_fit(spec: CampaignSpec, cpus: int | None = None) -> tuple[list[str], list[str]]:
+    """(problems, warnings): each method's busy threads (its declaration, with its parameters) against the CPUs a lane
+    of this campaign gets here (`cpus`: those this process may use). More threads than CPUs make its threads wait
+    for one, so its FPS and CPU figures are taken under contention: refused under `measurement: exclusive` (taken
+    for timing), a warning otherwise."""
+    cpus = cpus or len(os.sched_getaffinity(0))
+    exclusive = spec.measurement == "exclusive"
+    lanes = 1 if exclusive else spec.lanes
+    per_lane = cpus if exclusive else (spec.cpus_per_lane or max(1, cpus // lanes))
+    problems, warnings = [], []
+    for i, m in enumerate(spec.methods):
+        threads = slamrun.methods.get(m.name)(m.params).busy_threads()
+        if threads is None or threads <= per_lane:
+            continue
+        if exclusive:
+            problems.append(
+                f"methods[{i}]: {m.run_label} keeps {threads} threads busy, and measurement: exclusive gives it the "
+                f"{cpus} CPU(s) this process may use: its FPS and CPU figures would be taken with threads waiting for "
+                f"a CPU; measure it where {threads} CPUs are free, or with measurement: parallel"
+            )
+        else:
+            fit = max(1, cpus // threads)
+            warnings.append(
+                f"{m.run_label} keeps {threads} threads busy, and each of the {lanes} lane(s) gets {per_lane} of the "
+                f"{cpus} CPU(s) this process may use: its threads will wait for a CPU (cpu_wait_pct in results.csv "
+                f"says how long){f'; lanes: {fit} gives each of its runs {threads}' if fit * threads <= cpus else ''}"
+            )
+    return problems, warnings
+
+
+def cpu_warnings(spec: CampaignSpec) -> list[str]:
+    """cpu_fit's warnings where the runs execute on this machine (a cluster's workers have their own CPUs)."""
+    here = spec.distributed is None or spec.distributed.address == "local"
+    return cpu_fit(spec)[1] if here else []
 
 
 def runs_on_this_host(raw: dict) -> bool:

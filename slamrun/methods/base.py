@@ -64,6 +64,9 @@ class Method(ABC):
     network: ClassVar[Weights | None] = None  # the trained network its image needs (weights file)
     verify_bound: ClassVar[float] = 0.05  # `slamrun verify`: settled e_align / scene extent it must stay under
     native_build: ClassVar[NativeMethod | None] = None  # how `slamrun native-build` makes it
+    # Threads it keeps busy at once (tracking, mapping, ...): a lane with fewer CPUs makes its threads wait for one;
+    # None: it uses as many as its lane has (COLMAP's thread count follows the CPUs it is pinned to)
+    threads: ClassVar[int | None] = 1
 
     def __init__(self, params: BaseModel | dict | None = None):
         self.params = params if isinstance(params, BaseModel) else self.Params.model_validate(params or {})
@@ -84,6 +87,10 @@ class Method(ABC):
         Pure: the runner writes them, so the same call serves a local process and a container.
         """
         return {}
+
+    def busy_threads(self) -> int | None:
+        """The threads this method keeps busy with its parameters (`threads`, unless a setting changes it)."""
+        return self.threads
 
     def for_backend(self, backend: str) -> Method:
         """This method as run by a backend (`local` or `docker`); the interpreter may differ."""

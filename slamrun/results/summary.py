@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from slamrun.results.vocabulary import INFRA, METHOD_FAILURES, EvalStatus
+from slamrun.results.vocabulary import CONTENDED, INFRA_FAILURES, METHOD_FAILURES, EvalStatus
 
 
 @dataclass
@@ -14,7 +14,8 @@ class Tally:
     runs: int = 0
     done: int = 0
     failed: int = 0  # the method's failures
-    infra: int = 0  # infrastructure failures (retried, no result)
+    infra: int = 0  # infrastructure failures (retried, no result), contended runs among them
+    contended: int = 0  # of those, runs lost while their threads waited for a CPU (the machine's load)
     pending: int = 0  # pending or running
     evaluated: int = 0  # done, with metrics
     not_evaluable: int = 0  # done, without metrics
@@ -46,8 +47,9 @@ def tally(states: Iterable[tuple[str, str | None, str | None]]) -> Tally:
             else:
                 t.not_evaluable += 1
         elif state == "failed":
-            if failure == INFRA:
+            if failure in INFRA_FAILURES:
                 t.infra += 1
+                t.contended += failure == CONTENDED
             else:
                 t.failed += 1
                 if failure:

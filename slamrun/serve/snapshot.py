@@ -18,7 +18,7 @@ from slamrun.analysis.colours import method_colours
 from slamrun.core.ticks import log_ticks
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.progress import Tracker, duration
-from slamrun.engine.session import current_session
+from slamrun.engine.session import current_session, measurement_conditions
 from slamrun.results.vocabulary import MAIN_METRICS, SUMMARY_METRICS
 from slamrun.serve.folders import LEDGER
 
@@ -69,6 +69,7 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
     try:
         session = current_session(ledger)
         campaign = ledger.meta("campaign", name)
+        measurement = measurement_conditions(ledger.meta("spec"))
         rows = ledger.progress_rows()
         progress = Tracker(rows, session, campaign).figures(now)
         running = ledger.rows(state="running", columns=RUN_COLUMNS)
@@ -83,7 +84,7 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         "generated_at": now,
         "progress": counts,
         "state": state_of(counts),
-        "facts": facts(counts),
+        "facts": facts(counts) + ([f"measurement {measurement}"] if measurement else []),
         "labels": LABELS,
         "lanes": [_lane(r, now) for r in sorted(running, key=lambda r: r.get("started_at") or 0.0)],
         "failed": _failed(failed),

@@ -59,6 +59,7 @@ class CnnSvoParams(SvoParams, GpuOptionalParams):
 class CnnSvo(GpuOptional, Svo):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 2  # the frame handler and its depth-filter thread
     sources = (
         Source(
             "cnn_svo",

@@ -29,6 +29,7 @@ class ColmapParams(BaseModel):
 
 class Colmap(PythonProcess, Method):
     name = folder_name(__name__)  # its folder's
+    threads = None  # its thread count follows the CPUs it is pinned to
     image = None
     profile = Profile.rectified
     native = True

@@ -38,6 +38,7 @@ class DfOrbSlamParams(OrbSlam2Params):
 class DfOrbSlam(OrbSlam2):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 3  # tracking, local mapping and loop closing (ORB-SLAM2's three threads)
     sources = (
         Source(
             "df_orb_slam",

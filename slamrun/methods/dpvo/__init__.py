@@ -73,6 +73,7 @@ class DpvoParams(BaseModel):
 class Dpvo(NativeGpuMethod):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 2  # the network's process and its frame reader (PREFETCH frames ahead), beside the GPU
     sources = (
         Source(
             "dpvo",

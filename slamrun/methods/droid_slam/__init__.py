@@ -73,6 +73,7 @@ class DroidSlamParams(BaseModel):
 class DroidSlam(NativeGpuMethod):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 2  # the network's process and its frame reader, beside the GPU
     # with its submodules at the commits it records: thirdparty/lietorch (Lie groups on PyTorch, compiled with it)
     # and thirdparty/pytorch_scatter, not compiled (its scatter_sum and scatter_mean, pure Python there, are
     # dpvo/image/torch_scatter_compat.py's; the tests check them against it)

@@ -68,6 +68,9 @@ class Dsm(UpstreamMethod):
         settings = "".join(f"{k} = {str(v).lower() if isinstance(v, bool) else v}\n" for k, v in values.items())
         return {"calib.yaml": calib, "settings.txt": settings}
 
+    def busy_threads(self) -> int:
+        return 1 if self.params.single_threaded else 2  # singleThreaded (its default): one
+
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         return [
             self.exe(),

@@ -27,6 +27,7 @@ class DsoParams(UpstreamParams):
 class Dso(UpstreamMethod):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 2  # tracking and mapping (nomt=1: one)
     sources = (
         Source(
             "dso",
@@ -62,6 +63,9 @@ class Dso(UpstreamMethod):
         """mode=0 with the view's photometric calibration when asked for and the dataset has one (TUM-Mono);
         mode=1 otherwise (EuRoC, KITTI, TUM RGB-D, TUM-VI carry none)."""
         return self.params.photometric and view.photometric
+
+    def busy_threads(self) -> int:
+        return 1 if self.params.single_thread else 2  # tracking and mapping; nomt=1: one thread
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params

@@ -27,6 +27,7 @@ class DynaSlamParams(OrbSlam2Params):
 class DynaSlam(OrbSlam2):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 3  # tracking, local mapping and loop closing (ORB-SLAM2's three threads)
     sources = (
         Source(
             "dynaslam",

@@ -32,6 +32,7 @@ class GlomapParams(BaseModel):
 
 class Glomap(PythonProcess, Method):
     name = folder_name(__name__)  # its folder's
+    threads = None  # its thread count follows the CPUs it is pinned to
     image = None
     profile = Profile.rectified
     native = True

@@ -34,6 +34,7 @@ from slamrun.methods.upstream import UpstreamMethod, UpstreamParams
 class LsdSlam(UpstreamMethod):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 2  # tracking and mapping (multiThreading); loop closure adds its search and optimisation threads
     sources = (
         Source(
             "lsd_slam",

@@ -75,6 +75,7 @@ def orb_settings_yaml(view: PreparedView, p: OrbSlam2Params, extra: dict | None 
 class OrbSlam2(UpstreamMethod):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 3  # tracking, local mapping and loop closing (ORB-SLAM2's three threads)
     sources = (
         Source(
             "orb_slam2",

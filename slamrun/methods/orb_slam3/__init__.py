@@ -166,6 +166,7 @@ def evaluated_map(workdir: Path, refuse: bool) -> Trajectory:
 class OrbSlam3(UpstreamMethod):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 3  # tracking, local mapping and loop closing
     # after the study (shared/upstream README, "Methods after the study"): ORB-SLAM3 v1.0; the stored archive
     # lacks the vocabulary, Examples_old/ and the IMU data folders (one file a line in its .absent.txt)
     sources = (

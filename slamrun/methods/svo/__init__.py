@@ -60,6 +60,7 @@ def ros_params_yaml(values: dict) -> str:
 class Svo(UpstreamMethod):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    threads = 2  # the frame handler and its depth-filter thread
     sources = (
         Source(
             "svo",
