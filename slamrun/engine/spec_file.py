@@ -167,8 +167,12 @@ def cpu_fit(spec: CampaignSpec, cpus: int | None = None) -> tuple[list[str], lis
     per_lane = cpus if exclusive else (spec.cpus_per_lane or max(1, cpus // lanes))
     problems, warnings = [], []
     for i, m in enumerate(spec.methods):
-        threads = slamrun.methods.get(m.name)(m.params).busy_threads()
-        if threads is None or threads <= per_lane:
+        cls = slamrun.methods.REGISTRY.get(m.name)
+        try:
+            threads = cls(m.params).busy_threads() if cls is not None else None
+        except Exception:  # noqa: BLE001 - parameters the schema's step names, or a plug-in's own error: no figure
+            threads = None
+        if not isinstance(threads, int) or threads <= per_lane:
             continue
         if exclusive:
             problems.append(
