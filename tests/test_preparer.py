@@ -8,9 +8,12 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
+
 import slamrun.engine.preparer as preparer_module
 from slamrun.datasets.view import Direction, Profile
 from slamrun.engine.preparer import ViewPreparer
+from slamrun.errors import DatasetError
 
 
 def test_views_are_prepared_one_at_a_time_the_idle_lanes_first_views_with_every_core(tmp_path, monkeypatch):
@@ -57,3 +60,40 @@ def test_a_view_asked_for_while_it_is_being_prepared_is_prepared_once(tmp_path, 
     views.close()
     assert got == ["a", "a", "a"] and calls == ["a"]
     assert Path(key[0]).name == "a"
+
+
+def test_a_view_whose_background_preparation_failed_is_prepared_again_when_a_run_asks_again(tmp_path, monkeypatch):
+    """A preparation that failed on something passing (the cache deleted under it) is not remembered as the
+    view's fate: the run is retried as infrastructure, and its retry prepares the view again."""
+    calls = []
+
+    def once_failing_prepare(seq, direction, profile, cache, workers=2, frame_format="png"):
+        calls.append(seq.name)
+        if len(calls) == 1:
+            raise FileNotFoundError(2, "No such file or directory", str(cache / "x.tmp"))
+        return seq.name
+
+    monkeypatch.setattr(preparer_module, "prepare", once_failing_prepare)
+    key = (str(tmp_path / "a"), Direction.forward, Profile.native)
+    views = ViewPreparer([key], tmp_path).start()
+    with pytest.raises(FileNotFoundError):
+        views.get(key)
+    assert views.get(key) == "a" and calls == ["a", "a"]
+    views.close()
+
+
+def test_a_sequence_that_cannot_be_prepared_is_not_prepared_again_for_each_run(tmp_path, monkeypatch):
+    calls = []
+
+    def bad_data(seq, direction, profile, cache, workers=2, frame_format="png"):
+        calls.append(seq.name)
+        raise DatasetError(f"{seq}: frame 3 cannot be decoded")
+
+    monkeypatch.setattr(preparer_module, "prepare", bad_data)
+    key = (str(tmp_path / "a"), Direction.forward, Profile.native)
+    views = ViewPreparer([key], tmp_path).start()
+    for _ in range(3):
+        with pytest.raises(DatasetError):
+            views.get(key)
+    assert calls == ["a"]
+    views.close()

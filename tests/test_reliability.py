@@ -226,7 +226,9 @@ def test_a_deleted_view_cache_is_rebuilt_not_charged(tmp_path, tiny_dataset):
             deleted.append(run.key.id)
 
     res = campaign(spec, on_event=on_event)
-    assert deleted and res.counts == {"pending": 0, "running": 0, "done": 8, "failed": 0}
+    df = pd.read_csv(res.results_csv)
+    charged = df[df.status != "done"][["sequence", "direction", "trial", "failure", "message"]].to_dict("records")
+    assert deleted and res.counts == {"pending": 0, "running": 0, "done": 8, "failed": 0}, charged
 
 
 def test_a_method_that_damages_the_view_does_not_charge_later_runs(tmp_path, tiny_dataset):

@@ -38,6 +38,7 @@ class ViewPreparer:
         self._views: dict[ViewKey, PreparedView] = {}
         self._errors: dict[ViewKey, BaseException] = {}
         self._inflight: set[ViewKey] = set()
+        self._reached: set[ViewKey] = set()  # those the background thread has come to
         self._cond = threading.Condition()
         self._lock = threading.Lock()  # one preparation at a time (each uses several cores)
         self._stop = threading.Event()
@@ -55,6 +56,8 @@ class ViewPreparer:
         for i, key in enumerate(self._order):
             if self._stop.is_set():
                 return
+            with self._cond:
+                self._reached.add(key)
             self._prepare(key, self.head_workers if i < self.head else self.workers)
 
     def _prepare(self, key: ViewKey, workers: int | None = None) -> None:
@@ -83,18 +86,22 @@ class ViewPreparer:
             self.on_ready(key, view)
 
     def get(self, key: ViewKey) -> PreparedView:
-        """The view, once prepared (preparing it now if the background thread has not reached it)."""
-        with self._cond:
-            known = key in self._views or key in self._errors
-        if not known and key not in self._order:
+        """The view, once prepared: the background thread's, or prepared now when it will not come to it. A
+        failure is raised; one of the data (DatasetError) stays the view's, any other (the cache deleted under
+        the preparation) is raised once and the next request prepares the view anew."""
+        while True:
+            with self._cond:
+                if key in self._views:
+                    return self._views[key]
+                if key in self._errors:
+                    exc = self._errors[key]
+                    if not isinstance(exc, DatasetError):
+                        del self._errors[key]
+                    raise exc if isinstance(exc, (SlamRunError, OSError)) else InfraError(str(exc))
+                if key in self._inflight or (key in self._order and key not in self._reached):
+                    self._cond.wait(0.5)
+                    continue
             self._prepare(key)
-        with self._cond:
-            while key not in self._views and key not in self._errors:
-                self._cond.wait(0.5)
-            if key in self._errors:
-                exc = self._errors[key]
-                raise exc if isinstance(exc, (SlamRunError, OSError)) else InfraError(str(exc))
-            return self._views[key]
 
     def checked(self, key: ViewKey) -> tuple[PreparedView, str | None]:
         """The view, whole: one found missing or damaged is prepared again first. Returns the view and what
