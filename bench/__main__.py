@@ -12,6 +12,7 @@ from pathlib import Path
 
 from bench.analysis import bench_analysis
 from bench.common import one_core, report
+from bench.contention import bench_contention
 from bench.datasets import bench_datasets
 from bench.demo import bench_demo
 from bench.docker import bench_docker
@@ -39,6 +40,7 @@ BENCHES: dict[str, Callable[[Path], None]] = {
     "scale": bench_scale,
     "serve": bench_serve,
     "eta": lambda tmp: bench_eta(report),
+    "contention": lambda tmp: bench_contention(tmp, report),
 }
 
 

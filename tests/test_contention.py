@@ -143,3 +143,30 @@ def test_the_report_says_how_the_runs_shared_the_machine_and_counts_those_under_
     assert measurement_conditions({"measurement": "parallel", "lanes": 2, "cpus_per_lane": 1}) == (
         "parallel: 2 lane(s) of 1 CPU(s) each side by side"
     )
+
+
+def test_the_wait_a_method_causes_itself_is_not_the_machines(tmp_path: Path):
+    """ORB-SLAM3's 3 busy threads on a lane of 2 CPUs waited 32.5-58.4 % of their wall time in 24 runs on an idle
+    machine and lost 3 attempts beside two CPU hogs waiting 108, 115 and 154 % (README): 60 % per thread beyond its
+    CPUs is its own; only the wait beyond that makes a loss contended, and counts in the report's runs under
+    contention."""
+    from slamrun.analysis.tables import resources_table
+    from slamrun.engine.execute import _not_contended, own_wait_pct
+    from slamrun.errors import Contended
+    from slamrun.methods import get
+
+    orb3, vo = get("orb_slam3")({}), get("reference_vo")({})
+    assert own_wait_pct(orb3, [0, 1]) == 60.0 and own_wait_pct(orb3, [0, 1, 2, 3]) == 0.0
+    assert own_wait_pct(orb3, [0]) == 120.0 and own_wait_pct(vo, [0]) == 0.0
+    run = type("Run", (), {"key": type("Key", (), {"id": "orb_slam3@x/room_a@y/forward/00"})()})()
+    for idle in (32.5, 58.4):  # a loss at an idle machine's wait: charged
+        _not_contended(run, tmp_path / "stage", {"failure": "lost", "cpu_wait_pct": idle}, 15.0, 60.0)
+    for loaded in (108.0, 115.0, 154.0):
+        with pytest.raises(Contended, match="60 % of it its own threads'"):
+            _not_contended(run, tmp_path / "stage", {"failure": "lost", "cpu_wait_pct": loaded}, 15.0, 60.0)
+    with pytest.raises(Contended):  # a method that fits its lane has no allowance
+        _not_contended(run, tmp_path / "stage", {"failure": "lost", "cpu_wait_pct": 16.0}, 15.0, 0.0)
+    df = pd.DataFrame(
+        {"method": ["orb_slam3"] * 4, "cpu_wait_pct": [40.9, 58.4, 90.0, 130.2], "cpu_wait_own_pct": [60.0] * 4}
+    )
+    assert list(resources_table(df, contention_pct=15)["runs with CPU wait > 15 %"]) == [2]

@@ -70,6 +70,34 @@ def test_real_dso_forward_and_backward_through_docker(dso_docker):
     assert images["dso"]["id"] == record["image"]["id"] and images["dso"]["march"] == "x86-64-v2"
 
 
+def test_real_dso_on_a_perturbed_view_through_docker(dso_docker, tmp_path):
+    """Issue 53: DSO's image reads a perturbed view (noisy frames, PNG where the baseline view holds the
+    originals) as it reads any view: forward on the same room, beside its baseline run, in parallel lanes."""
+    _, data = dso_docker
+    spec = write_spec(
+        tmp_path,
+        data,
+        [{"name": "dso", "params": {"single_thread": True}}],
+        datasets=[{"name": "synth", "path": str(data), "sequences": ["room_a"]}],
+        directions=["forward"],
+        perturbations=[{"kind": "gaussian_noise", "sigma": [3]}],
+        backend="docker",
+        trials=1,
+        lanes=2,
+        timeout_s=600,
+        name="dso-perturbed",
+    )
+    res = run_campaign(load_spec(spec), log=lambda *a: None)
+    df = pd.read_csv(res.results_csv)
+    assert res.counts["done"] == 2, df[["perturbation", "status", "failure", "message"]].to_string()
+    noisy = df[df.perturbation == "gaussian_noise"].iloc[0]
+    assert noisy.level == 3 and noisy.eval_status == "ok" and noisy.n_poses > 20
+    assert noisy.e_align / scene_extent(data / "room_a") < 0.05, noisy.e_align
+    record = json.loads((Path(noisy.run_dir) / "run.json").read_text())
+    assert "/forward+gaussian_noise-3/" in noisy.run_dir and "-gaussian_noise-3-" in Path(record["view"]).name
+    assert json.loads((Path(record["view"]) / "view.json").read_text())["perturbation"] == "gaussian_noise-3"
+
+
 def path_length(positions) -> float:
     import numpy as np
 

@@ -334,3 +334,71 @@ def trajectories(paths: SequencePaths, folder: Path, label: str = "") -> Path:
     title = f"{paths.sequence}: best, median and worst run of each method by {paths.metric}, {paths.aligned_by()}"
     fig.suptitle(_labelled(label, title), fontsize=9)
     return save(fig, folder, f"trajectories_{paths.sequence}")
+
+
+def robustness(
+    df: pd.DataFrame,
+    kind: str,
+    metrics: list[str],
+    folder: Path,
+    label: str = "",
+    colours: dict[str, str] | None = None,
+) -> Path:
+    """The robustness figure of one perturbation kind (robustness_figure), saved in `folder`."""
+    return save(robustness_figure(df, kind, metrics, label, colours), folder, f"robustness_{kind}")
+
+
+def robustness_figure(
+    df: pd.DataFrame, kind: str, metrics: list[str], label: str = "", colours: dict[str, str] | None = None
+) -> plt.Figure:
+    """Against the level of `kind` (baseline first, mildest to most severe), one panel for the success rate and
+    one per metric: per method the median of its evaluated runs, with the band between the first and third
+    quartiles (the spread over trials, sequences and directions); a level where a method has no evaluated run has
+    no point (its success rate says why)."""
+    from slamrun.analysis.robustness import spread, success_rates
+    from slamrun.datasets.perturb import KINDS
+
+    rates = success_rates(df)
+    rates = rates[rates.perturbation == kind]
+    names = list(dict.fromkeys(rates.level)) or ["none"]
+    panels = ["success", *metrics]
+    cols = min(len(panels), 4)
+    rows = math.ceil(len(panels) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.3 * cols + 1.6, 2.7 * rows), layout="constrained", squeeze=False)
+    methods = sorted(df.method.unique())
+    colors = {**method_colours(methods), **(colours or {})}
+    x = np.arange(len(names))
+    for ax, panel in zip(axes.flat, panels, strict=False):
+        for m in methods:
+            if panel == "success":
+                r = rates[rates.method == m]
+                ax.plot([names.index(v) for v in r.level], r["success %"], "o-", color=colors[m], lw=1.6, ms=4, label=m)
+                continue
+            s = spread(df, kind, panel)
+            s = s[s.method == m]
+            if s.empty:
+                continue
+            ax.fill_between(s.position, s.q1, s.q3, color=colors[m], alpha=0.15, lw=0)
+            ax.plot(s.position, s["median"], "o-", color=colors[m], lw=1.6, ms=4)
+        if panel == "success":
+            ax.set_ylim(-3, 103)
+            ax.set_ylabel("success rate (%)")
+            ax.axhline(50, color="0.5", lw=0.8, ls=":")
+        else:
+            values = spread(df, kind, panel)[["q1", "q3"]].to_numpy(float).ravel()
+            if use_log_scale(values):
+                ax.set_yscale("log")
+            ax.set_ylabel(LABELS.get(panel, panel), fontsize=8)
+        ax.set_xticks(x, names, fontsize=8)
+        ax.set_xlim(-0.3, len(names) - 0.7)
+        ax.grid(True, alpha=0.3)
+    for ax in list(axes.flat)[len(panels) :]:
+        ax.set_visible(False)
+    k = KINDS[kind]
+    fig.supxlabel(f"{kind.replace('_', ' ')}: {k.parameter} ({k.unit}), mildest to most severe", fontsize=9)
+    title = f"robustness to {kind.replace('_', ' ')}: median and quartiles per level"
+    fig.suptitle(_labelled(label, title), fontsize=9)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, fontsize=8, loc="outside right upper", frameon=False)
+    return fig

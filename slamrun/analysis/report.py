@@ -19,6 +19,15 @@ from slamrun.analysis.colours import method_colours
 from slamrun.analysis.load import NO_DATASET, by_dataset, evaluated, load_results, main_metric, metrics_for
 from slamrun.analysis.paths import sequence_paths
 from slamrun.analysis.provenance import provenance
+from slamrun.analysis.robustness import (
+    BREAKDOWN_PCT,
+    baseline,
+    breakdown_table,
+    kinds,
+    level_statistics,
+    perturbed,
+    success_rates,
+)
 from slamrun.analysis.stats import study_statistics
 from slamrun.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
 from slamrun.core import jsonio
@@ -88,24 +97,30 @@ def one_at_a_time(marker: Path) -> Iterator[None]:
 def _write_report(
     df: pd.DataFrame, results: Path, out: Path, level: float, adjust: str, alpha: float, trajectory_sequences: int
 ) -> Path:
+    """Every table, figure and statistic of the study is of the runs on ordinary views (the baseline); the runs on
+    perturbed views are in each dataset's Robustness section alone."""
     clear_previous(out)
     out.mkdir(parents=True, exist_ok=True)
-    groups = by_dataset(df)
+    everything = by_dataset(df)
+    groups = {name: baseline(part) for name, part in everything.items()}
     options = {"level": level, "adjust": adjust, "alpha": alpha, "trajectory_sequences": trajectory_sequences}
     options["colours"] = method_colours(df.method) if "method" in df.columns else None
     prov = provenance(results, df)
     options |= {"measurement": prov.measurement, "contention_pct": prov.contention_pct}
+    stats_options = {k: options[k] for k in ("level", "adjust", "alpha", "colours")}
     sections = [Section("Provenance", page.provenance_html(prov, out, results))]
     if len(groups) == 1:
         name, part = next(iter(groups.items()))
         label = name if name != NO_DATASET else ""
         body = dataset_report(part, out, out, label, **options)
+        body += robustness_report(everything[name], out, out, label, **stats_options)
         intro = Section(f"Dataset {name}" if label else "Results", "", body)
         sections.append(intro)
     else:
-        sections.append(Section("All datasets (pooled)", "", pooled_report(df, out)))
+        sections.append(Section("All datasets (pooled)", "", pooled_report(baseline(df), out)))
         for name, folder in _folders(groups).items():
             body = dataset_report(groups[name], out / "datasets" / folder, out, name, **options)
+            body += robustness_report(everything[name], out / "datasets" / folder, out, name, **stats_options)
             sections.append(Section(f"Dataset {name}", "", body))
     views = any(page.has_view(s.html) for s in _walk(sections))
     if views:
@@ -266,6 +281,66 @@ def dataset_report(
     if traj is not None:
         sections.append(traj)
     return sections
+
+
+ROBUSTNESS_INTRO = (
+    "Each sequence was also played with its frames made worse (README, Robustness), every level a prepared view of "
+    "its own, forward and backward as the baseline; the baseline (level none) is the ordinary view, the runs every "
+    "other table of this report is made of. Success rates are over the method's results (infrastructure failures "
+    "and unfinished runs left out); a level's accuracy is of its evaluated runs only, so read it beside its success "
+    "rate: a method that fails the hard runs keeps a good median."
+)
+
+
+def robustness_report(
+    df: pd.DataFrame,
+    out: Path,
+    root: Path,
+    dataset: str = "",
+    level: float = 0.999,
+    adjust: str = "holm",
+    alpha: float = 0.05,
+    colours: dict[str, str] | None = None,
+) -> list[Section]:
+    """The Robustness section of one dataset's runs (all of them, perturbed and baseline), or none where no run
+    was on a perturbed view: success rates per level, the level at which each method breaks down, one figure
+    per kind (each metric and the success rate against the level), and the statistics within each level."""
+    if not perturbed(df):
+        return []
+    fig_dir, tab_dir = out / "figures", out / "tables"
+    where = f" ({dataset})" if dataset else ""
+    metrics = metrics_for(df)
+    rates = success_rates(df)
+    parts = [Section("Robustness", f"<p>{page.esc(ROBUSTNESS_INTRO)}</p>")]
+    title = f"Level at which the success rate falls under {BREAKDOWN_PCT:g} %"
+    caption = (
+        "Per method and perturbation, the mildest level whose success rate is under "
+        f"{BREAKDOWN_PCT:g} %: never (every level tested stayed at or above it), baseline (already under it on the "
+        "ordinary view)."
+    )
+    html = page.table(breakdown_table(rates), tab_dir, root, "robustness_breakdown", title + where, caption)
+    parts.append(Section(title, html))
+    title = "Success rate per perturbation level"
+    caption = "Runs, the method's results (done or failed by it), done, and the success rate, per level."
+    parts.append(Section(title, page.table(rates, tab_dir, root, "robustness_success", title + where, caption)))
+    figs = [figures.robustness(df, k, metrics, fig_dir, label=dataset, colours=colours) for k in kinds(df)]
+    caption = "Median (line) and first to third quartile (band) of the evaluated runs per level, and the success rate."
+    parts.append(Section("Robustness figures", "".join(page.figure(f, root, caption) for f in figs)))
+    table, full = level_statistics(df, metrics, level=level, adjust=adjust, alpha=alpha)
+    if not table.empty:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "statistics_robustness.json").write_text(jsonio.dumps(full, indent=1))
+        title = "Statistics within each perturbation level"
+        caption = (
+            "The study's procedure on each level's evaluated runs alone (as within a dataset): runs counted, medians "
+            f"and letter groups (methods sharing a letter do not differ at alpha {alpha:g}, {adjust}-adjusted), and "
+            "the Kruskal-Wallis rows; the full tests in statistics_robustness.json."
+        )
+        parts.append(Section(title, page.table(table, tab_dir, root, "robustness_statistics", title + where, caption)))
+    else:
+        none = "<p>No level has two methods with evaluated runs: no group comparison.</p>"
+        parts.append(Section("Statistics within each perturbation level", none))
+    return [Section("Robustness", parts[0].html, parts[1:])]
 
 
 METRIC_NAMES = {"kitti": ("kitti_t_pct", "KITTI's segment errors"), "rpe": ("rpe_t_rmse", "RPE")}

@@ -51,8 +51,9 @@ def add_commands(sub) -> None:
 def cmd_stats(args) -> int:
     from slamrun.analysis.datasets import dataset_rows, per_dataset_statistics, pooled_json, statistics_json
     from slamrun.analysis.load import load_results
+    from slamrun.analysis.robustness import baseline
 
-    df = dataset_rows(load_results(args.results), args.dataset, args.results)
+    df = dataset_rows(baseline(load_results(args.results)), args.dataset, args.results)  # perturbed: in the report
     per = per_dataset_statistics(df, args.results, args.metrics, level=args.level, adjust=args.adjust, alpha=args.alpha)
     pooled = pooled_json(df)
     if args.json:

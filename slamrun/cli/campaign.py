@@ -153,6 +153,11 @@ def _print_dry_run(spec) -> int:
         )
     else:
         console.print("every view it needs is prepared")
+    if d.perturbed_runs:
+        console.print(
+            f"robustness: {d.perturbed_runs} of the {d.total} runs are on perturbed views (README, Robustness); "
+            f"{d.perturbed_views} of the views to prepare, about {d.perturbed_bytes / 2**30:.2f} GB"
+        )
     for warning in cpu_warnings(spec):
         console.print(f"warning: {warning}")
     if d.to_run:
@@ -168,13 +173,17 @@ def _print_summary(campaign: str, results: Path, csv: Path) -> None:
     """The end-of-campaign tables: per method within each dataset (medians in metres are never pooled across
     datasets), the pooled counts, rates and ranks when there are several datasets, and the failed runs."""
     from slamrun.analysis.load import by_dataset, read_csv
+    from slamrun.analysis.robustness import baseline, perturbed
     from slamrun.analysis.summary import method_summary, pooled_summary
     from slamrun.cli.display import failed_runs_table, method_table, pooled_table
     from slamrun.engine.ledger import Ledger
 
-    df = read_csv(csv)
-    if df.empty:
+    everything = read_csv(csv)
+    if everything.empty:
         return
+    df = baseline(everything)  # the runs on perturbed views: the report's Robustness section
+    if perturbed(everything):
+        console.print(f"{len(everything) - len(df)} run(s) on perturbed views: the report's Robustness section")
     groups = by_dataset(df)
     for name, part in groups.items():
         console.print(method_table(method_summary(part), f"{campaign}: per method, dataset {name}"))

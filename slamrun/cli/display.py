@@ -18,7 +18,7 @@ from rich.text import Text
 
 from slamrun.engine.progress import Figures, Tracker, duration, one_line
 from slamrun.engine.session import read_tracker
-from slamrun.results.vocabulary import INFRA_FAILURES, MAIN_METRICS
+from slamrun.results.vocabulary import INFRA_FAILURES, MAIN_METRICS, played
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -198,7 +198,8 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
             else (r.get("message") or "")[:80]
         )
         where = (str(r.get("dataset")),) if several else ()
-        t.add_row(r["label"], *where, r["sequence"], r["direction"], str(r["trial"]), r.get("failure") or "?", log)
+        how = played(r["direction"], r.get("perturbation"), r.get("level"))
+        t.add_row(r["label"], *where, r["sequence"], how, str(r["trial"]), r.get("failure") or "?", log)
     return t, max(len(failed) - limit, 0)
 
 

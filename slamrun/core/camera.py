@@ -6,6 +6,7 @@ cx * width - 0.5 in pixels (and back with + 0.5).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import warnings
@@ -254,6 +255,27 @@ def read_camera_txt(path: str | Path) -> CameraFile:
         if mode not in ("crop", "full", "none"):
             raise DatasetError(f"{path}:3: output mode {mode_tokens[0]!r}; expected crop, full, none or 5 numbers")
     return CameraFile(FovCamera(w, h, fx, fy, cx, cy, omega), mode, ow, oh, explicit)
+
+
+def scaled_camera_file(cam: CameraFile, width: int, height: int) -> CameraFile:
+    """The same camera for its frames resized to `width` x `height`: focal lengths and principal point scaled with
+    the image (pixel-centre convention), distortion unchanged (it acts on normalised coordinates), the output size
+    scaled alike. An explicit output rule (absolute numbers) has no scaled form: DatasetError."""
+    if cam.output_mode == "explicit":
+        raise DatasetError("a camera with an explicit output rule cannot be scaled; use crop, full or none")
+    model = cam.camera
+    sx, sy = width / model.width, height / model.height
+
+    def pin(c: PinholeCamera) -> PinholeCamera:
+        return PinholeCamera(width, height, c.fx * sx, c.fy * sy, (c.cx + 0.5) * sx - 0.5, (c.cy + 0.5) * sy - 0.5)
+
+    if isinstance(model, FovCamera):
+        p = pin(model.pinhole)
+        scaled: CameraModel = FovCamera(width, height, p.fx, p.fy, p.cx, p.cy, model.omega)
+    else:
+        scaled = dataclasses.replace(model, pinhole=pin(model.pinhole))
+    out = (max(1, round(cam.out_width * sx)), max(1, round(cam.out_height * sy)))
+    return CameraFile(scaled, cam.output_mode, out[0], out[1], None)
 
 
 def write_camera_txt(path: str | Path, cam: FovCamera, mode: str = "crop", out_size: tuple[int, int] = (640, 480)):

@@ -1,5 +1,6 @@
-"""The view cache: prepared views built once per (sequence, direction, profile), in a content-addressed
-folder (slamrun.datasets.view describes what a view holds).
+"""The view cache: prepared views built once per (sequence, direction, profile, perturbation), in a
+content-addressed folder (slamrun.datasets.view describes what a view holds; slamrun.datasets.perturb the
+perturbations).
 
 Views are built in a temporary folder and renamed, and a file lock makes concurrent requests for the same
 view wait for one builder.
@@ -21,8 +22,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from slamrun.core.camera import rectification_maps, rectification_problem, rectified_pinhole, write_camera_txt
+from slamrun.core.camera import (
+    CameraFile,
+    rectification_maps,
+    rectification_problem,
+    rectified_pinhole,
+    scaled_camera_file,
+    write_camera_txt,
+)
 from slamrun.datasets.layouts import open_sequence
+from slamrun.datasets.perturb import BASELINE, Perturbation, kept_frames, perturb_frame, scaled_size
 from slamrun.datasets.sequence import Sequence, key_bytes
 from slamrun.datasets.view import Direction, PreparedView, Profile
 from slamrun.errors import DatasetError
@@ -33,12 +42,20 @@ VIEW_FORMAT_VERSION = 4  # 3: a manifest of the view's files in view.json; 4: ea
 FRAME_FORMATS = ("png", "pgm")  # rectified frames: png is compact, pgm is fastest to write and read
 
 
-def view_key(seq: Sequence, direction: Direction, profile: Profile, frame_format: str = "png") -> str:
-    """Content-addressed key: the small files in full, the frames by name and their container's size and time."""
+def view_key(
+    seq: Sequence,
+    direction: Direction,
+    profile: Profile,
+    frame_format: str = "png",
+    perturbation: Perturbation = BASELINE,
+) -> str:
+    """Content-addressed key: the small files in full, the frames by name and their container's size and time, and
+    the perturbation (a baseline view's key has none: caches of campaigns without the axis stay valid)."""
     h = hashlib.sha256()
     fmt = frame_format if profile is Profile.rectified or not seq.fov else "-"
     layout = "" if seq.layout == "tum-mono" else f"|{seq.layout}"
-    h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}|{fmt}{layout}".encode())
+    pert = "" if perturbation.is_none else f"|{perturbation.label}"
+    h.update(f"v{VIEW_FORMAT_VERSION}|{direction.value}|{profile.value}|{fmt}{layout}{pert}".encode())
     for p in seq.key_files:
         h.update(key_bytes(p))
     h.update(seq.frames_stamp().encode())
@@ -46,7 +63,8 @@ def view_key(seq: Sequence, direction: Direction, profile: Profile, frame_format
         st = seq.vignette.stat()
         h.update(f"{seq.vignette.name}|{st.st_size}|{st.st_mtime_ns}".encode())
     h.update("|".join(seq.frame_names).encode())
-    return f"{seq.name}-{direction.value}-{profile.value}-{h.hexdigest()[:12]}"
+    pert = "" if perturbation.is_none else f"-{perturbation.label}"
+    return f"{seq.name}-{direction.value}-{profile.value}{pert}-{h.hexdigest()[:12]}"
 
 
 def prepare(
@@ -56,6 +74,7 @@ def prepare(
     cache_dir: Path | str,
     workers: int = 2,
     frame_format: str = "png",
+    perturbation: Perturbation = BASELINE,
 ) -> PreparedView:
     """The prepared view, built now if the cache lacks it (safe across threads and processes).
 
@@ -70,7 +89,7 @@ def prepare(
     cache_dir.mkdir(parents=True, exist_ok=True)
     if frame_format not in FRAME_FORMATS:
         raise ValueError(f"frame format {frame_format!r}; expected one of {FRAME_FORMATS}")
-    key = view_key(seq, direction, profile, frame_format)
+    key = view_key(seq, direction, profile, frame_format, perturbation)
     final = _latest_generation(cache_dir, key)
     if final is not None and verify_view(final) is None:
         return PreparedView.load(final)
@@ -93,7 +112,8 @@ def prepare(
                 tmp,
                 workers,
                 frame_format,
-                whole_mirror(cache_dir, seq, direction, profile, frame_format),
+                whole_mirror(cache_dir, seq, direction, profile, frame_format, perturbation),
+                perturbation,
             )
             _seal(tmp, build_id)
             os.rename(tmp, final)
@@ -104,20 +124,30 @@ def prepare(
 
 
 def whole_view(
-    cache_dir: Path, seq: Sequence, direction: Direction, profile: Profile, frame_format: str
+    cache_dir: Path,
+    seq: Sequence,
+    direction: Direction,
+    profile: Profile,
+    frame_format: str,
+    perturbation: Perturbation = BASELINE,
 ) -> Path | None:
     """The folder of the view if the cache holds it prepared and whole, else None."""
-    root = _latest_generation(Path(cache_dir), view_key(seq, direction, profile, frame_format))
+    root = _latest_generation(Path(cache_dir), view_key(seq, direction, profile, frame_format, perturbation))
     return root if root is not None and verify_view(root) is None else None
 
 
 def whole_mirror(
-    cache_dir: Path, seq: Sequence, direction: Direction, profile: Profile, frame_format: str
+    cache_dir: Path,
+    seq: Sequence,
+    direction: Direction,
+    profile: Profile,
+    frame_format: str,
+    perturbation: Perturbation = BASELINE,
 ) -> Path | None:
-    """The whole view of the same sequence and profile in the other direction, if the cache holds one: its
-    frames are this view's in reverse order."""
+    """The whole view of the same sequence, profile and perturbation in the other direction, if the cache holds
+    one: its frames are this view's in reverse order (a perturbed frame depends on its index, not the direction)."""
     other = Direction.backward if direction is Direction.forward else Direction.forward
-    return whole_view(cache_dir, seq, other, profile, frame_format)
+    return whole_view(cache_dir, seq, other, profile, frame_format, perturbation)
 
 
 def _link_reversed(mirror: Path, images: Path, names: list[str]) -> bool:
@@ -242,17 +272,21 @@ def _build(
     workers: int,
     frame_format: str,
     mirror: Path | None = None,
+    perturbation: Perturbation = BASELINE,
 ) -> None:
     """Write the view into `out`; its frames are hard links to `mirror`'s (the other direction's view), in
-    reverse order, when one is given and links work, else decoded (and rectified) from the sequence."""
-    n = seq.n_frames
-    order = np.arange(n) if direction is Direction.forward else np.arange(n)[::-1]
-    t_orig = seq.timestamps
-    t_first, t_last = float(t_orig[0]), float(t_orig[-1])
-    t_view = t_orig[order] if direction is Direction.forward else t_first + t_last - t_orig[order]
+    reverse order, when one is given and links work, else decoded (perturbed, rectified) from the sequence. A
+    view without some frames (frame_drop) lacks their times too: its frames and times are the kept ones."""
+    kept = kept_frames(seq.n_frames, perturbation)
+    n = len(kept)
+    order = kept if direction is Direction.forward else kept[::-1]
+    t_all = seq.timestamps
+    t_first, t_last = float(t_all[0]), float(t_all[-1])
+    t_orig = t_all[kept]
+    t_view = t_all[order] if direction is Direction.forward else t_first + t_last - t_all[order]
     exposure = seq.exposures_ms[order] if seq.exposures_ms is not None else np.ones(n)
     (out / PreparedView.images_dir).mkdir()
-    frames = _FrameWriter(seq, order, out, workers, mirror)
+    frames = _FrameWriter(seq, order, out, workers, mirror, perturbation)
     if profile is Profile.native and seq.fov:  # the original frames and the FOV (or pinhole) calibration
         names, width, height, pinhole = frames.native()
     else:  # rectified; also the native view of a camera model that methods' calibration files cannot express
@@ -264,6 +298,7 @@ def _build(
         "direction": direction.value,
         "profile": profile.value,
         "n_frames": n,
+        "perturbation": perturbation.label,
         "t_first": t_first,
         "t_last": t_last,
         "width": width,
@@ -278,13 +313,31 @@ def _build(
 
 
 class _FrameWriter:
-    """A view's frames, in the view's order (`order`: the sequence's frame each view frame is), written into
-    `out`/images on `workers` threads, or hard-linked from `mirror` (the other direction's view)."""
+    """A view's frames, in the view's order (`order`: the sequence's frame each view frame is; frames not in it
+    are left out), written into `out`/images on `workers` threads, or hard-linked from `mirror` (the other
+    direction's view); each perturbed as `perturbation` says (after decoding, before rectification: at the camera)."""
 
-    def __init__(self, seq: Sequence, order: np.ndarray, out: Path, workers: int, mirror: Path | None):
+    def __init__(
+        self,
+        seq: Sequence,
+        order: np.ndarray,
+        out: Path,
+        workers: int,
+        mirror: Path | None,
+        perturbation: Perturbation = BASELINE,
+    ):
         self.seq, self.out, self.workers, self.mirror = seq, out, workers, mirror
+        self.perturbation = perturbation
         self.images = out / PreparedView.images_dir
-        self.inverse = {orig: i for i, orig in enumerate(order)}
+        self.inverse = {int(orig): i for i, orig in enumerate(order)}
+        self.index = {name: j for j, name in enumerate(seq.frame_names)}  # a frame's index in the sequence
+        self.camera: CameraFile = seq.camera
+        if perturbation.scale != 1.0:  # the calibration of the resized frames
+            cam = seq.camera.camera
+            try:
+                self.camera = scaled_camera_file(seq.camera, *scaled_size(cam.width, cam.height, perturbation))
+            except DatasetError as exc:
+                raise DatasetError(f"{seq.root}: {perturbation.label}: {exc}") from None
 
     def _each(self, names: list[str], write: Callable[[Path, str, bytes], None]) -> None:
         if self.mirror is not None and _link_reversed(self.mirror, self.images, names):
@@ -292,34 +345,54 @@ class _FrameWriter:
 
         def one(item: tuple[int, tuple[str, bytes]]) -> None:
             j, (name, data) = item
-            write(self.images / names[self.inverse[j]], name, data)
+            if j in self.inverse:  # a dropped frame is not written
+                write(self.images / names[self.inverse[j]], name, data)
 
         with ThreadPoolExecutor(max(1, self.workers)) as pool:
             list(pool.map(one, enumerate(self.seq.read_bytes())))
 
+    def _perturbed(self, name: str, img: np.ndarray) -> np.ndarray:
+        return perturb_frame(img, self.perturbation, self.seq.name, self.index[name])
+
     def native(self) -> tuple[list[str], int, int, None]:
-        """The original frames, each checked to decode, and the sequence's calibration files."""
-        seq, cam, out = self.seq, self.seq.camera, self.out
-        ext = Path(seq.frame_names[0]).suffix.lower()
-        names = [f"{i:06d}{ext}" for i in range(seq.n_frames)]
+        """The original frames, each checked to decode, and the sequence's calibration files; perturbed frames are
+        written losslessly as PNG, with the calibration (and vignette) of their size."""
+        seq, cam, out, pert = self.seq, self.camera, self.out, self.perturbation
+        ext = ".png" if pert.changes_pixels else Path(seq.frame_names[0]).suffix.lower()
+        names = [f"{i:06d}{ext}" for i in range(len(self.inverse))]
 
         def copy(dest: Path, name: str, data: bytes) -> None:
-            seq.decode(name, data, cv2.IMREAD_UNCHANGED)  # a frame a method cannot read is the dataset's problem
-            dest.write_bytes(data)
+            img = seq.decode(name, data, cv2.IMREAD_UNCHANGED)  # a frame a method cannot read: the dataset's problem
+            if pert.changes_pixels:
+                cv2.imwrite(str(dest), self._perturbed(name, img), [cv2.IMWRITE_PNG_COMPRESSION, 1])
+            else:
+                dest.write_bytes(data)
 
         self._each(names, copy)
-        if seq.camera_txt is not None:
+        if seq.camera_txt is not None and cam is seq.camera:
             shutil.copyfile(seq.camera_txt, out / PreparedView.camera)
         else:
             write_camera_txt(out / PreparedView.camera, cam.camera, cam.output_mode, (cam.out_width, cam.out_height))
-        for opt in (seq.pcalib, seq.vignette):
-            if opt is not None and opt.exists():
-                shutil.copyfile(opt, out / opt.name)
+        if seq.pcalib is not None and seq.pcalib.exists():
+            shutil.copyfile(seq.pcalib, out / seq.pcalib.name)
+        if seq.vignette is not None and seq.vignette.exists():
+            self._vignette(seq.vignette, out / seq.vignette.name)
         return names, cam.camera.width, cam.camera.height, None
+
+    def _vignette(self, src: Path, dest: Path) -> None:
+        """The vignette image, resized with the frames (a per-pixel attenuation)."""
+        if self.camera is self.seq.camera:
+            shutil.copyfile(src, dest)
+            return
+        img = cv2.imread(str(src), cv2.IMREAD_UNCHANGED)
+        if img is None:
+            raise DatasetError(f"{src}: does not decode as an image; expected the vignette")
+        size = (self.camera.camera.width, self.camera.camera.height)
+        cv2.imwrite(str(dest), cv2.resize(img, size, interpolation=cv2.INTER_AREA))
 
     def rectified(self, frame_format: str) -> tuple[list[str], int, int, tuple[float, float, float, float]]:
         """The frames rectified to the pinhole camera of the sequence's, and that camera's files."""
-        seq, cam, out = self.seq, self.seq.camera, self.out
+        seq, cam, out = self.seq, self.camera, self.out
         mode = "crop" if cam.output_mode == "explicit" else cam.output_mode
         problem = rectification_problem(cam)
         if problem is not None:
@@ -328,11 +401,12 @@ class _FrameWriter:
         map_x, map_y = rectification_maps(cam.camera, dst)
         if not (np.isfinite(map_x).all() and np.isfinite(map_y).all()):
             raise DatasetError(f"{seq.root}: the camera cannot be rectified: its rectification maps are not finite")
-        names = [f"{i:06d}.{frame_format}" for i in range(seq.n_frames)]
+        names = [f"{i:06d}.{frame_format}" for i in range(len(self.inverse))]
         params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if frame_format == "png" else []
 
         def rectify(dest: Path, name: str, data: bytes) -> None:
-            rect = cv2.remap(seq.decode(name, data), map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
+            img = self._perturbed(name, seq.decode(name, data))
+            rect = cv2.remap(img, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
             cv2.imwrite(str(dest), rect, params)
 
         self._each(names, rectify)

@@ -47,6 +47,7 @@ class PreparedView:
     frame_suffix: str = ".png"  # frames are images/<6-digit index><suffix>
     photometric: bool = True  # pcalib.txt and vignette.png are in the view (native views of TUM-Mono)
     build_id: str = ""  # which build of the view (slamrun.datasets.cache): a rebuilt view is another folder and id
+    perturbation: str = "none"  # how its frames were made worse (slamrun.datasets.perturb), `none` for the baseline
 
     images_dir = "images"
     times = "times.txt"
@@ -108,4 +109,5 @@ class PreparedView:
             frame_suffix=meta.get("frame_suffix", ".png"),
             photometric=meta.get("photometric", meta["profile"] == Profile.native.value),
             build_id=meta.get("build_id", ""),
+            perturbation=meta.get("perturbation", "none"),
         )

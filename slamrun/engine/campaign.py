@@ -87,9 +87,11 @@ def prepare_views(spec: CampaignSpec, runs: list[PlannedRun], keys: set[str], lo
         log(f"removed {removed} damaged view(s) from {spec.cache}")
     views = {}
     for r in runs:
-        k = (str(r.sequence_dir), r.key.direction, r.profile)
+        k = r.view_key
         if r.key.id in keys and k not in views:
-            views[k] = prepare(r.sequence_dir, r.key.direction, r.profile, spec.cache, frame_format=spec.frame_format)
+            views[k] = prepare(
+                r.sequence_dir, r.key.direction, r.profile, spec.cache, 2, spec.frame_format, r.perturbation
+            )
     return views
 
 
@@ -177,7 +179,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         if removed:
             log(f"removed {removed} damaged view(s) from {spec.cache}")
         # views are prepared in the background, in the order the runs start; a lane waits only for its own
-        order = [(str(r.sequence_dir), r.key.direction, r.profile) for r in runs if r.key.id in pending]
+        order = [r.view_key for r in runs if r.key.id in pending]
         lanes = 1 if spec.measurement == "exclusive" else spec.lanes
         views = ViewPreparer(order, spec.cache, spec.frame_format, head=lanes).start()  # the idle lanes' first views
         gts = load_groundtruths(runs) if spec.evaluate else {}

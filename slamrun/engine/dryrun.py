@@ -13,6 +13,7 @@ from pathlib import Path
 
 from slamrun.datasets.cache import whole_mirror, whole_view
 from slamrun.datasets.layouts import holds_sequence, open_sequence
+from slamrun.datasets.perturb import BASELINE, Perturbation, kept_frames
 from slamrun.datasets.view import Profile
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.paths import RunPaths, finished_record
@@ -38,6 +39,9 @@ class DryRun:
     sequences_unknown: int = 0  # those sequences
     eta_s: float | None = None
     eta_basis: str = "unknown"
+    perturbed_runs: int = 0  # of `total`: runs on perturbed views (the robustness axis)
+    perturbed_views: int = 0  # of `views_to_prepare`
+    perturbed_bytes: int = 0  # of `view_bytes`
 
 
 def dry_run(spec: CampaignSpec) -> DryRun:
@@ -66,12 +70,12 @@ def dry_run(spec: CampaignSpec) -> DryRun:
             state = "pending"
         else:
             state = row["state"]
-        counts[(run.key.label, run.key.direction.value)][state] += 1
+        counts[(run.key.label, run.key.played)][state] += 1
         if state in ("new", "pending", "infra"):
             todo_by_group[
                 run_group({"label": run.key.label, "dataset": run.dataset, "sequence": run.key.sequence})
             ] += 1
-            todo_views.add((run.sequence_dir, run.key.direction, run.profile))
+            todo_views.add((run.sequence_dir, run.key.direction, run.profile, run.perturbation))
     groups = []
     for (label, direction), c in sorted(counts.items()):
         groups.append(
@@ -98,17 +102,22 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         lanes=lanes,
         groups=groups,
     )
-    frames_counted: set[tuple[Path, Profile]] = set()  # a view's other direction links the same frames
+    frames_counted: set[tuple] = set()  # a view's other direction links the same frames
     ungenerated: set[Path] = set()
-    for seq_dir, direction, profile in sorted(todo_views, key=str):
-        size = _view_bytes_if_missing(seq_dir, direction, profile, spec)
+    for seq_dir, direction, profile, perturbation in sorted(todo_views, key=str):
+        size = _view_bytes_if_missing(seq_dir, direction, profile, spec, perturbation)
         if size is None:
             out.views_unknown += 1
             ungenerated.add(seq_dir)
         elif size:
             out.views_to_prepare += 1
-            out.view_bytes += 0 if (seq_dir, profile) in frames_counted else size
-            frames_counted.add((seq_dir, profile))
+            bytes_ = 0 if (seq_dir, profile, perturbation) in frames_counted else size
+            out.view_bytes += bytes_
+            if not perturbation.is_none:
+                out.perturbed_views += 1
+                out.perturbed_bytes += bytes_
+            frames_counted.add((seq_dir, profile, perturbation))
+    out.perturbed_runs = sum(1 for r in runs if not r.perturbation.is_none)
     out.sequences_unknown = len(ungenerated)
     overhead = last_session_overhead(list(rows.values()), session)
     out.eta_s, out.eta_basis = eta(dict(todo_by_group), wall_times(rows.values()), lanes, overhead)
@@ -128,7 +137,9 @@ def last_session_overhead(rows: list[dict], session: dict) -> float:
     return overhead_per_run(sum(mine), len(mine), int(session.get("lanes") or 1), end - start)
 
 
-def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: CampaignSpec) -> int | None:
+def _view_bytes_if_missing(
+    seq_dir: Path, direction, profile: Profile, spec: CampaignSpec, perturbation: Perturbation = BASELINE
+) -> int | None:
     """0 when the view is prepared and whole, its estimated size when it must be prepared (1 when its frames
     will be links to its other direction's, prepared already), None when the sequence does not exist yet
     (synthetic, generated on first use)."""
@@ -138,17 +149,20 @@ def _view_bytes_if_missing(seq_dir: Path, direction, profile: Profile, spec: Cam
         seq = open_sequence(seq_dir)
     except DatasetError:
         return None
-    if whole_view(spec.cache, seq, direction, profile, spec.frame_format) is not None:
+    if whole_view(spec.cache, seq, direction, profile, spec.frame_format, perturbation) is not None:
         return 0
-    if whole_mirror(spec.cache, seq, direction, profile, spec.frame_format) is not None:
+    if whole_mirror(spec.cache, seq, direction, profile, spec.frame_format, perturbation) is not None:
         return 1  # its frames are links to the other direction's: a few small files
-    if profile is Profile.rectified:
-        per_pixel = 1.0 if spec.frame_format == "pgm" else 0.5  # PNG level 1 on camera images: about half
-        return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * per_pixel)
-    if not seq.fov:  # its native view is rectified too
-        return int(seq.n_frames * seq.camera.out_width * seq.camera.out_height * 0.5)
+    frames = len(kept_frames(seq.n_frames, perturbation))
+    pixels = seq.camera.out_width * seq.camera.out_height * perturbation.scale**2
+    if perturbation.kind == "gaussian_noise":  # noise does not compress: PNG keeps about every byte
+        return int(frames * pixels * (1.0 if spec.frame_format == "pgm" or profile is Profile.native else 0.9))
+    if profile is Profile.rectified or not seq.fov or perturbation.changes_pixels:  # written as PNG (or PGM)
+        per_pixel = 1.0 if spec.frame_format == "pgm" and profile is Profile.rectified else 0.5  # PNG level 1
+        return int(frames * pixels * per_pixel)
+    share = frames / max(1, seq.n_frames)  # frame_drop keeps the rest of the original files
     if seq.zip_path is not None:
         with zipfile.ZipFile(seq.zip_path) as zf:
-            return sum(i.file_size for i in zf.infolist())
+            return int(share * sum(i.file_size for i in zf.infolist()))
     assert seq.images_dir is not None
-    return sum((seq.images_dir / name).stat().st_size for name in seq.frame_names)
+    return int(share * sum((seq.images_dir / name).stat().st_size for name in seq.frame_names))

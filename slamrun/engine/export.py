@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from slamrun.datasets.perturb import NONE
 from slamrun.engine.ledger import Ledger
 from slamrun.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, TEXT_METRIC_COLUMNS
 
@@ -14,6 +15,8 @@ COLUMNS = (
     "method",
     "sequence",
     "direction",
+    "perturbation",
+    "level",
     "trial",
     "status",
     "failure",
@@ -42,6 +45,7 @@ def results_frame(ledger: Ledger) -> pd.DataFrame:
     for col in COLUMNS:  # a ledger read read-only from an earlier version lacks the newer columns
         if col not in df.columns:
             df[col] = None
+    df["perturbation"] = df["perturbation"].fillna(NONE)  # runs recorded before the axis: the baseline
     for col in (c for c in METRIC_COLUMNS + RESOURCE_COLUMNS if c not in TEXT_METRIC_COLUMNS):
         df[col] = pd.to_numeric(df[col], errors="coerce")
     return df[list(COLUMNS)]

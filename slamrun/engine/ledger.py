@@ -21,7 +21,18 @@ from slamrun.results.vocabulary import IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMN
 if TYPE_CHECKING:
     from slamrun.engine.plan import PlannedRun
 
-KEY_COLUMNS = ("key", "label", "method", "dataset", "sequence", "direction", "trial", "settings")
+KEY_COLUMNS = (
+    "key",
+    "label",
+    "method",
+    "dataset",
+    "sequence",
+    "direction",
+    "trial",
+    "settings",
+    "perturbation",
+    "level",
+)
 STATE_COLUMNS = (
     "active",
     "state",
@@ -50,6 +61,7 @@ _TYPES = {
     "n_frames": "INTEGER",
     "rpe_pairs": "INTEGER",
     "rpe_interval": "TEXT",
+    "level": "REAL",
 }
 _REAL = set(METRIC_COLUMNS + RESOURCE_COLUMNS + ("started_at", "ended_at", "pid_start")) - set(_TYPES)
 
@@ -257,6 +269,8 @@ class Ledger:
                 r.key.direction.value,
                 r.key.trial,
                 r.key.settings,
+                r.perturbation.kind,
+                r.perturbation.level,
             )
             for r in runs
         ]
@@ -266,7 +280,7 @@ class Ledger:
             self._db.execute("UPDATE runs SET active = 0 WHERE method IS NOT ?", (IMPORTED,))  # imports stay
             self._db.executemany(
                 "INSERT OR IGNORE INTO runs (key, label, method, dataset, sequence, direction, trial, settings, "
-                "active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)",
+                "perturbation, level, active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)",
                 rows,
             )
             self._db.executemany("UPDATE runs SET active = 1 WHERE key = ?", [(r[0],) for r in rows])
@@ -348,7 +362,11 @@ class Ledger:
     def rows(
         self, active_only: bool = True, state: str | None = None, columns: tuple[str, ...] | None = None
     ) -> list[dict]:
-        """The runs as dicts, in key order: every column, or only `columns`."""
+        """The runs as dicts, in key order: every column, or only `columns` (those a ledger of an earlier version,
+        opened read-only, lacks are left out)."""
+        if columns:
+            have = {row[1] for row in self._db.execute("PRAGMA table_info(runs)")}
+            columns = tuple(c for c in columns if c in have) or ("key",)
         sql = f"SELECT {', '.join(columns) if columns else '*'} FROM runs"
         cond, args = [], []
         if active_only:
@@ -364,7 +382,8 @@ class Ledger:
             return []
 
     PROGRESS_COLUMNS = (
-        "key", "label", "dataset", "sequence", "direction", "state", "failure", "wall_s", "started_at", "cpu_wait_pct"
+        "key", "label", "dataset", "sequence", "direction", "perturbation", "level", "state", "failure", "wall_s",
+        "started_at", "cpu_wait_pct",
     )  # fmt: skip
 
     def progress_rows(self) -> list[dict]:

@@ -5,18 +5,21 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass
+from itertools import product
 from pathlib import Path
 
 import slamrun.methods
 from slamrun.core.metrics import RpeInterval
 from slamrun.datasets.layouts import sequence_identity
+from slamrun.datasets.perturb import BASELINE, NONE, Perturbation
 from slamrun.datasets.view import Direction, Profile
-from slamrun.engine.spec import CampaignSpec, MethodSpec
+from slamrun.engine.spec import CampaignSpec, DatasetSpec, MethodSpec
 
 
 @dataclass(frozen=True)
 class RunKey:
-    """(method label, sequence and its data, direction, trial, settings hash): the ledger's primary key."""
+    """(method label, sequence and its data, direction, perturbation, trial, settings hash): the ledger's primary
+    key. A baseline run's key has no perturbation part (keys and folders of campaigns without the axis unchanged)."""
 
     label: str
     sequence: str
@@ -24,20 +27,26 @@ class RunKey:
     trial: int
     settings: str  # hash of the settings that change results
     data: str = "none"  # digest of the sequence's content (slamrun.datasets.tum_mono.sequence_identity)
+    perturbation: str = NONE  # its label (slamrun.datasets.perturb.Perturbation.label)
+
+    @property
+    def played(self) -> str:
+        """How the sequence was played: `forward`, or `forward+gaussian_noise-5` for a perturbed view."""
+        return self.direction.value if self.perturbation == NONE else f"{self.direction.value}+{self.perturbation}"
 
     @property
     def id(self) -> str:
-        return f"{self.label}@{self.settings}/{self.sequence}@{self.data}/{self.direction.value}/{self.trial:02d}"
+        return f"{self.label}@{self.settings}/{self.sequence}@{self.data}/{self.played}/{self.trial:02d}"
 
     @property
     def relpath(self) -> Path:
-        """runs/<label>@<settings>/<sequence>@<data>/<direction>/<trial>: new settings or new data never reuse a
-        folder."""
+        """runs/<label>@<settings>/<sequence>@<data>/<direction>[+<perturbation>]/<trial>: new settings or new data
+        never reuse a folder."""
         return (
             Path("runs")
             / f"{self.label}@{self.settings}"
             / f"{self.sequence}@{self.data}"
-            / self.direction.value
+            / self.played
             / f"{self.trial:02d}"
         )
 
@@ -55,6 +64,12 @@ class PlannedRun:
     alignment: str = "sim3"
     rpe: RpeInterval = RpeInterval()  # the dataset's RPE interval
     min_coverage: float | None = None  # under it, a run is lost
+    perturbation: Perturbation = BASELINE  # how its view's frames were made worse (none: the ordinary view)
+
+    @property
+    def view_key(self) -> tuple[str, Direction, Profile, Perturbation]:
+        """The prepared view it runs on (slamrun.engine.preparer)."""
+        return (str(self.sequence_dir), self.key.direction, self.profile, self.perturbation)
 
 
 def settings_hash(m: MethodSpec) -> str:
@@ -70,8 +85,16 @@ def settings_hash(m: MethodSpec) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:10]
 
 
+def perturbations(spec: CampaignSpec, ds: DatasetSpec) -> list[Perturbation]:
+    """The baseline, then each level of the dataset's perturbations (the campaign's unless it names its own)."""
+    chosen = spec.perturbations if ds.perturbations is None else ds.perturbations
+    levels = [Perturbation(p.kind, level, spec.perturbation_seed) for p in chosen for level in p.levels]
+    return [BASELINE, *dict.fromkeys(levels)]
+
+
 def plan(spec: CampaignSpec) -> list[PlannedRun]:
-    """Every run of the campaign, trials outermost so a partial campaign covers all methods evenly."""
+    """Every run of the campaign, trials outermost so a partial campaign covers all methods evenly, and within a
+    trial the baseline before the perturbed views."""
     runs: list[tuple[tuple, PlannedRun]] = []
     for mi, m in enumerate(spec.methods):
         cls = slamrun.methods.get(m.name)
@@ -82,22 +105,22 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
         for ds in spec.datasets:
             for seq in ds.sequences:
                 data = sequence_identity(ds.path / seq)
-                for direction in directions:
-                    for trial in range(trials):
-                        key = RunKey(m.run_label, seq, direction, trial, h, data)
-                        run = PlannedRun(
-                            key,
-                            mi,
-                            m.name,
-                            ds.name,
-                            ds.path / seq,
-                            method.profile,
-                            m.timeout_s or spec.timeout_s,
-                            tuple(ds.metrics),
-                            ds.alignment,
-                            ds.rpe_interval,
-                            ds.min_coverage,
-                        )
-                        runs.append(((trial, mi, seq, direction.value), run))
+                for direction, pert, trial in product(directions, perturbations(spec, ds), range(trials)):
+                    key = RunKey(m.run_label, seq, direction, trial, h, data, pert.label)
+                    run = PlannedRun(
+                        key,
+                        mi,
+                        m.name,
+                        ds.name,
+                        ds.path / seq,
+                        method.profile,
+                        m.timeout_s or spec.timeout_s,
+                        tuple(ds.metrics),
+                        ds.alignment,
+                        ds.rpe_interval,
+                        ds.min_coverage,
+                        pert,
+                    )
+                    runs.append(((trial, pert.label != NONE, mi, seq, direction.value, pert.label), run))
     runs.sort(key=lambda r: r[0])
     return [r for _, r in runs]

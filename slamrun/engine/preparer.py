@@ -12,10 +12,11 @@ import threading
 from pathlib import Path
 
 from slamrun.datasets.cache import prepare, verify_view
+from slamrun.datasets.perturb import Perturbation
 from slamrun.datasets.view import Direction, PreparedView, Profile
 from slamrun.errors import DatasetError, InfraError, SlamRunError
 
-ViewKey = tuple[str, Direction, Profile]  # (sequence folder, direction, profile)
+ViewKey = tuple[str, Direction, Profile, Perturbation]  # (sequence folder, direction, profile, perturbation)
 
 
 class ViewPreparer:
@@ -70,9 +71,7 @@ class ViewPreparer:
         view = None
         try:
             with self._lock:
-                view = prepare(
-                    Path(key[0]), key[1], key[2], self.cache, workers or self.workers, frame_format=self.frame_format
-                )
+                view = self._build(key, workers or self.workers)
         except Exception as exc:  # noqa: BLE001 - a full disk, an undecodable frame: the runs say it
             with self._cond:
                 self._errors[key] = exc
@@ -84,6 +83,10 @@ class ViewPreparer:
                 self._cond.notify_all()
         if view is not None:
             self.on_ready(key, view)
+
+    def _build(self, key: ViewKey, workers: int) -> PreparedView:
+        seq, direction, profile, perturbation = key
+        return prepare(Path(seq), direction, profile, self.cache, workers, self.frame_format, perturbation)
 
     def get(self, key: ViewKey) -> PreparedView:
         """The view, once prepared: the background thread's, or prepared now when it will not come to it. A
@@ -115,9 +118,7 @@ class ViewPreparer:
                 current = self._views[key]
             if current.root == view.root:  # not rebuilt by another lane meanwhile
                 try:
-                    current = prepare(
-                        Path(key[0]), key[1], key[2], self.cache, self.head_workers, frame_format=self.frame_format
-                    )
+                    current = self._build(key, self.head_workers)
                 except DatasetError as exc:
                     raise InfraError(f"{key[0]}: its view is damaged and cannot be prepared again: {exc}") from None
                 with self._cond:

@@ -12,7 +12,7 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 
-from slamrun.results.vocabulary import METHOD_FAILURES, is_infra
+from slamrun.results.vocabulary import METHOD_FAILURES, is_infra, played
 
 
 @dataclass
@@ -206,6 +206,7 @@ class Tracker:
             row = {
                 k: r.get(k) for k in ("label", "direction", "state", "failure", "wall_s", "started_at", "cpu_wait_pct")
             }
+            row["direction"] = played(row["direction"], r.get("perturbation"), r.get("level"))
             row["group"], row["key"] = run_group(r), r.get("key", i)
             self.rows[row["key"]] = row
             self._count(row, +1)

@@ -91,7 +91,7 @@ def collect_leftovers(
             attempt = 0
         paths = RunPaths(results, run.key) if run else None
         if run and row and row["state"] == "pending" and attempt and paths.staging(attempt).is_dir():
-            view = view_of((str(run.sequence_dir), run.key.direction, run.profile))
+            view = view_of(run.view_key)
             stage = paths.staging(attempt)
             result = backend.collect(container, RunPaths.log(stage), log_cap_bytes, view.n_frames) if view else None
             method = methods_by_index[run.method_index]

@@ -166,7 +166,7 @@ class Scheduler:
         into it) is prepared again first, so no run is charged for it. A view that cannot be prepared is an
         infrastructure failure (a full disk stops the campaign)."""
         try:
-            view, problem = self.views.checked((str(run.sequence_dir), run.key.direction, run.profile))
+            view, problem = self.views.checked(run.view_key)
         except DatasetError as exc:
             raise InfraError(f"{run.key.id}: its view cannot be prepared: {exc}") from None
         except OSError as exc:

@@ -70,6 +70,54 @@ class RpeSpec(Strict):
         return self
 
 
+PERTURBATION_KINDS = Literal[
+    "gaussian_noise", "motion_blur", "exposure", "frame_drop", "resolution", "jpeg"
+]  # slamrun.datasets.perturb.KINDS (checked there)
+
+
+class PerturbationSpec(Strict):
+    """One kind of perturbation and its levels, e.g. {kind: gaussian_noise, sigma: [2, 5, 10]}: each level is a
+    view of every sequence, beside the baseline (the ordinary view). README, Robustness."""
+
+    kind: PERTURBATION_KINDS = Field(description="What is made worse (README, Robustness: each kind).")
+    sigma: list[float] | None = Field(None, description="gaussian_noise: standard deviation, grey levels of 255.")
+    length_px: list[int] | None = Field(None, description="motion_blur: the blur's length in pixels.")
+    gain: list[float] | None = Field(None, description="exposure: intensities times gain (saturated).")
+    every: list[int] | None = Field(None, description="frame_drop: every N-th frame is absent (2: half the rate).")
+    scale: list[float] | None = Field(None, description="resolution: frames and camera scaled by this (< 1).")
+    quality: list[int] | None = Field(None, description="jpeg: JPEG quality (1-95).")
+
+    @field_validator("sigma", "length_px", "gain", "every", "scale", "quality", mode="before")
+    @classmethod
+    def _one_level_is_a_list(cls, v: Any) -> Any:
+        return [v] if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+
+    @model_validator(mode="after")
+    def _its_own_levels(self):
+        from slamrun.datasets.perturb import KINDS
+
+        kind = KINDS[self.kind]
+        given = [f for f in ("sigma", "length_px", "gain", "every", "scale", "quality") if getattr(self, f) is not None]
+        others = [f for f in given if f != kind.parameter]
+        if others:
+            raise ValueError(f"{self.kind} takes `{kind.parameter}`, not {', '.join(others)}")
+        levels = getattr(self, kind.parameter)
+        if not levels:
+            raise ValueError(f"{self.kind}: give its levels, e.g. {{kind: {self.kind}, {kind.parameter}: [...]}}")
+        for level in levels:
+            if (why := kind.valid(float(level))) is not None:
+                raise ValueError(f"{self.kind}: {kind.parameter} {level}: {why}")
+        if len(set(levels)) != len(levels):
+            raise ValueError(f"{self.kind}: the levels of {kind.parameter} repeat")
+        return self
+
+    @property
+    def levels(self) -> list[float]:
+        from slamrun.datasets.perturb import KINDS
+
+        return [float(v) for v in getattr(self, KINDS[self.kind].parameter)]
+
+
 class DatasetSpec(Strict):
     name: str = Field(description="Dataset name, e.g. tum-mono.")
     path: Path = Field(description="Folder holding one folder per sequence.")
@@ -146,6 +194,10 @@ class DatasetSpec(Strict):
     alignment: str = Field(
         "sim3", description="Alignment before ATE, RPE and KITTI's metric: sim3 (monocular), se3, first:N, ..."
     )
+    perturbations: list[PerturbationSpec] | None = Field(
+        None,
+        description="This dataset's perturbations (replacing the campaign's; [] for none): README, Robustness.",
+    )
 
     @field_validator("alignment")
     @classmethod
@@ -205,6 +257,15 @@ class CampaignSpec(Strict):
         f"its wall time (cpu_wait_pct) is `contended`: retried, and counted apart as infrastructure failures are, "
         f"never in the method's rate ({CONTENTION_PCT:g} measured to separate them on a shared machine; README). "
         "Default null: every loss is the method's.",
+    )
+    perturbations: list[PerturbationSpec] = Field(
+        default_factory=list,
+        description="Robustness: each sequence also played with its frames made worse, e.g. [{kind: gaussian_noise, "
+        "sigma: [2, 5]}, {kind: frame_drop, every: [2]}]; every level a view of its own beside the baseline "
+        "(README, Robustness). A dataset's own `perturbations` replace these.",
+    )
+    perturbation_seed: int = Field(
+        0, ge=0, description="Seed of the perturbations' random parts (noise, blur angles): the same views anywhere."
     )
     retry_backoff_s: float = Field(5.0, ge=0, description="First retry delay; doubles each retry.")
     evaluate: bool = Field(True, description="Evaluate each finished run against the ground truth.")

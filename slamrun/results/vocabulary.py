@@ -27,6 +27,8 @@ INFRA = "infra"  # the machine's fault: retried, never counted in a rate
 # load, not the method, is the likelier cause; retried and counted apart, as infrastructure failures are
 CONTENDED = "contended"
 CONTENTION_PCT = 15.0  # the threshold of cpu_wait_pct measured to separate the two (README: the numbers that chose it)
+OWN_WAIT_PER_THREAD_PCT = 60.0  # the wait a run causes itself per busy thread beyond its lane's CPUs: ORB-SLAM3 (3
+# threads, 2 CPUs) waited 32.5-58.4 % of its wall time in 24 runs on an idle machine, 90-154 % beside two CPU hogs
 CONTENDABLE = ("lost", "not_initialized")  # the failures a starved real-time method shows
 INFRA_FAILURES = (INFRA, CONTENDED)
 UNDER_MIN_COVERAGE = "under the dataset's min_coverage"  # in the message of a run lost for its coverage
@@ -87,6 +89,7 @@ RESOURCE_COLUMNS = (
     "n_frames",
     "cpu_wait_pct",  # the run's threads' time runnable but waiting for a CPU, % of wall time (100 % = one thread)
     "host_cpu_pressure_pct",  # the share of the run's wall time in which some task on the machine waited for a CPU
+    "cpu_wait_own_pct",  # of cpu_wait_pct, the run's own: OWN_WAIT_PER_THREAD_PCT per thread beyond its CPUs
 )
 
 # `slamrun evaluate --metric tum-mono`: the fields of each file's result
@@ -124,3 +127,13 @@ LABELS = {
     "cpu_wait_pct": "waiting for a CPU (% of wall time)",
     "host_cpu_pressure_pct": "machine's CPU pressure (%)",
 }
+
+
+NONE = "none"  # the baseline perturbation: the ordinary view (slamrun.datasets.perturb)
+
+
+def played(direction: str, kind: str | None, level: float | None) -> str:
+    """How a run's sequence was played, as status and the report name it: `forward`, `forward+gaussian_noise-5`."""
+    if not kind or kind == NONE or level is None:
+        return direction
+    return f"{direction}+{kind}-{float(level):g}"

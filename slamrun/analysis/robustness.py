@@ -1,0 +1,143 @@
+"""Robustness: how each method's success rate and accuracy change with a perturbation's level (a campaign with
+`perturbations:`). Pure tables from a results table; the figure is in slamrun.analysis.figures. Within one
+dataset, as every other table: the baseline (the ordinary view) is each kind's first level."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+from slamrun.analysis.load import evaluated
+from slamrun.analysis.stats import study_statistics
+from slamrun.analysis.tables import medians_with_letters
+from slamrun.results.summary import tally
+from slamrun.results.vocabulary import NONE
+
+BREAKDOWN_PCT = 50.0  # the success rate under which a method is said to break down at a level
+
+
+def baseline(df: pd.DataFrame) -> pd.DataFrame:
+    """The runs on ordinary views (every run of a table without the axis): what every table but the robustness
+    section is made of, so a perturbed run never enters the study's statistics."""
+    if "perturbation" not in df.columns:
+        return df
+    return df[df["perturbation"].fillna(NONE) == NONE]
+
+
+def perturbed(df: pd.DataFrame) -> bool:
+    return "perturbation" in df.columns and bool((df["perturbation"].fillna(NONE) != NONE).any())
+
+
+def kinds(df: pd.DataFrame) -> list[str]:
+    """The perturbation kinds of the table, in the order of slamrun.datasets.perturb.KINDS."""
+    from slamrun.datasets.perturb import KINDS
+
+    found = set(df["perturbation"].dropna()) - {NONE} if "perturbation" in df.columns else set()
+    return [k for k in KINDS if k in found]
+
+
+def levels(df: pd.DataFrame, kind: str) -> list[float]:
+    """The kind's levels in the table, mildest first (by the kind's severity)."""
+    from slamrun.datasets.perturb import KINDS
+
+    found = {float(v) for v in df.loc[df["perturbation"] == kind, "level"].dropna()}
+    return sorted(found, key=lambda v: (KINDS[kind].severity_of(v), v))
+
+
+def series(df: pd.DataFrame, kind: str) -> list[tuple[str, pd.DataFrame]]:
+    """(level name, its runs) for the baseline and each level of `kind`, mildest first."""
+    out = [(NONE, baseline(df))]
+    part = df[df["perturbation"] == kind]
+    for level in levels(df, kind):
+        out.append((f"{level:g}", part[np.isclose(part["level"].astype(float), level)]))
+    return out
+
+
+def success_rates(df: pd.DataFrame) -> pd.DataFrame:
+    """Per method, kind and level (the baseline as level `none` of each kind): runs, the method's results, done, and
+    the success rate over its results (infrastructure failures and unfinished runs left out, as everywhere)."""
+    rows = []
+    for kind in kinds(df):
+        for name, part in series(df, kind):
+            for method, runs in part.groupby("method", sort=True):
+                t = tally(zip(runs["status"], runs["failure"], runs["eval_status"], strict=True))
+                rows.append(
+                    {
+                        "perturbation": kind,
+                        "level": name,
+                        "method": method,
+                        "runs": t.runs,
+                        "results": t.results,
+                        "done": t.done,
+                        "success %": np.nan if t.success_pct is None else round(t.success_pct, 1),
+                    }
+                )
+    return pd.DataFrame(rows, columns=["perturbation", "level", "method", "runs", "results", "done", "success %"])
+
+
+def breakdown_table(rates: pd.DataFrame) -> pd.DataFrame:
+    """Per method and kind, the mildest level at which its success rate falls under BREAKDOWN_PCT: the level, or
+    `never` (every level tested stayed at or above it), or `baseline` (already under it on the ordinary view)."""
+    if rates.empty:
+        return pd.DataFrame(columns=["method"])
+    out: dict[str, dict] = {}
+    for (kind, method), part in rates.groupby(["perturbation", "method"], sort=False):
+        found = "never"
+        for name, rate in zip(part["level"], part["success %"], strict=True):
+            if not math.isnan(rate) and rate < BREAKDOWN_PCT:
+                found = "baseline" if name == NONE else name
+                break
+        out.setdefault(method, {"method": method})[_column(kind)] = found
+    return pd.DataFrame(sorted(out.values(), key=lambda r: r["method"]))
+
+
+def _column(kind: str) -> str:
+    from slamrun.datasets.perturb import KINDS
+
+    return f"{kind} ({KINDS[kind].parameter})"
+
+
+def spread(df: pd.DataFrame, kind: str, metric: str) -> pd.DataFrame:
+    """Per method and level of `kind` (baseline first): the median, first and third quartiles of `metric` over the
+    method's evaluated runs (the spread over trials, sequences and directions), and how many runs gave it."""
+    rows = []
+    for i, (name, part) in enumerate(series(df, kind)):
+        ok = evaluated(part, [metric])
+        for method, runs in ok.groupby("method", sort=True):
+            v = runs[metric].astype(float)
+            rows.append(
+                {
+                    "method": method,
+                    "position": i,
+                    "level": name,
+                    "median": float(v.median()),
+                    "q1": float(v.quantile(0.25)),
+                    "q3": float(v.quantile(0.75)),
+                    "n": len(v),
+                }
+            )
+    return pd.DataFrame(rows, columns=["method", "position", "level", "median", "q1", "q3", "n"])
+
+
+def level_statistics(
+    df: pd.DataFrame, metrics: list[str], level: float = 0.999, adjust: str = "holm", alpha: float = 0.05
+) -> tuple[pd.DataFrame, dict]:
+    """The study's procedure within each perturbation level (as within each dataset: a level's runs are one
+    population, never pooled with another's): per level, each method's runs, medians and letter groups, and the
+    Kruskal-Wallis p of each metric; and the full statistics per level (JSON). Levels with fewer than two methods
+    with evaluated runs have none."""
+    tables, full = [], {}
+    for kind in kinds(df):
+        for name, part in series(df, kind)[1:]:
+            ok = evaluated(part, metrics)
+            if ok.method.nunique() < 2 or len(ok) <= len(metrics) + 1:
+                continue
+            st = study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha)
+            table = medians_with_letters(st, metrics)
+            table.insert(0, "level", name)
+            table.insert(0, "perturbation", kind)
+            tables.append(table)
+            full[f"{kind}-{name}"] = st.to_json()
+    return (pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()), full

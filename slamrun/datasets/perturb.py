@@ -1,0 +1,222 @@
+"""Perturbed views: the same frames made worse in one named way (noise, blur, exposure, dropped frames, a lower
+resolution, JPEG compression), at a level, for robustness campaigns. Pure functions of a frame, its index in the
+sequence and a seed: a view's frames are the same pixels on every machine, and a sequence's forward and backward
+views hold the same perturbed frames (the noise of frame i does not depend on the direction it is played in).
+
+`none` is the baseline: the ordinary view. Methods see ordinary frames; the view's camera follows a change of
+resolution; a dropped frame is absent from the view (its time too), never repeated.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from slamrun.results.vocabulary import NONE, played  # noqa: F401 - part of this module's names
+
+
+@dataclass(frozen=True)
+class Kind:
+    """One kind of perturbation: the spec's parameter naming its levels, what it models, and the order of
+    severity of its levels (`worse(a, b)`: a is the more severe)."""
+
+    name: str
+    parameter: str
+    unit: str
+    models: str
+    baseline: float  # the level that leaves frames as they are (the x-axis' "none")
+    severity: str  # "up": a higher level is worse; "down": lower is worse; "away": further from baseline (log)
+
+    def severity_of(self, level: float) -> float:
+        if self.severity == "up":
+            return level
+        if self.severity == "down":
+            return -level
+        return abs(math.log(level))
+
+    def valid(self, level: float) -> str | None:
+        """Why `level` is not a level of this kind, or None."""
+        if not math.isfinite(level):
+            return "not a finite number"
+        if level == self.baseline:
+            return "the baseline (the ordinary view), which every campaign runs: leave it out"
+        lo, hi, integer = _RANGES[self.name]
+        if integer and level != int(level):
+            return "expected a whole number"
+        if not lo <= level <= hi:
+            return f"expected {lo:g} to {hi:g}"
+        return None
+
+
+_RANGES = {  # (lowest, highest, whole numbers only)
+    "gaussian_noise": (0.1, 128.0, False),
+    "motion_blur": (2, 101, True),
+    "exposure": (0.05, 20.0, False),
+    "frame_drop": (2, 1000, True),
+    "resolution": (0.05, 0.95, False),
+    "jpeg": (1, 95, True),
+}
+
+KINDS: dict[str, Kind] = {
+    k.name: k
+    for k in (
+        Kind(
+            "gaussian_noise",
+            "sigma",
+            "grey levels of 255",
+            "sensor noise: zero-mean Gaussian noise of standard deviation `sigma`, independent per pixel and frame",
+            0.0,
+            "up",
+        ),
+        Kind(
+            "motion_blur",
+            "length_px",
+            "pixels",
+            "camera shake during the exposure: a line kernel `length_px` long, at an angle drawn per frame",
+            1.0,
+            "up",
+        ),
+        Kind(
+            "exposure",
+            "gain",
+            "factor",
+            "a wrong exposure: intensities times `gain`, saturated (under 1 darker, over 1 brighter and clipped); "
+            "the exposure times a method is given stay the original ones",
+            1.0,
+            "away",
+        ),
+        Kind(
+            "frame_drop",
+            "every",
+            "frames",
+            "lost frames: every `every`-th frame of the sequence is absent (2: half the frame rate), its time too",
+            math.inf,
+            "down",
+        ),
+        Kind(
+            "resolution",
+            "scale",
+            "factor",
+            "a lower-resolution camera: frames resized by `scale` (area interpolation), the calibration with them",
+            1.0,
+            "down",
+        ),
+        Kind(
+            "jpeg",
+            "quality",
+            "JPEG quality",
+            "lossy compression: each frame encoded as JPEG at `quality` and decoded (stored losslessly after)",
+            100.0,
+            "down",
+        ),
+    )
+}
+
+
+@dataclass(frozen=True)
+class Perturbation:
+    """A kind at a level (`none` at no level), with the spec's seed."""
+
+    kind: str = NONE
+    level: float | None = None
+    seed: int = 0
+
+    @property
+    def is_none(self) -> bool:
+        return self.kind == NONE
+
+    @property
+    def label(self) -> str:
+        """A name for folders and run keys: `gaussian_noise-5`, `exposure-0.5`; `-s7` with a seed other than 0."""
+        if self.is_none:
+            return NONE
+        return f"{self.kind}-{self.level:g}" + (f"-s{self.seed}" if self.seed else "")
+
+    @property
+    def changes_pixels(self) -> bool:
+        return not self.is_none and self.kind != "frame_drop"
+
+    @property
+    def scale(self) -> float:
+        return float(self.level) if self.kind == "resolution" else 1.0
+
+
+BASELINE = Perturbation()
+
+
+def kept_frames(n: int, p: Perturbation) -> np.ndarray:
+    """Indices of the sequence's frames a view holds: all, or all but every `every`-th (frame_drop)."""
+    idx = np.arange(n)
+    if p.kind != "frame_drop":
+        return idx
+    every = int(p.level)
+    return idx[(idx + 1) % every != 0]
+
+
+def scaled_size(width: int, height: int, p: Perturbation) -> tuple[int, int]:
+    return max(1, round(width * p.scale)), max(1, round(height * p.scale))
+
+
+def _rng(p: Perturbation, sequence: str, index: int) -> np.random.Generator:
+    """The generator of frame `index` of `sequence`: from the seed, the kind, the level and the frame alone."""
+    tag = zlib.crc32(f"{sequence}|{p.kind}|{p.level!r}".encode())
+    return np.random.default_rng([p.seed, tag, index])
+
+
+def perturb_frame(img: np.ndarray, p: Perturbation, sequence: str, index: int) -> np.ndarray:
+    """Frame `index` (of the sequence, not of the view) perturbed; the same dtype (8 or 16 bit, grey or colour)."""
+    if not p.changes_pixels:
+        return img
+    import cv2
+
+    top = float(np.iinfo(img.dtype).max) if img.dtype.kind in "ui" else 1.0
+    if p.kind == "gaussian_noise":
+        noise = _rng(p, sequence, index).standard_normal(img.shape, dtype=np.float32) * (p.level * top / 255.0)
+        return _clipped(img.astype(np.float32) + noise, img.dtype, top)
+    if p.kind == "exposure":
+        return _clipped(img.astype(np.float32) * p.level, img.dtype, top)
+    if p.kind == "motion_blur":
+        return cv2.filter2D(img, -1, _line_kernel(int(p.level), _rng(p, sequence, index).uniform(0.0, 180.0)))
+    if p.kind == "resolution":
+        h, w = img.shape[:2]
+        return cv2.resize(img, scaled_size(w, h, p), interpolation=cv2.INTER_AREA)
+    if p.kind == "jpeg":
+        eight = img if img.dtype == np.uint8 else (img.astype(np.float32) * (255.0 / top)).round().astype(np.uint8)
+        ok, data = cv2.imencode(".jpg", eight, [cv2.IMWRITE_JPEG_QUALITY, int(p.level)])
+        if not ok:
+            raise ValueError(f"frame {index}: JPEG encoding failed")
+        back = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        return back if img.dtype == np.uint8 else (back.astype(np.float32) * (top / 255.0)).round().astype(img.dtype)
+    raise ValueError(f"unknown perturbation {p.kind!r}")
+
+
+def _clipped(values: np.ndarray, dtype: np.dtype, top: float) -> np.ndarray:
+    if np.dtype(dtype).kind in "ui":
+        return np.clip(np.rint(values), 0, top).astype(dtype)
+    return np.clip(values, 0.0, top).astype(dtype)
+
+
+def _line_kernel(length: int, angle_deg: float) -> np.ndarray:
+    """A normalised line of `length` pixels through the kernel's centre at `angle_deg` (a linear motion)."""
+    import cv2
+
+    size = length if length % 2 else length + 1
+    k = np.zeros((size, size), np.float32)
+    c = (size - 1) / 2.0
+    dx, dy = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    half = (length - 1) / 2.0
+    p0 = (round(c - dx * half), round(c - dy * half))
+    p1 = (round(c + dx * half), round(c + dy * half))
+    cv2.line(k, p0, p1, 1.0, 1)
+    return k / k.sum()
+
+
+def describe(p: Perturbation) -> str:
+    """One line for logs and captions: `gaussian noise, sigma 5`."""
+    if p.is_none:
+        return "none (the baseline)"
+    kind = KINDS[p.kind]
+    return f"{p.kind.replace('_', ' ')}, {kind.parameter} {p.level:g}"

@@ -1,0 +1,154 @@
+"""Robustness campaigns end to end (issue 53): reference_vo and colmap on two synthetic rooms, forward and
+backward, over two perturbations of two levels each; the ledger, results.csv, status and the report's Robustness
+section carry them, and no perturbed run enters the study's tables. The tables' own logic on a hand-made table."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from slamrun.analysis.report import write_report
+from slamrun.analysis.robustness import baseline, breakdown_table, level_statistics, success_rates
+from slamrun.datasets.make_synthetic import generate
+from slamrun.engine.campaign import run_campaign
+from slamrun.engine.dryrun import dry_run
+from slamrun.engine.session import read_figures
+from slamrun.engine.spec_file import load_spec
+
+AXIS = [{"kind": "gaussian_noise", "sigma": [4, 40]}, {"kind": "resolution", "scale": [0.5, 0.2]}]
+
+
+@pytest.fixture(scope="module")
+def campaign(tmp_path_factory) -> tuple[Path, Path]:
+    """The campaign, run once: (its spec, its results folder)."""
+    root = tmp_path_factory.mktemp("robust")
+    for name, seed in (("room_a", 4), ("room_b", 6)):
+        generate(root / "data" / name, frames=90, seed=seed, size=(320, 240))
+    spec = {
+        "name": "robust",
+        "results": str(root / "results"),
+        "cache": str(root / "cache"),
+        "datasets": [{"name": "synth", "path": str(root / "data"), "sequences": ["room_a", "room_b"]}],
+        "methods": [{"name": "reference_vo"}, {"name": "colmap", "params": {"max_features": 512}}],
+        "perturbations": AXIS,
+        "trials": 1,
+        "lanes": 2,
+        "timeout_s": 300,
+        "report": False,
+    }
+    path = root / "spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    before = dry_run(load_spec(path))
+    assert before.total == 2 * 2 * 2 * 5 and before.perturbed_runs == 32
+    assert before.perturbed_views == 16 and before.perturbed_bytes > 0  # 2 rooms x 2 directions x 4 levels
+    result = run_campaign(load_spec(path), log=lambda *a: None)
+    assert result.counts["pending"] == 0
+    return path, root / "results"
+
+
+def test_every_run_carries_its_perturbation_and_level(campaign):
+    _, results = campaign
+    df = pd.read_csv(results / "results.csv")
+    assert len(df) == 40
+    got = df.groupby(["perturbation", df.level.fillna(0)]).size().to_dict()
+    assert got == {
+        ("gaussian_noise", 4.0): 8,
+        ("gaussian_noise", 40.0): 8,
+        ("none", 0.0): 8,
+        ("resolution", 0.2): 8,
+        ("resolution", 0.5): 8,
+    }
+    perturbed = df[df.perturbation != "none"]
+    for run_dir in perturbed.run_dir:
+        record = json.loads((Path(run_dir) / "run.json").read_text())
+        assert record["perturbation"] in ("gaussian_noise", "resolution") and record["level"] > 0
+        view = json.loads((Path(record["view"]) / "view.json").read_text())
+        assert view["perturbation"].startswith(record["perturbation"])  # it ran on its own view
+        assert f"/{record['direction']}+{view['perturbation']}/" in run_dir
+    baseline_ok = df[(df.perturbation == "none") & (df.status == "done")]
+    assert len(baseline_ok) >= 6, "the rooms are tracked on the ordinary views"
+
+
+def test_status_groups_by_how_the_sequence_was_played(campaign):
+    _, results = campaign
+    groups = {(g["method"], g["direction"]) for g in read_figures(results).per_group}
+    assert ("reference_vo", "forward") in groups and ("colmap", "backward+resolution-0.2") in groups
+    assert len(groups) == 2 * 2 * 5
+
+
+def test_the_report_has_a_robustness_section_and_keeps_the_studys_tables_to_the_baseline(campaign):
+    _, results = campaign
+    index = write_report(results)
+    html = index.read_text()
+    assert "Robustness" in html and "Level at which the success rate falls under 50 %" in html
+    assert "robustness_gaussian_noise.png" in html and "robustness_resolution.png" in html
+    tables = index.parent / "tables"
+    rates = pd.read_csv(tables / "robustness_success.csv")
+    assert set(rates.level.astype(str)) == {"none", "4", "40", "0.5", "0.2"}
+    assert set(rates.method) == {"reference_vo", "colmap"}
+    breakdown = pd.read_csv(tables / "robustness_breakdown.csv", dtype=str)
+    assert list(breakdown.columns) == ["method", "gaussian_noise (sigma)", "resolution (scale)"]
+    df = pd.read_csv(results / "results.csv")
+    failures = pd.read_csv(tables / "failures.csv")  # the study's runs table: the baseline's 8 runs alone
+    assert failures.runs.sum() == len(baseline(df)) == 8
+    for f in ("robustness_gaussian_noise.png", "robustness_resolution.png"):
+        assert (index.parent / "figures" / f).stat().st_size > 10_000
+
+
+def test_the_plan_states_what_the_axis_adds(campaign, capsys):
+    from slamrun.cli import main
+
+    spec, _ = campaign
+    assert main(["plan", str(spec)]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"robustness: 32 of the 40 runs are on perturbed views", out)
+
+
+# ------------------------------------------------------------------ the tables' logic on a hand-made table
+
+
+def _runs(method: str, kind: str, level: float | None, done: int, failed: int, value: float) -> list[dict]:
+    row = {"method": method, "perturbation": kind, "level": level, "sequence": "s", "direction": "forward"}
+    rng = np.random.default_rng(abs(hash((method, kind, level))) % 2**32)
+    out = []
+    for i in range(done):
+        out.append(
+            row
+            | {
+                "trial": i,
+                "status": "done",
+                "failure": None,
+                "eval_status": "ok",
+                "ate_rmse": value * (1 + 0.1 * rng.random()),
+            }
+        )
+    for i in range(failed):
+        out.append(
+            row | {"trial": done + i, "status": "failed", "failure": "lost", "eval_status": None, "ate_rmse": None}
+        )
+    out.append(row | {"trial": 99, "status": "failed", "failure": "infra", "eval_status": None, "ate_rmse": None})
+    return out
+
+
+def test_success_rates_breakdown_and_statistics_per_level():
+    rows = []
+    for m, base, fall in (("steady", 0.1, 10), ("fragile", 0.2, 1)):
+        rows += _runs(m, "none", None, 10, 0, base)
+        for sigma in (2.0, 10.0, 30.0):
+            failed = min(10, int(sigma // fall)) if m == "fragile" else 0
+            rows += _runs(m, "gaussian_noise", sigma, 10 - failed, failed, base * (1 + sigma / 10))
+    df = pd.DataFrame(rows)
+    rates = success_rates(df)
+    fragile = rates[rates.method == "fragile"].set_index("level")["success %"].to_dict()
+    assert fragile == {"none": 100.0, "2": 80.0, "10": 0.0, "30": 0.0}  # the infra run is no result
+    br = breakdown_table(rates).set_index("method")["gaussian_noise (sigma)"].to_dict()
+    assert br == {"fragile": "10", "steady": "never"}
+    table, full = level_statistics(df, ["ate_rmse"])
+    assert set(table.level) == {"2"}  # only level 2 has two methods with evaluated runs
+    assert set(full) == {"gaussian_noise-2"}
