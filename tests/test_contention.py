@@ -113,6 +113,12 @@ def test_a_real_time_method_starved_by_a_hog_is_contended_and_retried(tmp_path: 
     assert [kind for kind, _ in events].count("retry") == 1  # retried once (retries: 1), contended again
     df = pd.read_csv(res.results_csv)
     assert list(df.failure) == ["contended"] and res.infra_failures == 1
+    assert list(df.contended_attempts) == [2]  # both attempts, each with its wait, traceable in results.csv
+    assert "waited for a CPU" in row["contended_message"]
+    from slamrun.analysis.report import write_report
+
+    html = write_report(res.results).read_text()  # the report names the run
+    assert "Runs with a contended attempt" in html and "seq_a" in html
     assert Ledger(res.results / "ledger.sqlite").reset_infra_failures() == 1  # the next start runs it again
 
 

@@ -52,6 +52,13 @@ RUNS_CAPTION = (
 )
 
 
+CONTENDED_CAPTION = (
+    "Runs with an attempt lost while its threads waited for a CPU beyond the spec's contention_pct (the machine's "
+    "load): that attempt was not charged to the method and the run was tried again; 'ended' is how it finally ended "
+    "(contended: every attempt was, it is retried at the next start)."
+)
+
+
 def runs_table(df: pd.DataFrame) -> pd.DataFrame:
     """The report's runs-and-failures table: the per-method summary's counts and rates (rates over the
     method's results: infrastructure failures and unfinished runs are left out), and each failure kind."""
@@ -243,18 +250,7 @@ def dataset_report(
             Section("Statistics", "<p>Fewer than two methods with evaluated runs: no group comparison.</p>")
         )
 
-    finished = df[df.status.isin(["done", "failed"])] if "status" in df else pd.DataFrame()
-    res = tables.resources_table(finished, contention_pct) if not finished.empty else pd.DataFrame()
-    if not res.empty:
-        title = "Resources: means per run (Table 2 layout)"
-        caption = "Means over each method's finished runs (done or failed) of the resources the runner measured"
-        caption += f", taken under measurement {measurement}." if measurement else "."
-        if contention_pct is not None and "cpu_wait_pct" in finished.columns:
-            caption += (
-                f" Runs whose threads waited for a CPU more than {contention_pct:g} % of their wall time had their "
-                "FPS and CPU figures taken under contention: counted per method."
-            )
-        sections.append(Section(title, page.table(res, tab_dir, root, "table2_resources", title + where, caption)))
+    sections += _resources(df, tab_dir, root, where, measurement, contention_pct)
     # the campaign's accuracy figure per run: TUM-Mono's e_align, else ATE (datasets without TUM-Mono's metrics)
     main = main_metric(df)
     if main is not None and "direction" in df.columns:
@@ -323,6 +319,11 @@ def robustness_report(
     title = "Success rate per perturbation level"
     caption = "Runs, the method's results (done or failed by it), done, and the success rate, per level."
     parts.append(Section(title, page.table(rates, tab_dir, root, "robustness_success", title + where, caption)))
+    contended = tables.contended_runs_table(df[df["perturbation"] != "none"])
+    if not contended.empty:
+        title = "Runs on perturbed views with a contended attempt"
+        html = page.table(contended, tab_dir, root, "robustness_contended_runs", title + where, CONTENDED_CAPTION)
+        parts.append(Section(title, html))
     figs = [figures.robustness(df, k, metrics, fig_dir, label=dataset, colours=colours) for k in kinds(df)]
     caption = "Median (line) and first to third quartile (band) of the evaluated runs per level, and the success rate."
     parts.append(Section("Robustness figures", "".join(page.figure(f, root, caption) for f in figs)))
@@ -341,6 +342,31 @@ def robustness_report(
         none = "<p>No level has two methods with evaluated runs: no group comparison.</p>"
         parts.append(Section("Statistics within each perturbation level", none))
     return [Section("Robustness", parts[0].html, parts[1:])]
+
+
+def _resources(
+    df: pd.DataFrame, tab_dir: Path, root: Path, where: str, measurement: str, contention_pct: float | None
+) -> list[Section]:
+    """The resources table (Table 2's layout) and the runs with a contended attempt, where there are any."""
+    sections = []
+    finished = df[df.status.isin(["done", "failed"])] if "status" in df else pd.DataFrame()
+    res = tables.resources_table(finished, contention_pct) if not finished.empty else pd.DataFrame()
+    if not res.empty:
+        title = "Resources: means per run (Table 2 layout)"
+        caption = "Means over each method's finished runs (done or failed) of the resources the runner measured"
+        caption += f", taken under measurement {measurement}." if measurement else "."
+        if contention_pct is not None and "cpu_wait_pct" in finished.columns:
+            caption += (
+                f" Runs whose threads waited for a CPU more than {contention_pct:g} % of their wall time had their "
+                "FPS and CPU figures taken under contention: counted per method."
+            )
+        sections.append(Section(title, page.table(res, tab_dir, root, "table2_resources", title + where, caption)))
+    contended = tables.contended_runs_table(df)
+    if not contended.empty:
+        title = "Runs with a contended attempt"
+        html = page.table(contended, tab_dir, root, "contended_runs", title + where, CONTENDED_CAPTION)
+        sections.append(Section(title, html))
+    return sections
 
 
 METRIC_NAMES = {"kitti": ("kitti_t_pct", "KITTI's segment errors"), "rpe": ("rpe_t_rmse", "RPE")}

@@ -9,6 +9,7 @@ import pandas as pd
 from scipy import stats
 
 from slamrun.analysis.stats import StudyStats
+from slamrun.results.vocabulary import played
 
 LETTERS = " letters"  # the suffix of a medians column's letter groups
 KRUSKAL_ROWS = ("Kruskal-Wallis chi2", "Kruskal-Wallis df", "Kruskal-Wallis p")
@@ -105,6 +106,36 @@ def resources_table(df: pd.DataFrame, contention_pct: float | None = None) -> pd
         over = (df["cpu_wait_pct"] - own > contention_pct).groupby(df["method"]).sum()
         out[f"runs with CPU wait > {contention_pct:g} %"] = over.reindex(out["method"]).to_numpy()
     return out
+
+
+def contended_runs_table(df: pd.DataFrame) -> pd.DataFrame:
+    """The runs with an attempt lost under contention (retried, or recorded `contended`): which run, how many such
+    attempts, how it ended, and the last such attempt's wait. Empty where there is none."""
+    if "contended_attempts" not in df.columns:
+        return pd.DataFrame()
+    hit = df[df["contended_attempts"].fillna(0) > 0]
+    if hit.empty:
+        return pd.DataFrame()
+    where = hit["direction"].astype(str)
+    if "perturbation" in hit.columns:
+        where = [played(d, k, lv) for d, k, lv in zip(where, hit["perturbation"], hit.get("level"), strict=True)]
+    return pd.DataFrame(
+        {
+            "method": hit["method"].to_numpy(),
+            "sequence": hit["sequence"].to_numpy(),
+            "direction": list(where),
+            "trial": hit["trial"].to_numpy(),
+            "contended attempts": hit["contended_attempts"].astype(int).to_numpy(),
+            "ended": [f if s == "failed" else s for s, f in zip(hit["status"], hit["failure"], strict=True)],
+            "last contended attempt": [_after_key(m) for m in hit.get("contended_message", [""] * len(hit))],
+        }
+    ).sort_values(["method", "sequence", "direction", "trial"])
+
+
+def _after_key(message) -> str:
+    """A run's message without the run's key it starts with."""
+    text = "" if message is None or (isinstance(message, float) and np.isnan(message)) else str(message)
+    return text.split(": ", 1)[1] if ": " in text else text
 
 
 def motion_bias_table(df: pd.DataFrame, metric: str = "e_align") -> pd.DataFrame:

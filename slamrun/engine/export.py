@@ -27,6 +27,7 @@ COLUMNS = (
     "dataset",
     "settings",
     "attempts",
+    "contended_attempts",
     "exit_code",
     "message",
     "host",

@@ -48,6 +48,8 @@ STATE_COLUMNS = (
     "run_dir",
     "host",  # the machine that ran it (its run.json: CPU, GPUs, Slurm node)
     "packages",  # a native method's Python packages and versions
+    "contended_attempts",  # attempts lost while waiting for a CPU (the machine's load): retried, never charged
+    "contended_message",  # the last of them: its wait and the machine's pressure
 )
 ALL_COLUMNS = KEY_COLUMNS + STATE_COLUMNS + METRIC_COLUMNS + RESOURCE_COLUMNS
 
@@ -55,6 +57,7 @@ _TYPES = {
     "trial": "INTEGER",
     "active": "INTEGER",
     "attempts": "INTEGER",
+    "contended_attempts": "INTEGER",
     "exit_code": "INTEGER",
     "pid": "INTEGER",
     "n_poses": "INTEGER",
@@ -331,6 +334,16 @@ class Ledger:
                 (time.time(), run_dir, key),
             )
             return self._db.execute("SELECT attempts FROM runs WHERE key = ?", (key,)).fetchone()[0]
+
+    def note_contended(self, key: str, message: str) -> None:
+        """One more attempt of the run lost under contention (retried or recorded `contended`): counted, its
+        message kept, whatever the run's final state."""
+        with self._lock:
+            self._db.execute(
+                "UPDATE runs SET contended_attempts = COALESCE(contended_attempts, 0) + 1, contended_message = ? "
+                "WHERE key = ?",
+                (message[-2000:], key),
+            )
 
     def set_process(self, key: str, pid: int, pid_start: float) -> None:
         with self._lock:

@@ -270,6 +270,8 @@ class Scheduler:
             self.fatal_error = self.fatal_error or exc
             self.request_stop()
         except InfraError as exc:
+            if isinstance(exc, Contended):
+                self.ledger.note_contended(run.key.id, str(exc))
             if attempt <= self.spec.retries and not self.stop.is_set():
                 self.ledger.reset_to_pending(run.key.id)
                 self.on_event("retry", run, lane, {"message": str(exc), "delay_s": 0.0})
