@@ -117,8 +117,11 @@ def test_a_real_time_method_starved_by_a_hog_is_contended_and_retried(tmp_path: 
     assert "waited for a CPU" in row["contended_message"]
     from slamrun.analysis.report import write_report
 
-    html = write_report(res.results).read_text()  # the report names the run
-    assert "Runs with a contended attempt" in html and "seq_a" in html
+    index = write_report(res.results)  # the report names the run, with the wait of its last contended attempt
+    assert "Runs with a contended attempt" in index.read_text()
+    named = pd.read_csv(index.parent / "tables" / "contended_runs.csv")
+    assert list(named.sequence) == ["seq_a"] and list(named.ended) == ["contended"]
+    assert named["last contended attempt"][0].startswith("lost while its threads waited for a CPU")
     assert Ledger(res.results / "ledger.sqlite").reset_infra_failures() == 1  # the next start runs it again
 
 

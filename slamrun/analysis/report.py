@@ -357,8 +357,9 @@ def _resources(
         caption += f", taken under measurement {measurement}." if measurement else "."
         if contention_pct is not None and "cpu_wait_pct" in finished.columns:
             caption += (
-                f" Runs whose threads waited for a CPU more than {contention_pct:g} % of their wall time had their "
-                "FPS and CPU figures taken under contention: counted per method."
+                f" Runs whose threads waited for a CPU more than {contention_pct:g} % of their wall time beyond the "
+                "wait they cause themselves (cpu_wait_own_pct: a method with more busy threads than its CPUs) had "
+                "their FPS and CPU figures taken under contention: counted per method."
             )
         sections.append(Section(title, page.table(res, tab_dir, root, "table2_resources", title + where, caption)))
     contended = tables.contended_runs_table(df)

@@ -284,10 +284,11 @@ def _not_contended(
         return
     shutil.rmtree(stage, ignore_errors=True)
     beyond = f", {own_pct:.0f} % of it its own threads' (more than its CPUs)" if own_pct else ""
+    pressure = values.get("host_cpu_pressure_pct")
+    machine = f"; the machine's CPU pressure {pressure:.0f} %" if pressure is not None else ""
     raise Contended(
         f"{run.key.id}: {values['failure']} while its threads waited for a CPU {wait:.0f} % of its wall time{beyond} "
-        f"(over contention_pct {contention_pct:g}; the machine's CPU pressure {values.get('host_cpu_pressure_pct')} "
-        "%): the machine's load, not charged to the method"
+        f"(over contention_pct {contention_pct:g}{machine}): the machine's load, not charged to the method"
     )
 
 

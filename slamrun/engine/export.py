@@ -28,6 +28,7 @@ COLUMNS = (
     "settings",
     "attempts",
     "contended_attempts",
+    "contended_message",
     "exit_code",
     "message",
     "host",
