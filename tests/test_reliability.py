@@ -231,6 +231,21 @@ def test_a_deleted_view_cache_is_rebuilt_not_charged(tmp_path, tiny_dataset):
     assert deleted and res.counts == {"pending": 0, "running": 0, "done": 8, "failed": 0}, charged
 
 
+def test_an_observer_that_raises_never_changes_a_runs_record(tmp_path, tiny_dataset, capsys):
+    """The event hook (the live display, a user's callback) raising on a finished run must not record the run again
+    as an infrastructure failure: the deleted-cache test above failed so when its rmtree met a view being written
+    (the run it had just recorded done became `infra`). The error is printed, the record stands."""
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method()], datasets=one_sequence(tiny_dataset), trials=2, lanes=1)
+
+    def on_event(kind, run, lane, info):
+        if kind == "finished":
+            raise OSError(39, "Directory not empty", "cache")
+
+    res = campaign(spec, on_event=on_event)
+    assert res.counts == {"pending": 0, "running": 0, "done": 4, "failed": 0}
+    assert "an event observer failed" in capsys.readouterr().err
+
+
 def test_a_method_that_damages_the_view_does_not_charge_later_runs(tmp_path, tiny_dataset):
     methods = [{**fake_method("damage-view", label="vandal"), "trials": 1}, fake_method(label="honest")]
     spec = write_spec(

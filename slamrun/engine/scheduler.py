@@ -8,6 +8,7 @@ runs in flight (they go back to pending).
 from __future__ import annotations
 
 import os
+import sys
 import threading
 import time
 import traceback
@@ -72,7 +73,7 @@ class Scheduler:
         self.backend = backend
         self.views = views
         self.groundtruths = groundtruths
-        self.on_event = on_event or (lambda *a: None)
+        self._observer = on_event or (lambda *a: None)
         self.stop = threading.Event()  # no new runs
         self.cancel = threading.Event()  # stop runs in flight
         self._queue: deque[PlannedRun] = deque()
@@ -83,6 +84,16 @@ class Scheduler:
         self.fatal_error: SlamRunError | None = None  # the error that stopped it (full disk, ledger lost)
         self.methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
         self.results_id = str(ledger.meta("results_id") or "")  # on each container, beside the campaign's name
+
+    def on_event(self, kind: str, run: PlannedRun, lane: Lane, info: dict) -> None:
+        """Tell the observer (the live display, a caller's hook). What it raises is printed and never changes a
+        run's record: a run recorded done stays done."""
+        try:
+            self._observer(kind, run, lane, info)
+        except Exception:  # noqa: BLE001 - an observer's bug is not the run's
+            print(f"slamrun: an event observer failed on '{kind}' of {run.key.id} (the run's record stands):",
+                  file=sys.stderr)  # fmt: skip
+            traceback.print_exc(file=sys.stderr)
 
     def run(self, runs: list[PlannedRun]) -> None:
         pending = set(self.ledger.pending_keys())
