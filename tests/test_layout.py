@@ -119,23 +119,53 @@ def test_backends_provide_the_whole_protocol():
         assert not missing, f"{cls.__name__} lacks {missing}"
 
 
-def test_evaluating_a_file_imports_neither_opencv_nor_yaml_nor_a_method():
+LAYOUT_MODULES = ("layouts", "euroc", "icl_nuim", "kitti", "tartanair", "tum_mono", "tum_rgbd", "tum_vi", "sequence")
+
+
+def loaded_by_evaluate(*argv: str) -> tuple[str, list[str]]:
+    """What `slamrun evaluate ARGV` printed, and the modules it loaded of OpenCV, PyYAML, the methods, the engine
+    and the dataset layouts."""
+    code = (
+        "import runpy, sys\n"
+        f"sys.argv = ['slamrun', 'evaluate', *{list(argv)!r}]\n"
+        "try:\n    runpy.run_module('slamrun.cli', run_name='__main__')\nexcept SystemExit as e:\n    code = e.code\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('cv2', 'yaml') "
+        "or m.startswith(('slamrun.methods', 'slamrun.engine')) "
+        f"or m in {['slamrun.datasets.' + name for name in LAYOUT_MODULES]!r}), file=sys.stderr)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    return out.stdout, ast.literal_eval(out.stderr.strip().splitlines()[-1])
+
+
+def test_evaluating_a_file_imports_neither_opencv_nor_yaml_nor_a_method_nor_a_layout(tmp_path):
     """`slamrun evaluate --gt FILE` starts lean: no OpenCV (only decoding a frame needs it), no PyYAML (only a YAML
-    file), no method, no engine."""
+    file), no method, no engine, no dataset layout (a folder's evaluation loads them); a layout's note on its own
+    ground-truth file is still said."""
     data = Path(__file__).resolve().parents[2] / "shared" / "data" / "evo_test_data"
     gt, est = data / "fr2_desk_groundtruth.txt", data / "fr2_desk_ORB.txt"
     if not gt.is_file():
         pytest.skip(reason=f"{gt} missing: the shared test data lives beside the repository")
-    code = (
-        "import runpy, sys\n"
-        f"sys.argv = ['slamrun', 'evaluate', '--metric', 'ate', '--gt', {str(gt)!r}, {str(est)!r}]\n"
-        "try:\n    runpy.run_module('slamrun.cli', run_name='__main__')\nexcept SystemExit as e:\n    code = e.code\n"
-        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('cv2', 'yaml') "
-        "or m.startswith(('slamrun.methods', 'slamrun.engine'))), file=sys.stderr)\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
-    assert "ate_rmse" in out.stdout or "ate" in out.stdout, out.stdout + out.stderr
-    assert out.stderr.strip().splitlines()[-1] == "[]", out.stderr
+    for metric in (["--metric", "ate"], ["--gt-format", "tum"]):  # the second: its defaults, ate and rpe
+        stdout, loaded = loaded_by_evaluate(*metric, "--gt", str(gt), str(est))
+        assert "ate" in stdout and loaded == [], (metric, stdout, loaded)
+    freiburg = tmp_path / "traj0.gt.freiburg"
+    freiburg.write_bytes(gt.read_bytes())
+    out = subprocess.run(
+        [sys.executable, "-m", "slamrun.cli", "evaluate", "--gt", str(freiburg), str(est)],
+        capture_output=True, text=True, cwd=ROOT,
+    )  # fmt: skip
+    assert "ICL-NUIM's poses as the release has them" in out.stderr, out.stderr
+
+
+def test_what_a_file_is_evaluated_with_is_its_layouts_without_loading_it():
+    """A ground-truth file's default metrics are its dataset's layout's, and the notes said of files are the built-in
+    layouts' own: written in light modules (groundtruth.py, file_notes.py), checked against the layouts here."""
+    from slamrun.datasets import file_notes
+    from slamrun.datasets.groundtruth import FILE_DEFAULT_METRICS, FILE_LAYOUTS
+    from slamrun.datasets.layouts import BUILT_IN, DEFAULT_METRICS
+
+    assert FILE_DEFAULT_METRICS == {fmt: DEFAULT_METRICS[layout] for fmt, layout in FILE_LAYOUTS.items()}
+    assert set(file_notes.NOTES) == {layout.file_note for layout in BUILT_IN if layout.file_note is not None}
 
 
 def test_no_function_runs_over_80_lines():

@@ -20,7 +20,8 @@ import numpy as np
 from slamrun.core.camera import CameraFile, FovCamera, PinholeCamera, RadTanCamera
 from slamrun.core.inputs import load_yaml_file
 from slamrun.core.trajectory import Trajectory, read_euroc_csv
-from slamrun.datasets import frames
+from slamrun.datasets import file_notes, frames
+from slamrun.datasets.file_notes import EUROC_GT
 from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import (
     IMAGE_SUFFIXES,
@@ -41,7 +42,6 @@ if TYPE_CHECKING:
     from slamrun.datasets.synth import Synth
 
 CAM = Path("mav0/cam0")
-EUROC_GT = Path("mav0/state_groundtruth_estimate0/data.csv")
 GT_MAX_GAP_S = 0.02  # ground truth is interpolated between samples at most this far from a frame
 MAX_NS = 2**63 - 1  # EuRoC's stamps are int64 nanoseconds
 
@@ -217,30 +217,6 @@ def recognise(root: Path) -> bool:
     return (root / CAM).is_dir() and not (root / "dso" / "camchain.yaml").exists()
 
 
-def asl_file_note(path: Path, frame: str, how: str, folder: str = "SEQUENCE_FOLDER") -> str:
-    """What an ASL state csv given to `slamrun evaluate` as it is means for the figures, and the folder form that
-    evaluates as the campaign does (`folder`: the sequence's, where the csv lies in one)."""
-    return (
-        f"{path}: an ASL state csv holds the poses of {frame} at its own times; a campaign evaluates the camera's "
-        f"poses at the frames (carried by {how}, interpolated), so figures against this file differ from "
-        f"results.csv's. To evaluate as the campaign does, give the sequence folder: --gt {folder}"
-    )
-
-
-def asl_folder(path: Path, gt_rel: Path) -> str | None:
-    """The sequence folder an ASL csv lies in as `gt_rel` (SEQ/mav0/NAME/data.csv), or None."""
-    parts = path.parts
-    if len(parts) >= 3 and parts[-3:-1] == gt_rel.parts[-3:-1]:
-        return str(Path(*parts[:-3]))
-    return None
-
-
-def file_note(path: Path) -> str | None:
-    """EuRoC's state ground truth given as it is: in the body (IMU) frame."""
-    folder = asl_folder(path, EUROC_GT)
-    return None if folder is None else asl_file_note(path, "the body (IMU) frame", "the camera's T_BS", folder)
-
-
 # EuRoC's cam0: the radial-tangential distortion and the camera-to-body transform of the real rig (MH_01's
 # sensor.yaml), the intrinsics scaled to the image size.
 EUROC_DISTORTION = (-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05)
@@ -343,5 +319,5 @@ LAYOUT = Layout(
     groundtruth_file=str(EUROC_GT),
     synth=write_synthetic,
     download=Download(URL, _archive, ", ".join(ALL_SEQUENCES), default=ALL_SEQUENCES),
-    file_note=file_note,
+    file_note=file_notes.euroc,
 )

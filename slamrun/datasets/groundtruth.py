@@ -21,17 +21,7 @@ from slamrun.core.formats import FORMATS, read_trajectory
 from slamrun.core.inputs import read_text_bounded
 from slamrun.core.metrics import RpeInterval
 from slamrun.core.trajectory import Trajectory, read_times
-from slamrun.datasets.euroc import EUROC_GT, asl_file_note, asl_folder
-from slamrun.datasets.layouts import (
-    BUILT_IN,
-    DEFAULT_METRICS,
-    DEFAULT_RPE,
-    GROUNDTRUTH_FILES,
-    detect,
-    names,
-    open_sequence,
-)
-from slamrun.datasets.tum_vi import TUMVI_GT
+from slamrun.datasets.file_notes import EUROC_GT, TUMVI_GT, asl_file_note, asl_folder, layout_note
 from slamrun.errors import DatasetError
 
 FORMAT_NAMES = {  # the trajectory formats (core/formats.py), and TUM-Mono's ground-truth file
@@ -40,13 +30,16 @@ FORMAT_NAMES = {  # the trajectory formats (core/formats.py), and TUM-Mono's gro
     "kitti": "KITTI poses (12 numbers a row: the 3x4 pose, one row per frame of --times)",
 }
 FILE_FORMATS = tuple(FORMAT_NAMES)
-# the metrics a ground-truth file is evaluated with when --metric is not given: its dataset's
+# the metrics a ground-truth file is evaluated with when --metric is not given: its dataset's layout's defaults
+# (TUM-Mono, TUM RGB-D, EuRoC, KITTI: tests/test_layout.py checks them), written here so that a file's evaluation
+# loads no layout
 FILE_DEFAULT_METRICS = {
     "tum-mono": ("tum-mono",),
-    "tum": DEFAULT_METRICS["tum-rgbd"],
-    "euroc": DEFAULT_METRICS["euroc"],
-    "kitti": DEFAULT_METRICS["kitti"],
+    "tum": ("ate", "rpe"),
+    "euroc": ("ate", "rpe"),
+    "kitti": ("ate", "rpe", "kitti"),
 }
+FILE_LAYOUTS = {"tum-mono": "tum-mono", "tum": "tum-rgbd", "euroc": "euroc", "kitti": "kitti"}  # whose defaults
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,6 +95,8 @@ def open_groundtruth(
 
 def sequence_groundtruth(root: Path) -> GroundTruth:
     """A sequence folder's ground truth as the campaign evaluates with it: its layout's reader, frame and times."""
+    from slamrun.datasets.layouts import DEFAULT_METRICS, DEFAULT_RPE, GROUNDTRUTH_FILES, detect, names, open_sequence
+
     layout = detect(root)
     if layout is None:
         raise DatasetError(
@@ -125,16 +120,6 @@ def sniff_format(path: Path, metrics: tuple[str, ...] | None) -> str:
     if len(first.split()) == 12:
         return "kitti"
     return "tum-mono" if not metrics or "tum-mono" in metrics else "tum"
-
-
-def layout_note(path: Path) -> str | None:
-    """A built-in layout's note on one of its ground-truth files (an ASL state csv of EuRoC or TUM-VI, ICL-NUIM's
-    *.gt.freiburg, TartanAir's pose_left.txt, ...), or None. Plug-ins are not loaded for a file (evaluating files
-    never pays for scanning the installed packages)."""
-    for layout in BUILT_IN:
-        if layout.file_note is not None and (note := layout.file_note(path)):
-            return note
-    return None
 
 
 def file_notes(path: Path, fmt: str) -> tuple[str, ...]:

@@ -27,7 +27,8 @@ import numpy as np
 from slamrun.core.camera import CameraFile, FovCamera
 from slamrun.core.metrics import poses_at
 from slamrun.core.trajectory import Trajectory, quat_to_rotmat, read_tum, rotmat_to_quat
-from slamrun.datasets import frames
+from slamrun.datasets import file_notes, frames
+from slamrun.datasets.file_notes import ICL_NUIM_FPS
 from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import (
     IMAGE_SUFFIXES,
@@ -45,7 +46,7 @@ if TYPE_CHECKING:
 
 WIDTH, HEIGHT = 640, 480
 FX, FY, CX, CY = 481.20, -480.00, 319.50, 239.50  # as published; fy's sign is the y-up camera of the poses
-FPS = 30.0  # frame k is at k / FPS seconds
+FPS = ICL_NUIM_FPS  # frame k is at k / FPS seconds
 MIRROR = np.diag([1.0, -1.0, 1.0])  # S: the y-up camera (and its mirrored world) to a y-down one
 ASSOCIATIONS = "associations.txt"
 
@@ -154,17 +155,6 @@ def recognise(root: Path) -> bool:
     return bool(groundtruth_files(root))
 
 
-def file_note(path: Path) -> str | None:
-    """An ICL-NUIM *.gt.freiburg given as it is: frame numbers for times, and the y-up camera."""
-    if not path.name.endswith(".gt.freiburg"):
-        return None
-    return (
-        f"{path}: ICL-NUIM's poses as the release has them: frame numbers for times and a y-up camera (fy -480); a "
-        f"campaign evaluates frame k at k/{FPS:g} s against these poses mirrored into the y-down camera methods "
-        f"see (fy +480). To evaluate as the campaign does, give the sequence folder: --gt {path.parent}"
-    )
-
-
 def _groundtruth_name(name: str) -> str:
     """The release's name of a sequence's ground truth: livingRoom<k> for the living room, traj<k> for the office."""
     found = re.search(r"traj(\d)", name)
@@ -231,5 +221,5 @@ LAYOUT = Layout(
         "living_room_traj0_frei_png and traj0_frei_png",
         default=tuple(SCENES[scene].format(k=k) for scene in SCENES for k in range(4)),  # the study's eight
     ),
-    file_note=file_note,
+    file_note=file_notes.icl_nuim,
 )

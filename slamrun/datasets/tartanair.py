@@ -21,7 +21,8 @@ import numpy as np
 
 from slamrun.core.camera import CameraFile, FovCamera
 from slamrun.core.trajectory import Trajectory, quat_to_rotmat, rotmat_to_quat
-from slamrun.datasets import frames
+from slamrun.datasets import file_notes, frames
+from slamrun.datasets.file_notes import TARTANAIR_FPS, TARTANAIR_POSES
 from slamrun.datasets.protocol import Layout, Placed
 from slamrun.datasets.sequence import Sequence, check_regular, folder_sequence, number_rows, read_text
 from slamrun.errors import DatasetError
@@ -32,9 +33,9 @@ if TYPE_CHECKING:
 WIDTH, HEIGHT = 640, 480
 FX = FY = 320.0
 CX, CY = 320.0, 240.0
-FPS = 20.0  # frame k is at k / FPS seconds
+FPS = TARTANAIR_FPS  # frame k is at k / FPS seconds
 NED_TO_CAMERA = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])  # M: (forward, right, down) -> (x, y, z)
-IMAGES, POSES = "image_left", "pose_left.txt"
+IMAGES, POSES = "image_left", TARTANAIR_POSES
 FRAME_NAME = re.compile(r"(\d{6})_left\.png")
 
 
@@ -117,15 +118,6 @@ def recognise(root: Path) -> bool:
     return (root / IMAGES).is_dir() or (root / POSES).exists()
 
 
-def file_note(path: Path) -> str | None:
-    if path.name != POSES:
-        return None
-    return (
-        f"{path}: TartanAir's poses have no times and are in NED axes; give the sequence folder (--gt "
-        f"{path.parent}): it times frame k at k/{FPS:g} s and carries the poses to the camera's axes"
-    )
-
-
 def write_synthetic(tmp: Path, s: Synth) -> Placed:
     """The sequence in TartanAir's layout: image_left/NNNNNN_left.png (colour, the published pinhole) and
     pose_left.txt: the camera's poses in NED axes (camera and world), one row per frame, no times."""
@@ -165,5 +157,5 @@ LAYOUT = Layout(
     synth=write_synthetic,
     fixed_size=(WIDTH, HEIGHT),
     manual_download=TARTANAIR_HOWTO,
-    file_note=file_note,
+    file_note=file_notes.tartanair,
 )

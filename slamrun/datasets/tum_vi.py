@@ -15,10 +15,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from slamrun.core.camera import CameraFile, EquidistantCamera, PinholeCamera
+from slamrun.datasets import file_notes
 from slamrun.datasets.euroc import (
     CAM,
-    asl_file_note,
-    asl_folder,
     body_rows,
     calibration_yaml,
     make_camera,
@@ -28,6 +27,7 @@ from slamrun.datasets.euroc import (
     write_asl_frames,
     yaml_numbers,
 )
+from slamrun.datasets.file_notes import TUMVI_GT
 from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import Sequence
 from slamrun.errors import DatasetError
@@ -35,7 +35,6 @@ from slamrun.errors import DatasetError
 if TYPE_CHECKING:
     from slamrun.datasets.synth import Synth
 
-TUMVI_GT = Path("mav0/mocap0/data.csv")
 TUMVI_CALIB = Path("dso/camchain.yaml")
 NOTES = (
     "TUM-VI's ground truth covers only the parts of the sequence the motion-capture room sees; "
@@ -69,12 +68,6 @@ def read_camchain(path: Path) -> tuple[CameraFile, np.ndarray]:
 def recognise(root: Path) -> bool:
     """mav0/cam0/ and dso/camchain.yaml."""
     return (root / CAM).is_dir() and (root / TUMVI_CALIB).exists()
-
-
-def file_note(path: Path) -> str | None:
-    """TUM-VI's motion-capture ground truth given as it is: in the IMU frame."""
-    folder = asl_folder(path, TUMVI_GT)
-    return None if folder is None else asl_file_note(path, "the IMU frame", "the camera's T_cam_imu", folder)
 
 
 # TUM-VI's cam0 (room sequences, 512x512 equidistant) and its camera-to-IMU transform, as in its camchain.
@@ -143,5 +136,5 @@ LAYOUT = Layout(
         _archive,
         ", ".join(f"{room}1-{n}" for room, n in TUM_VI_ROOMS.items()) + " (e.g. room1, dataset-room1_512_16)",
     ),
-    file_note=file_note,
+    file_note=file_notes.tum_vi,
 )
