@@ -180,8 +180,9 @@ def test_settings_are_the_authors_defaults(patched):
     assert dpvo_process.CONFIG == upstream
     demo = yaml.safe_load((patched / "config/default.yaml").read_text())
     defaults = DpvoParams()
-    for option, key, _ in dpvo_process.SETTINGS:
-        assert getattr(defaults, option) == demo.get(key, upstream[key]), option
+    _, cfg = dpvo_process.config(Dpvo().settings())
+    for key in dpvo_process.CONFIG:
+        assert getattr(cfg, key) == demo.get(key, upstream[key]), key  # what slamrun runs: default.yaml's
     stride = re.search(r"'--stride', type=int, default=(\d+)", (patched / "demo.py").read_text())
     assert defaults.stride == int(stride.group(1))
 
@@ -224,6 +225,26 @@ def test_native_problems_say_what_to_do(tmp_path):
     assert problems(tmp_path / "d", None) == []
 
 
+def changed(params: type) -> dict:
+    """A value other than its default for each parameter a GPU method hands its process (all but build, weights)."""
+    import typing
+
+    out = {}
+    for name, field in params.model_fields.items():
+        default, kind = field.default, field.annotation
+        if name in ("build", "weights"):
+            continue
+        if typing.get_origin(kind) is typing.Literal:
+            out[name] = next(choice for choice in typing.get_args(kind) if choice != default)
+        elif default is None:
+            out[name] = 7
+        elif isinstance(default, bool):
+            out[name] = not default
+        else:
+            out[name] = default + (1 if isinstance(default, int) else 0.25)
+    return out
+
+
 def test_command_carries_the_settings_and_the_build(tmp_path):
     build = fake_build(tmp_path / "build", "x")
     m = Dpvo({"build": str(build), "stride": 1, "patches_per_frame": 64, "seed": 3}).for_backend("local")
@@ -232,12 +253,45 @@ def test_command_carries_the_settings_and_the_build(tmp_path):
     view = make_view(tmp_path / "v", 1000 + np.arange(40) / 30, Profile.rectified)
     argv = m.command(view, tmp_path / "work")
     assert argv[:3] == [sys.executable, "-m", "slamrun.methods.dpvo.process"]
-    opts = dict(zip(argv[3::2], argv[4::2], strict=False))
+    opts = dict(zip(argv[3::2], argv[4::2], strict=True))
     assert opts["--build"] == str(build) and opts["--weights"] == str(build / "weights/dpvo.pth")
-    assert opts["--stride"] == "1" and opts["--patches-per-frame"] == "64" and opts["--seed"] == "3"
     assert opts["--camera"] == str(view.path("camera_pinhole.json"))
+    args = dpvo_process.parse(argv[3:])
+    runner, cfg = dpvo_process.config(args.settings)
+    assert runner == {"stride": 1, "seed": 3} and cfg.PATCHES_PER_FRAME == 64
     docker = Dpvo().for_backend("docker").command(view.at("/data"), Path("/work"))
     assert docker[0] == "python3" and "/opt/dpvo/weights/dpvo.pth" in docker
+
+
+def test_every_parameter_is_written_once_and_reaches_dpvo():
+    """Each of DpvoParams' fields, set to a value other than its default, reaches the process as it is: the runner's
+    (stride, seed) or DPVO's cfg under its config.py name. The params model is the one place a parameter is written:
+    the command hands them all as one JSON object, the process knows DPVO's names."""
+    values = changed(DpvoParams)
+    assert len(values) == 13
+    runner, cfg = dpvo_process.config(Dpvo(values).settings())
+    got = runner | {key.lower(): value for key, value in vars(cfg).items()}
+    assert {name: got[name] for name in values} == values
+    untouched = {key: value for key, value in vars(cfg).items() if key.lower() not in values}
+    assert untouched == {key: dpvo_process.CONFIG[key] for key in untouched}  # config.py's: loop closure off
+
+
+@pytest.mark.parametrize(
+    ("settings", "says"),
+    [
+        ('{"patches_per_frame": 64, "patch_count": 3}', "unknown setting 'patch_count'"),
+        ('{"PATCHES_PER_FRAME": 64}', "unknown setting 'PATCHES_PER_FRAME'"),
+        ('{"patches_per_frame": "64"}', "setting patches_per_frame: '64' is not a int"),
+        ('{"mixed_precision": 1}', "setting mixed_precision: 1 is not a bool"),
+        ('{"stride": 0}', "setting stride: 0 is not a positive integer"),
+        ("[1]", "a JSON object expected"),
+        ("{patches", "Expecting property name"),
+    ],
+)
+def test_settings_the_process_cannot_take_are_named(settings, says):
+    with pytest.raises(ValueError, match=re.escape(says)):
+        dpvo_process.config(settings)
+    assert dpvo_process.config('{"keyframe_thresh": 15}')[1].KEYFRAME_THRESH == 15  # an integer where a number is meant
 
 
 # ---------------------------------------------------------------- the runner, up to DPVO's CUDA code
@@ -275,6 +329,8 @@ def test_runner_reads_the_view_and_stops_at_the_missing_gpu(tmp_path, room_view,
     short.write_text("\n".join(room_view.path("times.txt").read_text().splitlines()[:-1]) + "\n")
     res = subprocess.run([*argv[:10], str(short), *argv[11:]], capture_output=True, text=True, cwd=tmp_path)
     assert res.returncode == 1 and "40 frames but 39 timestamps" in res.stderr
+    res = subprocess.run([*argv, "--settings", '{"patch_count": 3}'], capture_output=True, text=True, cwd=tmp_path)
+    assert res.returncode == 1 and "dpvo: unknown setting 'patch_count'" in res.stderr, res.stderr
 
 
 def test_runner_output_reads_back_at_the_original_timestamps(tmp_path, room_view):

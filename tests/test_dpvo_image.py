@@ -18,13 +18,14 @@ import pytest
 
 from slamrun.images import native
 from slamrun.images import sources as src
-from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
+from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, recipe_text, toolchain_labels
 from tests import images
 from tests.conftest import UPSTREAM, recipe, require_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
 RECIPE = recipe("dpvo")
 DOCKERFILE = RECIPE / "Dockerfile"
+TORCH_CUDA = recipe("torch_cuda")  # the stages DPVO's and DROID-SLAM's images share
 IMAGE = "slamrun/dpvo:latest"
 ARCHS = "7.5 8.0 8.6 8.9 9.0"  # Turing, A100, Ampere consumer, Ada, Hopper (issue 41)
 TOOLCHAIN = {"nvidia-cuda-nvcc", "nvidia-cuda-crt", "nvidia-nvvm", "nvidia-cuda-cccl"}
@@ -48,7 +49,7 @@ def test_every_file_the_recipe_installs_is_pinned_by_hash_and_generated_from_the
     assert pypi_files_of(DOCKERFILE) == [f.filename for f in (*torch_files, *tool_files)]  # nothing else copied
     assert all(src.PYPI_FILES[f.filename] == f for f in (*torch_files, *tool_files))
     for name, table in (("requirements.txt", torch_files), ("requirements-build.txt", tool_files)):
-        lines = pins(RECIPE / name)
+        lines = pins(TORCH_CUDA / name)
         assert "\n".join(lines) + "\n" == src.requirements(list(table)), name
         for line, f in zip(lines, table, strict=True):
             m = HASHED.match(line)
@@ -56,7 +57,7 @@ def test_every_file_the_recipe_installs_is_pinned_by_hash_and_generated_from_the
     projects = [f.project for f in (*torch_files, *tool_files)]
     assert len(projects) == len(set(projects))  # one file per project
     assert {f.project for f in tool_files} == TOOLCHAIN | {"ninja"}
-    text = DOCKERFILE.read_text()
+    text = recipe_text(DOCKERFILE)
     installs = [i for i in re.sub(r"\\\n", " ", text).splitlines() if "pip install" in i]
     assert len(installs) == 2 and all("--no-index" in i for i in installs)
     assert all(i.count("--require-hashes") == 1 for i in installs if "-r /opt" in i)
@@ -89,14 +90,20 @@ def test_the_toolchain_is_what_cuda_toolkit_pins_when_its_wheel_is_at_hand():
 
 
 def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_patches():
-    build, runtime = stages(DOCKERFILE.read_text())
-    assert build.startswith("FROM debian:bookworm-slim AS build") and runtime.startswith("FROM debian:bookworm-slim\n")
-    uninstalled = re.search(r"pip uninstall -y --no-cache-dir \\\n\s+([^\\\n]+)", build).group(1).split()
+    torch_cuda, venv, runtime_base, build, runtime = stages(recipe_text(DOCKERFILE))
+    assert torch_cuda.startswith("FROM debian:bookworm-slim AS torch-cuda") and build.startswith(
+        "FROM torch-cuda AS build"
+    )
+    assert venv.startswith("FROM torch-cuda AS torch-venv") and runtime_base.startswith("FROM debian:bookworm-slim AS")
+    assert runtime.startswith("FROM torch-runtime\n")
+    uninstalled = re.search(r"pip uninstall -y --no-cache-dir \\\n\s+([^\\\n]+)", venv).group(1).split()
     assert set(uninstalled) == TOOLCHAIN | {"ninja"}  # every build-only wheel is removed before the copy
-    assert "pip uninstall -y --no-cache-dir triton" in build  # torch.compile's, not DPVO's
-    assert "pypi" not in runtime and "g++" not in runtime and "sources/" not in runtime
-    assert "! ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin/nvcc" in runtime
-    assert "USER slam" in runtime and "useradd --create-home --uid 1000 slam" in runtime
+    assert "pip uninstall -y --no-cache-dir triton" in venv  # torch.compile's, not DPVO's
+    assert "COPY --from=torch-venv /opt/venv /opt/venv" in runtime_base and "--from=build /opt/venv" not in runtime
+    for stage in (runtime_base, runtime):
+        assert "pypi" not in stage and "g++" not in stage and "sources/" not in stage
+    assert "! ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin/nvcc" in runtime_base
+    assert "USER slam" in runtime and "useradd --create-home --uid 1000 slam" in runtime_base
     assert ARCH_ARG.search(build).group(1) == ARCHS
     # the native route's files, not copies: patches.py (with the torch_scatter stand-in) and the stand-in network
     recipe_ = native.NATIVE["dpvo"]
@@ -108,11 +115,38 @@ def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_pat
     assert recipe_.standin_args == (seed, str(float(gain)))
 
 
+def test_the_shared_stages_are_one_text_put_ahead_of_each_recipe_that_names_them():
+    """DPVO's and DROID-SLAM's recipes start FROM torch-cuda and end FROM torch-runtime, which neither defines: the
+    build puts recipes/torch_cuda/stages.Dockerfile ahead of each (once), so both build the same steps; a recipe
+    naming no shared stage is built as written."""
+    shared = (TORCH_CUDA / "stages.Dockerfile").read_text()
+    for name in ("dpvo", "droid_slam"):
+        own = (recipe(name) / "Dockerfile").read_text()
+        assert "FROM debian" not in own and "pip install" not in own and "pypi/" not in own  # all of it shared
+        assert recipe_text(recipe(name) / "Dockerfile") == shared + "\n" + own
+    for name in ("dso", "reference_vo", "orb_slam3"):
+        assert recipe_text(recipe(name) / "Dockerfile") == (recipe(name) / "Dockerfile").read_text()
+    listed = subprocess.run([sys.executable, "-m", "slamrun.cli", "images", "--list"], capture_output=True, text=True)
+    assert "dpvo: slamrun/dpvo:latest <- dpvo/image/Dockerfile (+ recipes/torch_cuda/stages.Dockerfile)" in listed.stdout
+    assert "dso: slamrun/dso:latest <- dso/image/Dockerfile\n" in listed.stdout
+
+
 def test_the_extension_build_script_compiles_with_the_wheels_toolkit_for_the_given_targets():
     script = (RECIPE / "build-extensions.sh").read_text()
-    assert 'CUDA_HOME=$cuda TORCH_CUDA_ARCH_LIST="$arch"' in script and "cuda=$site/nvidia/cu13" in script
-    assert "libcudart.so.13" in script and 'python3 "$patches" "$tree"' in script
-    assert "import torch, cuda_corr, cuda_ba, lietorch_backends" in script
+    common = (recipe("common") / "build-torch-extension.sh").read_text()
+    assert 'CUDA_HOME=$cuda TORCH_CUDA_ARCH_LIST="$arch"' in common and "cuda=$site/nvidia/cu13" in common
+    assert "libcudart.so.13" in common and 'python3 "$patches" "$tree"' in script
+    assert 'bash "$compile" "$tree" "$arch" "$jobs" cuda_corr cuda_ba lietorch_backends' in script
+    assert 'compile=$(dirname "$0")/../common/build-torch-extension.sh' in script  # copied beside the recipe's:
+    copies = re.sub(r"\\\n", " ", DOCKERFILE.read_text())
+    assert re.search(
+        r"COPY [^\n]*slamrun/methods/recipes/common/build-torch-extension.sh[^\n]* /opt/slamrun-build/docker/common/",
+        copies,
+    )
+    assert re.search(
+        r"COPY [^\n]*slamrun/methods/dpvo/image/build-extensions.sh[^\n]* /opt/slamrun-build/docker/dpvo/", copies
+    )
+    assert native.NATIVE["dpvo"].setups == ((".", ("cuda_corr", "cuda_ba", "lietorch_backends")),)
     res = subprocess.run(["bash", "-n", str(RECIPE / "build-extensions.sh")], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     res = subprocess.run(["bash", "-n", str(RECIPE / "network.sh")], capture_output=True, text=True)
@@ -237,20 +271,21 @@ def test_the_compiled_extensions_and_dpvo_import_inside_the_image_without_a_gpu(
 
 
 def test_slamruns_dpvo_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
-    """The image's `python3 -m slamrun.methods.dpvo.process`, as the docker backend runs it, on a real prepared view: it
-    reads the frames and the network, imports PyTorch, and exits 3 saying there is no GPU."""
+    """The image's `python3 -m slamrun.methods.dpvo.process`, as the docker backend runs it (every parameter set to a
+    value other than its default, handed as one JSON object), on a real prepared view: it reads the settings, the
+    frames and the network, imports PyTorch, and exits 3 saying there is no GPU; a setting it does not know is bad
+    input (exit 1), named."""
     from slamrun.datasets.cache import prepare
     from slamrun.datasets.make_synthetic import generate
     from slamrun.datasets.view import Direction, Profile
-    from slamrun.methods.dpvo import IMAGE_BUILD, IMAGE_WEIGHTS
+    from slamrun.methods.dpvo import Dpvo, DpvoParams
+    from tests.test_dpvo import changed
 
     api, _ = built_image()
     view = prepare(generate(tmp_path / "room", frames=20, seed=3), Direction.forward, Profile.rectified, tmp_path / "c")
-    argv = [
-        "python3", "-m", "slamrun.methods.dpvo.process", "--build", IMAGE_BUILD, "--weights", IMAGE_WEIGHTS,
-        "--images", f"/data/{view.images_dir}", "--times", f"/data/{view.times}",
-        "--camera", "/data/camera_pinhole.json",
-        "--out", "/tmp/trajectory.txt",
-    ]  # fmt: skip
+    argv = Dpvo(changed(DpvoParams)).for_backend("docker").command(view.at("/data"), Path("/tmp"))
     status, out = run_in_image(api, argv, {view.root: "/data"})
     assert status == 3 and "NO GPU" in out, out[-3000:]
+    argv[argv.index("--settings") + 1] = '{"patch_count": 3}'
+    status, out = run_in_image(api, argv, {view.root: "/data"})
+    assert status == 1 and "dpvo: unknown setting 'patch_count'" in out, out[-3000:]

@@ -248,13 +248,42 @@ def test_command_carries_every_setting_and_the_build(tmp_path):
     assert argv[:3] == [sys.executable, "-m", "slamrun.methods.droid_slam.process"]
     opts = dict(zip(argv[3::2], argv[4::2], strict=True))
     assert opts["--build"] == str(build) and opts["--weights"] == str(build / "weights/droid.pth")
-    assert opts["--stride"] == "1" and opts["--buffer"] == "300" and opts["--upsample"] == "1" and opts["--seed"] == "5"
     assert opts["--out"] == str(tmp_path / "work" / "trajectory.txt")
-    parsed = proc.parse(argv[3:])  # the process reads back exactly what the method set
-    for option in proc.DEMO:
-        assert getattr(parsed, option) == getattr(m.params, option), option
+    values = proc.settings(proc.parse(argv[3:]).settings)  # the process reads back exactly what the method set
+    assert values == m.params.model_dump(exclude={"build", "weights"})
+    assert values["stride"] == 1 and values["buffer"] == 300 and values["upsample"] is True and values["seed"] == 5
     docker = DroidSlam().for_backend("docker").command(view.at("/data"), Path("/work"))
     assert docker[0] == "python3" and "/opt/droid_slam/weights/droid.pth" in docker and "/opt/droid_slam" in docker
+
+
+def test_every_parameter_is_written_once_and_reaches_droid():
+    """Each of DroidSlamParams' fields, set to a value other than its default, reaches DROID's `args` (demo.py's
+    namespace) by its name, or the runner (stride, seed): the params model is the one place a parameter is written."""
+    from tests.test_dpvo import changed
+
+    values = changed(DroidSlamParams)
+    assert len(values) == 16
+    got = proc.settings(DroidSlam(values).settings())
+    assert got == values
+    args = vars(proc.droid_args(got, Path("/w/droid.pth"), (48, 64)))
+    assert {name: args[name] for name in values if name not in ("stride", "seed")} == {
+        name: value for name, value in values.items() if name not in ("stride", "seed")
+    }
+    assert args["weights"] == "/w/droid.pth" and args["image_size"] == [48, 64] and args["disable_vis"] is True
+
+
+@pytest.mark.parametrize(
+    ("settings", "says"),
+    [
+        ('{"strides": 2}', "unknown setting 'strides'"),
+        ('{"buffer": 2.5}', "setting buffer: 2.5 is not a int"),
+        ('{"upsample": "1"}', "setting upsample: '1' is not a bool"),
+        ('{"warmup": 0}', "setting warmup: 0 is not a positive integer"),
+    ],
+)
+def test_settings_the_process_cannot_take_are_named(settings, says):
+    with pytest.raises(ValueError, match=re.escape(says)):
+        proc.settings(settings)
 
 
 # ---------------------------------------------------------------- the process, up to PyTorch and CUDA
@@ -459,7 +488,7 @@ def fake_droid(tmp_path) -> Path:
 def test_process_tracks_every_strided_frame_and_writes_every_frames_pose(tmp_path, room_view, fake_droid):
     out = tmp_path / "t.txt"
     argv = process_argv(room_view, fake_droid, fake_droid / "weights/droid.pth", out)
-    res = subprocess.run([*argv, "--stride", "3", "--upsample", "1"], capture_output=True, text=True)
+    res = subprocess.run([*argv, "--settings", '{"stride": 3, "upsample": true}'], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     fake = json.loads(next(ln for ln in res.stdout.splitlines() if ln.startswith("FAKE "))[5:])
     assert fake["tracked"] == list(range(0, 40, 3))  # demo.py's [::stride]
@@ -478,9 +507,9 @@ def test_process_tracks_every_strided_frame_and_writes_every_frames_pose(tmp_pat
 
 def test_process_says_not_initialized_and_a_full_buffer(tmp_path, room_view, fake_droid):
     argv = process_argv(room_view, fake_droid, fake_droid / "weights/droid.pth", tmp_path / "t.txt")
-    res = subprocess.run([*argv, "--warmup", "20"], capture_output=True, text=True)  # 14 frames tracked at stride 3
+    res = subprocess.run([*argv, "--settings", '{"warmup": 20}'], capture_output=True, text=True)  # 14 frames tracked
     assert res.returncode == 2 and "NOT INITIALIZED: DROID-SLAM kept 14 keyframe(s), it starts at 20" in res.stdout
     assert DroidSlam().failure_from_log(res.stdout) == "not_initialized"
-    res = subprocess.run([*argv, "--stride", "1", "--buffer", "50"], capture_output=True, text=True)
+    res = subprocess.run([*argv, "--settings", '{"stride": 1, "buffer": 50}'], capture_output=True, text=True)
     assert res.returncode == 4 and "40 keyframes fill the buffer of 50" in res.stderr and "params.buffer" in res.stderr
     assert not (tmp_path / "t.txt").exists()

@@ -20,7 +20,7 @@ import pytest
 from slamrun.errors import SlamRunError
 from slamrun.images import native
 from slamrun.images import sources as src
-from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, toolchain_labels
+from slamrun.images.build import ARCH_ARG, BuildOptions, model_choice, pypi_files_of, recipe_text, toolchain_labels
 from tests import images
 from tests.conftest import UPSTREAM, recipe, require_upstream
 from tests.test_dpvo_image import stages
@@ -43,29 +43,35 @@ def instructions(text: str) -> list[str]:
 # ---------------------------------------------------------------- the recipe
 
 
-def test_the_torch_stage_is_dpvos_word_for_word():
-    """Up to the patches, the build stage is DPVO's: the same wheels (one pinned list, DPVO_TORCH and DPVO_TOOLCHAIN),
-    the same requirement files, the same commands, so that an engine that built one serves the other from its cache."""
-    mine, theirs = instructions(DOCKERFILE.read_text()), instructions(DPVO.read_text())
-    shared = next(i for i, line in enumerate(theirs) if "slamrun/methods/dpvo/image/patches.py" in line)
-    assert shared >= 9 and mine[:shared] == theirs[:shared]
+def test_the_torch_stages_are_dpvos():
+    """The build starts from the torch-cuda stage and ends on torch-runtime, DPVO's (recipes/torch_cuda): the same
+    wheels (one pinned list, DPVO_TORCH and DPVO_TOOLCHAIN), the same steps, so that an engine that built one serves
+    the other from its cache."""
+    mine, theirs = stages(recipe_text(DOCKERFILE)), stages(recipe_text(DPVO))
+    assert (
+        [instructions(s) for s in mine[:3]] == [instructions(s) for s in theirs[:3]]
+        and mine[3].startswith("FROM torch-cuda AS build")
+        and mine[4].startswith("FROM torch-runtime\n")
+    )
     assert pypi_files_of(DOCKERFILE) == pypi_files_of(DPVO)
     assert [f.filename for f in (*src.pypi_table(src.DPVO_TORCH), *src.pypi_table(src.DPVO_TOOLCHAIN))] == (
         pypi_files_of(DOCKERFILE)
     )
-    assert "COPY slamrun/methods/dpvo/image/requirements.txt /opt/slamrun-build/" in mine[:shared]
     assert not (RECIPE / "requirements.txt").exists()  # no second copy of the pins
 
 
 def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_recipe():
-    build, runtime = stages(DOCKERFILE.read_text())
-    assert build.startswith("FROM debian:bookworm-slim AS build") and runtime.startswith("FROM debian:bookworm-slim\n")
-    uninstalled = re.search(r"pip uninstall -y --no-cache-dir \\\n\s+([^\\\n]+)", build).group(1).split()
+    _, venv, runtime_base, build, runtime = stages(recipe_text(DOCKERFILE))
+    uninstalled = re.search(r"pip uninstall -y --no-cache-dir \\\n\s+([^\\\n]+)", venv).group(1).split()
     assert set(uninstalled) == TOOLCHAIN
-    assert "pip uninstall -y --no-cache-dir triton" in build
+    assert "pip uninstall -y --no-cache-dir triton" in venv
     assert "pypi" not in runtime and "g++" not in runtime and "sources/" not in runtime
-    assert "! ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin/nvcc" in runtime
-    assert "check_image.py" in runtime and "USER slam" in runtime and "useradd --create-home --uid 1000 slam" in runtime
+    assert "! ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin/nvcc" in runtime_base
+    assert (
+        "check_image.py" in runtime
+        and "USER slam" in runtime
+        and "useradd --create-home --uid 1000 slam" in runtime_base
+    )
     assert ARCH_ARG.search(build).group(1) == ARCHS
     assert "COPY sources/droid_slam.tar.gz sources/lietorch.tar.gz" in build  # pytorch_scatter is not built
     recipe = native.NATIVE["droid_slam"]
@@ -240,14 +246,19 @@ def test_the_torch_scatter_stand_in_matches_pytorch_scatters_own_code(tmp_path):
 
 def test_slamruns_droid_slam_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_path):
     """The image's `python3 -m slamrun.methods.droid_slam.process`, as the docker backend runs it, on a real prepared
-    view: it reads the frames and the network, imports PyTorch and exits 3 saying there is no GPU."""
+    view (every parameter set to a value other than its default, as one JSON object): it reads the settings, the frames
+    and the network, imports PyTorch and exits 3 saying there is no GPU; a setting it does not know exits 1, named."""
     from slamrun.datasets.cache import prepare
     from slamrun.datasets.make_synthetic import generate
     from slamrun.datasets.view import Direction, Profile
-    from slamrun.methods.droid_slam import DroidSlam
+    from slamrun.methods.droid_slam import DroidSlam, DroidSlamParams
+    from tests.test_dpvo import changed
 
     api, _ = built_image()
     view = prepare(generate(tmp_path / "room", frames=20, seed=3), Direction.forward, Profile.rectified, tmp_path / "c")
-    argv = DroidSlam().for_backend("docker").command(view.at("/data"), Path("/tmp"))
+    argv = DroidSlam(changed(DroidSlamParams)).for_backend("docker").command(view.at("/data"), Path("/tmp"))
     status, out = run_in_image(api, argv, {view.root: "/data"})
     assert status == 3 and "NO GPU" in out, out[-3000:]
+    argv[argv.index("--settings") + 1] = '{"strides": 3}'  # a setting the process does not know: bad input, named
+    status, out = run_in_image(api, argv, {view.root: "/data"})
+    assert status == 1 and "droid_slam: unknown setting 'strides'" in out, out[-3000:]

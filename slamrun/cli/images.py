@@ -120,13 +120,14 @@ def methods_json() -> dict:
 
 def cmd_images(args) -> int:
     import slamrun.methods
-    from slamrun.images.build import METHODS, BuildOptions, build, buildable
+    from slamrun.images.build import METHODS, BuildOptions, build, buildable, stage_files
 
     if args.list:
         for name, (tag, dockerfile) in buildable().items():
             gpu = " (GPU optional, CPU by default)" if slamrun.methods.REGISTRY[name].gpu_capable else ""
             where = dockerfile.relative_to(METHODS) if dockerfile.is_relative_to(METHODS) else dockerfile
-            console.print(f"{name}: {tag} <- {where}{gpu}")
+            stages = "".join(f" (+ {path.relative_to(METHODS)})" for path in stage_files(dockerfile))
+            console.print(f"{name}: {tag} <- {where}{stages}{gpu}")
         return 0
     opts = BuildOptions(
         sources_dir=args.sources,

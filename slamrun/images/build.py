@@ -88,10 +88,39 @@ def buildable() -> dict[str, tuple[str, Path]]:
     return out
 
 
+FROM_RE = re.compile(r"^FROM\s+(\S+)(?:\s+AS\s+(\S+))?", re.MULTILINE | re.IGNORECASE)
+
+
+def shared_stages() -> dict[str, Path]:
+    """The build stages recipes share: stage name -> the `recipes/<part>/stages.Dockerfile` that defines it."""
+    out = {}
+    for path in sorted((METHODS / "recipes").glob("*/stages.Dockerfile")):
+        out |= {stage.lower(): path for _, stage in FROM_RE.findall(path.read_text()) if stage}
+    return out
+
+
+def stage_files(dockerfile: Path) -> list[Path]:
+    """The shared stage files a recipe starts FROM (naming one of their stages that it does not define itself)."""
+    own = dockerfile.read_text()
+    defined = {stage.lower() for _, stage in FROM_RE.findall(own) if stage}
+    shared, parts = shared_stages(), []
+    for base, _ in FROM_RE.findall(own):
+        path = shared.get(base.lower())
+        if path is not None and base.lower() not in defined and path not in parts:
+            parts.append(path)
+    return parts
+
+
+def recipe_text(dockerfile: Path) -> str:
+    """The Dockerfile as built: the shared stage files it starts FROM ahead of its own text; one Dockerfile, so Docker
+    builds the shared stages as any other and caches their layers once for every image that names them."""
+    return "".join(part.read_text() + "\n" for part in stage_files(dockerfile)) + dockerfile.read_text()
+
+
 def pypi_files_of(dockerfile: Path) -> list[str]:
-    """The PyPI files a Dockerfile copies from the build context (`pypi/<file>.whl`)."""
+    """The PyPI files a Dockerfile (with the shared stages it names) copies from the build context (`pypi/<file>`)."""
     names = []
-    instructions = re.sub(r"\\\n", " ", dockerfile.read_text())  # a continued line is one instruction
+    instructions = re.sub(r"\\\n", " ", recipe_text(dockerfile))  # a continued line is one instruction
     for line in instructions.splitlines():
         if line.strip().upper().startswith(("COPY", "ADD")):
             names += [n for n in PYPI_RE.findall(line) if n not in names]
@@ -113,7 +142,7 @@ def toolchain_labels(dockerfile: Path, wheels: list[str], build_args: dict[str, 
         toolkit = versions["cuda-toolkit"]
         nvcc = f", nvcc {versions['nvidia-cuda-nvcc']}" if "nvidia-cuda-nvcc" in versions else ""
         labels[f"{LABEL}.cuda"] = f"{'.'.join(toolkit.split('.')[:2])} (cuda-toolkit {toolkit}{nvcc})"
-    m = ARCH_ARG.search(dockerfile.read_text())
+    m = ARCH_ARG.search(recipe_text(dockerfile))
     arch = build_args.get("TORCH_CUDA_ARCH_LIST") or (m and (m.group(1) or m.group(2)))
     if arch:
         labels[f"{LABEL}.cuda-arch"] = arch
@@ -138,9 +167,10 @@ def model_choice(name: str, opts: BuildOptions) -> tuple[str, str]:
 
 
 def sources_of(dockerfile: Path) -> list[str]:
-    """The upstream sources a Dockerfile copies from the build context (`sources/<name>.tar.gz`)."""
+    """The upstream sources a Dockerfile (with its shared stages) copies from the build context
+    (`sources/<name>.tar.gz`)."""
     names = []
-    for line in dockerfile.read_text().splitlines():
+    for line in recipe_text(dockerfile).splitlines():
         if line.strip().upper().startswith(("COPY", "ADD")):
             names += [n for n in SOURCE_RE.findall(line) if n not in names]
     unknown = [n for n in names if n not in src.SOURCES]
@@ -293,7 +323,7 @@ def build(
 
 def debian_bases(dockerfile: Path) -> set[str]:
     """The `debian:<suite>-slim` images a recipe starts FROM (bookworm for most, bullseye for DynaSLAM)."""
-    return set(re.findall(r"^FROM\s+(debian:[a-z]+-slim)\b", dockerfile.read_text(), flags=re.MULTILINE))
+    return set(re.findall(r"^FROM\s+(debian:[a-z]+-slim)\b", recipe_text(dockerfile), flags=re.MULTILINE))
 
 
 def ensure_bases(client, dockerfile: Path, log: Callable[[str], None]) -> None:
@@ -332,7 +362,7 @@ def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions,
 
             ctx = Path(tmp)
             labels = assemble_context(name, dockerfile, opts, ctx, note)
-            shutil.copyfile(dockerfile, ctx / "Dockerfile.slamrun")
+            (ctx / "Dockerfile.slamrun").write_text(recipe_text(dockerfile))
             args = {"MARCH": opts.march, "JOBS": str(opts.jobs), **json.loads(labels[f"{LABEL}.build-args"])}
             note(f"build arguments: {json.dumps(args)}")
             run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)

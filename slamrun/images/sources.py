@@ -286,20 +286,18 @@ wrapt-1.15.0-cp27-cp27mu-manylinux2010_x86_64.whl
 """
 
 
-# DPVO's image (slamrun/methods/dpvo/image/Dockerfile), and DROID-SLAM's (slamrun/methods/droid_slam/image/Dockerfile,
-# whose build stage starts
-# with the same steps and the same requirement files: one list for both): PyTorch 2.11.0, the PyPI build for CUDA 13.0
+# The torch-cuda stages DPVO's and DROID-SLAM's images share (slamrun/methods/recipes/torch_cuda/stages.Dockerfile: one
+# list for both): PyTorch 2.11.0, the PyPI build for CUDA 13.0
 # (cp311, Debian 12's Python), with every file pip resolves for it, and the CUDA 13.0 compiler as PyPI wheels (no GPU
 # needed to compile). CUDA 13 because PyPI's CUDA 12 compiler wheels (nvidia-cuda-nvcc-cu12, 12.1 to 12.9) hold ptxas
 # alone, no nvcc or cicc.
 # Found with `pip download --only-binary=:all: --python-version 3.11 --platform manylinux_2_{5..36}_x86_64
 # torch==2.11.0 'cuda-toolkit[nvcc,cccl,crt,nvvm]==13.0.2' ninja==1.13.0 numpy==2.2.6
 # opencv-python-headless==4.11.0.86` (and pip==26.3). The runtime stage keeps DPVO_TORCH only
-# (slamrun/methods/dpvo/image/requirements.txt); DPVO_TOOLCHAIN compiles the extensions in the build stage and is
-# uninstalled
-# before the runtime stage copies the environment (slamrun/methods/dpvo/image/requirements-build.txt);
-# tests/test_dpvo_image.py
-# checks both files against these lists.
+# (slamrun/methods/recipes/torch_cuda/requirements.txt); DPVO_TOOLCHAIN compiles the extensions in the build stage and
+# is uninstalled before the runtime stage copies the environment
+# (slamrun/methods/recipes/torch_cuda/requirements-build.txt); tests/test_dpvo_image.py checks both files against these
+# lists.
 DPVO_TORCH = """
 # pip: installs everything below with --no-index --require-hashes (Debian's venv has no pip of its own)
 pip-26.3-py3-none-any.whl

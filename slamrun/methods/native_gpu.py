@@ -10,6 +10,7 @@ import sys
 from abc import abstractmethod
 from pathlib import Path
 
+from slamrun.datasets.view import PreparedView
 from slamrun.methods.base import Method, PythonProcess
 
 
@@ -69,6 +70,7 @@ class NativeGpuMethod(PythonProcess, Method):
     needs_gpu = True
     native = True
     modules = ("torch", "numpy", "cv2")
+    process: str  # its process's module (`python -m`), which reads the settings as one JSON object
     image_build: str  # where the image holds the build (its network in weights/)
     weights_name: str  # the network's file name (dpvo.pth, droid.pth)
     backend: str = "local"
@@ -94,6 +96,19 @@ class NativeGpuMethod(PythonProcess, Method):
             return f"{self.image_build}/weights/{self.weights_name}"
         record = read_build_record(Path(self.build_dir())) or {}
         return str(Path(self.build_dir()) / record.get("weights_file", f"weights/{self.weights_name}"))
+
+    def settings(self) -> str:
+        """Its parameters as one JSON object, as its process reads them (`--settings`): every one but where the build
+        and the network are, by its name in the params model, the one place each is written."""
+        return json.dumps(self.params.model_dump(exclude={"weights", "build"}), sort_keys=True)
+
+    def command(self, view: PreparedView, workdir: Path) -> list[str]:
+        return [
+            self.python, "-m", self.process, "--build", self.build_dir(), "--weights", self.weights(),
+            "--images", str(view.path(view.images_dir)), "--times", str(view.path(view.times)),
+            "--camera", str(view.path("camera_pinhole.json")), "--out", str(workdir / self.output_file),
+            "--settings", self.settings(),
+        ]  # fmt: skip
 
     def problems(self, backend: str) -> list[str]:
         if backend != "local":

@@ -21,7 +21,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from slamrun.datasets.view import PreparedView, Profile
+from slamrun.datasets.view import Profile
 from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import NativeMethod, Source, Weights
 from slamrun.methods.native_gpu import NativeGpuMethod, native_root
@@ -107,25 +107,9 @@ class Dpvo(NativeGpuMethod):
     profile = Profile.rectified
     Params = DpvoParams
     not_initialized_pattern = r"^NOT INITIALIZED"
+    process = "slamrun.methods.dpvo.process"  # run as `python -m`, given these params as one JSON object
     image_build = IMAGE_BUILD
     weights_name = WEIGHTS_NAME
 
     def default_build(self) -> Path:
         return default_build()
-
-    def command(self, view: PreparedView, workdir: Path) -> list[str]:
-        p = self.params
-        argv = [
-            self.python, "-m", "slamrun.methods.dpvo.process",
-            "--build", self.build_dir(), "--weights", self.weights(),
-            "--images", str(view.path(view.images_dir)), "--times", str(view.path(view.times)),
-            "--camera", str(view.path("camera_pinhole.json")), "--out", str(workdir / self.output_file),
-            "--stride", str(p.stride),
-            "--patches-per-frame", str(p.patches_per_frame), "--removal-window", str(p.removal_window),
-            "--optimization-window", str(p.optimization_window), "--patch-lifetime", str(p.patch_lifetime),
-            "--keyframe-thresh", repr(p.keyframe_thresh), "--keyframe-index", str(p.keyframe_index),
-            "--motion-model", p.motion_model, "--motion-damping", repr(p.motion_damping),
-            "--mixed-precision", "1" if p.mixed_precision else "0", "--centroid-sel-strat", p.centroid_sel_strat,
-            "--buffer-size", str(p.buffer_size),
-        ]  # fmt: skip
-        return argv + (["--seed", str(p.seed)] if p.seed is not None else [])

@@ -1,7 +1,12 @@
 """The DPVO process: `python -m slamrun.methods.dpvo.process --build DIR --weights FILE --images ... --out ...
-[settings]`.
+[--settings JSON]`.
 
-Feeds the view's frames (every `--stride`-th, in order, 3-channel as demo.py reads them, cropped to a multiple of 16
+`--settings` is slamrun's parameters of DPVO as one JSON object (the method's params, `json.dumps`ed: each parameter
+is written once, in slamrun/methods/dpvo/__init__.py's DpvoParams): `stride` and `seed` are this runner's, every other
+name is a DPVO setting by its config.py name in lower case (`patches_per_frame` is PATCHES_PER_FRAME). A name this
+process does not know (an image older than the runner) or a value of another type is bad input, named.
+
+Feeds the view's frames (every `stride`-th, in order, 3-channel as demo.py reads them, cropped to a multiple of 16
 pixels) to DPVO with the view's pinhole intrinsics, then writes every fed frame's pose (DPVO's `terminate()`: the
 keyframes' poses and the dropped frames' poses from their keyframe's) as TUM, camera-to-world, at the frames' view
 timestamps. DPVO is imported from `--build` (a native build: the patched tree with its compiled extensions).
@@ -44,19 +49,7 @@ CONFIG = {
     "LOOP_CLOSE_WINDOW_SIZE": 3,
     "LOOP_RETR_THRESH": 0.04,
 }
-SETTINGS = (  # command-line option -> DPVO's setting, type
-    ("patches_per_frame", "PATCHES_PER_FRAME", int),
-    ("removal_window", "REMOVAL_WINDOW", int),
-    ("optimization_window", "OPTIMIZATION_WINDOW", int),
-    ("patch_lifetime", "PATCH_LIFETIME", int),
-    ("keyframe_thresh", "KEYFRAME_THRESH", float),
-    ("keyframe_index", "KEYFRAME_INDEX", int),
-    ("motion_model", "MOTION_MODEL", str),
-    ("motion_damping", "MOTION_DAMPING", float),
-    ("mixed_precision", "MIXED_PRECISION", lambda s: s == "1"),
-    ("centroid_sel_strat", "CENTROID_SEL_STRAT", str),
-    ("buffer_size", "BUFFER_SIZE", int),
-)
+RUNNER = {"stride": 2, "seed": None}  # this runner's settings: demo.py's --stride; PyTorch's generators unseeded
 PREFETCH = 8  # frames read ahead by a reader thread, as demo.py's reader process does
 
 
@@ -64,21 +57,36 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="dpvo")
     for name in ("--build", "--weights", "--images", "--times", "--camera", "--out"):
         ap.add_argument(name, type=Path, required=True)
-    ap.add_argument("--stride", type=int, default=2)
-    ap.add_argument("--seed", type=int)
-    for option, _, kind in SETTINGS:
-        ap.add_argument("--" + option.replace("_", "-"), dest=option, type=str if kind not in (int, float) else kind)
+    ap.add_argument("--settings", default="{}", help="slamrun's parameters as one JSON object (see the module's text)")
     return ap.parse_args(argv)
 
 
-def config(args: argparse.Namespace) -> SimpleNamespace:
-    """DPVO's cfg: config.py's defaults, the given settings over them."""
-    values = dict(CONFIG)
-    for option, key, kind in SETTINGS:
-        given = getattr(args, option)
-        if given is not None:
-            values[key] = kind(given)
-    return SimpleNamespace(**values)
+def checked(name: str, value, default):
+    """`value` for a setting whose default is `default`: of its type (an integer where a number is meant), else a
+    ValueError naming it."""
+    if default is None or type(value) is type(default) or (type(default) is float and type(value) is int):
+        return value
+    raise ValueError(f"setting {name}: {value!r} is not a {type(default).__name__} (default {default!r})")
+
+
+def config(settings: str) -> tuple[dict, SimpleNamespace]:
+    """This runner's settings (stride, seed) and DPVO's cfg (config.py's defaults, the given settings over them), from
+    `--settings`; a ValueError names what is wrong."""
+    given = json.loads(settings)
+    if not isinstance(given, dict):
+        raise ValueError(f"--settings: a JSON object expected, got {settings!r}")
+    runner, values = dict(RUNNER), dict(CONFIG)
+    for name, value in given.items():
+        if name in runner:
+            runner[name] = checked(name, value, RUNNER[name])
+        elif name.upper() in CONFIG and name == name.lower():
+            values[name.upper()] = checked(name, value, CONFIG[name.upper()])
+        else:
+            known = ", ".join([*RUNNER, *(k.lower() for k in CONFIG)])
+            raise ValueError(f"unknown setting {name!r} (this process knows {known}): is the image older than slamrun?")
+    if type(runner["stride"]) is not int or runner["stride"] < 1:
+        raise ValueError(f"setting stride: {runner['stride']!r} is not a positive integer")
+    return runner, SimpleNamespace(**values)
 
 
 def frames(images: Path, times_file: Path, stride: int) -> tuple[list[Path], np.ndarray]:
@@ -146,7 +154,8 @@ def write_tum(path: Path, timestamps: np.ndarray, poses: np.ndarray) -> None:
 def run(argv: list[str] | None = None) -> int:
     args = parse(argv)
     try:
-        paths, times = frames(args.images, args.times, args.stride)
+        runner, cfg = config(args.settings)
+        paths, times = frames(args.images, args.times, runner["stride"])
         k, width, height = intrinsics(args.camera)
     except (OSError, ValueError, KeyError) as exc:
         print(f"dpvo: {exc}", file=sys.stderr)
@@ -163,12 +172,13 @@ def run(argv: list[str] | None = None) -> int:
     if not torch.cuda.is_available():
         print("NO GPU: DPVO runs on CUDA only and torch.cuda.is_available() is False", file=sys.stderr)
         return 3
-    if args.seed is not None:
-        torch.manual_seed(args.seed)
+    if runner["seed"] is not None:
+        torch.manual_seed(runner["seed"])
     from dpvo.dpvo import DPVO  # DPVO's CUDA code: builds a CUDA tensor at import
 
-    cfg = config(args)
-    print(f"dpvo: {len(paths)} frames (stride {args.stride}) of {width}x{height}, settings {vars(cfg)}", flush=True)
+    print(
+        f"dpvo: {len(paths)} frames (stride {runner['stride']}) of {width}x{height}, settings {vars(cfg)}", flush=True
+    )
     print(f"dpvo: network {weights_note(args.build, args.weights)}", flush=True)
     slam = None
     intr = torch.from_numpy(k).cuda()

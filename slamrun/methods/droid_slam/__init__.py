@@ -23,7 +23,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from slamrun.datasets.view import PreparedView, Profile
+from slamrun.datasets.view import Profile
 from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import NativeMethod, Source, Weights
 from slamrun.methods.native_gpu import NativeGpuMethod, native_root
@@ -124,25 +124,9 @@ class DroidSlam(NativeGpuMethod):
     profile = Profile.rectified
     Params = DroidSlamParams
     not_initialized_pattern = r"^NOT INITIALIZED"
+    process = "slamrun.methods.droid_slam.process"  # run as `python -m`, given these params as one JSON object
     image_build = IMAGE_BUILD
     weights_name = WEIGHTS_NAME
 
     def default_build(self) -> Path:
         return default_build()
-
-    def command(self, view: PreparedView, workdir: Path) -> list[str]:
-        p = self.params
-        argv = [
-            self.python, "-m", "slamrun.methods.droid_slam.process",
-            "--build", self.build_dir(), "--weights", self.weights(),
-            "--images", str(view.path(view.images_dir)), "--times", str(view.path(view.times)),
-            "--camera", str(view.path("camera_pinhole.json")), "--out", str(workdir / self.output_file),
-            "--stride", str(p.stride), "--buffer", str(p.buffer), "--beta", repr(p.beta),
-            "--filter-thresh", repr(p.filter_thresh), "--warmup", str(p.warmup),
-            "--keyframe-thresh", repr(p.keyframe_thresh), "--frontend-thresh", repr(p.frontend_thresh),
-            "--frontend-window", str(p.frontend_window), "--frontend-radius", str(p.frontend_radius),
-            "--frontend-nms", str(p.frontend_nms), "--backend-thresh", repr(p.backend_thresh),
-            "--backend-radius", str(p.backend_radius), "--backend-nms", str(p.backend_nms),
-            "--upsample", "1" if p.upsample else "0", "--motion-damping", repr(p.motion_damping),
-        ]  # fmt: skip
-        return argv + (["--seed", str(p.seed)] if p.seed is not None else [])

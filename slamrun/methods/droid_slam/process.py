@@ -1,7 +1,12 @@
 """The DROID-SLAM process: `python -m slamrun.methods.droid_slam.process --build DIR --weights FILE --images ...
---out ... [settings]`.
+--out ... [--settings JSON]`.
 
-Tracks every `--stride`-th frame of the view in order (3-channel, resized to about 384x512 pixels and cropped to a
+`--settings` is slamrun's parameters of DROID-SLAM as one JSON object (the method's params, `json.dumps`ed: each
+parameter is written once, in slamrun/methods/droid_slam/__init__.py's DroidSlamParams): demo.py's options by their
+names (`filter_thresh` is --filter_thresh), DROID's `motion_damping`, and this runner's `seed`. A name this process
+does not know (an image older than the runner) or a value of another type is bad input, named.
+
+Tracks every `stride`-th frame of the view in order (3-channel, resized to about 384x512 pixels and cropped to a
 multiple of 8, the intrinsics scaled, as DROID-SLAM's demo.py does) with the view's pinhole intrinsics, then calls
 DROID's terminate() with EVERY frame of the view: after its two global bundle adjustments, its trajectory filler gives
 each frame a pose (interpolated between the keyframes around it, then refined by motion-only bundle adjustment), and
@@ -25,7 +30,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from slamrun.methods.dpvo.process import frames, intrinsics, weights_note, write_tum
+from slamrun.methods.dpvo.process import checked, frames, intrinsics, weights_note, write_tum
 
 # demo.py's options and defaults (the ones slamrun's parameters set; tests compare them with demo.py)
 DEMO = {
@@ -43,6 +48,7 @@ DEMO = {
     "backend_radius": 2,
     "backend_nms": 3,
 }
+SETTINGS = DEMO | {"upsample": False, "motion_damping": 0.0, "seed": None}  # every setting, with its default
 AREA = 384 * 512  # demo.py resizes every image to about this many pixels
 FILL_BATCH = 16  # the trajectory filler's batch: it needs this many free slots in the keyframe buffer
 
@@ -51,25 +57,37 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog="droid_slam")
     for name in ("--build", "--weights", "--images", "--times", "--camera", "--out"):
         ap.add_argument(name, type=Path, required=True)
-    for option, default in DEMO.items():
-        ap.add_argument("--" + option.replace("_", "-"), dest=option, type=type(default), default=default)
-    ap.add_argument("--upsample", choices=("0", "1"), default="0")
-    ap.add_argument("--motion-damping", dest="motion_damping", type=float, default=0.0)
-    ap.add_argument("--seed", type=int)
+    ap.add_argument("--settings", default="{}", help="slamrun's parameters as one JSON object (see the module's text)")
     return ap.parse_args(argv)
 
 
-def droid_args(args: argparse.Namespace, image_size: tuple[int, int]) -> SimpleNamespace:
+def settings(text: str) -> dict:
+    """Every setting (SETTINGS' defaults, the given ones over them) from `--settings`; a ValueError names what is
+    wrong."""
+    given = json.loads(text)
+    if not isinstance(given, dict):
+        raise ValueError(f"--settings: a JSON object expected, got {text!r}")
+    unknown = [name for name in given if name not in SETTINGS]
+    if unknown:
+        raise ValueError(
+            f"unknown setting {unknown[0]!r} (this process knows {', '.join(SETTINGS)}): is the image older than "
+            "slamrun?"
+        )
+    values = SETTINGS | {name: checked(name, value, SETTINGS[name]) for name, value in given.items()}
+    for name in ("stride", "buffer", "warmup"):
+        if values[name] < 1:
+            raise ValueError(f"setting {name}: {values[name]!r} is not a positive integer")
+    return values
+
+
+def droid_args(values: dict, weights: Path, image_size: tuple[int, int]) -> SimpleNamespace:
     """The `args` DROID's classes read (demo.py's namespace): headless, monocular, synchronous, on the one GPU."""
-    values = {option: getattr(args, option) for option in DEMO if option != "stride"}
     return SimpleNamespace(
-        **values,
-        weights=str(args.weights),
+        **{name: value for name, value in values.items() if name not in ("stride", "seed")},
+        weights=str(weights),
         image_size=list(image_size),
         disable_vis=True,
         stereo=False,
-        upsample=args.upsample == "1",
-        motion_damping=args.motion_damping,
         asynchronous=False,
         frontend_device="cuda",
         backend_device="cuda",
@@ -123,6 +141,7 @@ def stream(paths: list[Path], indices, k: np.ndarray, height: int, width: int):
 def run(argv: list[str] | None = None) -> int:
     args = parse(argv)
     try:
+        values = settings(args.settings)
         paths, times = frames(args.images, args.times, 1)
         k, width, height = intrinsics(args.camera)
     except (OSError, ValueError, KeyError) as exc:
@@ -143,15 +162,15 @@ def run(argv: list[str] | None = None) -> int:
     if not torch.cuda.is_available():
         print("NO GPU: DROID-SLAM runs on CUDA only and torch.cuda.is_available() is False", file=sys.stderr)
         return 3
-    if args.seed is not None:
-        torch.manual_seed(args.seed)
+    if values["seed"] is not None:
+        torch.manual_seed(values["seed"])
     from droid import Droid  # DROID's modules: lietorch, droid_backends
 
     _, _, h, w = resized(height, width)
-    cfg = droid_args(args, (h, w))
-    tracked = range(0, len(paths), args.stride)
+    cfg = droid_args(values, args.weights, (h, w))
+    tracked = range(0, len(paths), values["stride"])
     print(
-        f"droid_slam: {len(tracked)} of {len(paths)} frames tracked (stride {args.stride}), {width}x{height} "
+        f"droid_slam: {len(tracked)} of {len(paths)} frames tracked (stride {values['stride']}), {width}x{height} "
         f"resized to {w}x{h}, settings {vars(cfg)}",
         flush=True,
     )
@@ -163,11 +182,11 @@ def run(argv: list[str] | None = None) -> int:
             droid.track(i, image, intrinsics=intr)
         keyframes = droid.video.counter.value
         if not droid.frontend.is_initialized:
-            print(f"NOT INITIALIZED: DROID-SLAM kept {keyframes} keyframe(s), it starts at {args.warmup}")
+            print(f"NOT INITIALIZED: DROID-SLAM kept {keyframes} keyframe(s), it starts at {values['warmup']}")
             return 2
-        if keyframes + FILL_BATCH > args.buffer:
+        if keyframes + FILL_BATCH > values["buffer"]:
             print(
-                f"droid_slam: {keyframes} keyframes fill the buffer of {args.buffer} (the trajectory filler needs "
+                f"droid_slam: {keyframes} keyframes fill the buffer of {values['buffer']} (the trajectory filler needs "
                 f"{FILL_BATCH} more): raise params.buffer",
                 file=sys.stderr,
             )
