@@ -127,7 +127,8 @@ def test_the_shared_stages_are_one_text_put_ahead_of_each_recipe_that_names_them
     for name in ("dso", "reference_vo", "orb_slam3"):
         assert recipe_text(recipe(name) / "Dockerfile") == (recipe(name) / "Dockerfile").read_text()
     listed = subprocess.run([sys.executable, "-m", "slamrun.cli", "images", "--list"], capture_output=True, text=True)
-    assert "dpvo: slamrun/dpvo:latest <- dpvo/image/Dockerfile (+ recipes/torch_cuda/stages.Dockerfile)" in listed.stdout
+    line = "dpvo: slamrun/dpvo:latest <- dpvo/image/Dockerfile (+ recipes/torch_cuda/stages.Dockerfile)"
+    assert line in listed.stdout
     assert "dso: slamrun/dso:latest <- dso/image/Dockerfile\n" in listed.stdout
 
 
