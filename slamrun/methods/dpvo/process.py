@@ -69,24 +69,31 @@ def checked(name: str, value, default):
     raise ValueError(f"setting {name}: {value!r} is not a {type(default).__name__} (default {default!r})")
 
 
+def settings_over(text: str, defaults: dict, positive: tuple[str, ...]) -> dict:
+    """The settings `--settings` gives over their `defaults`: a JSON object of known names, each value of its
+    default's type, those named in `positive` at least 1; else a ValueError naming what is wrong."""
+    given = json.loads(text)
+    if not isinstance(given, dict):
+        raise ValueError(f"--settings: a JSON object expected, got {text!r}")
+    unknown = [name for name in given if name not in defaults]
+    if unknown:
+        raise ValueError(
+            f"unknown setting {unknown[0]!r} (this process knows {', '.join(defaults)}): is the image older than "
+            "slamrun?"
+        )
+    values = defaults | {name: checked(name, value, defaults[name]) for name, value in given.items()}
+    for name in positive:
+        if values[name] < 1:
+            raise ValueError(f"setting {name}: {values[name]!r} is not a positive integer")
+    return values
+
+
 def config(settings: str) -> tuple[dict, SimpleNamespace]:
     """This runner's settings (stride, seed) and DPVO's cfg (config.py's defaults, the given settings over them), from
     `--settings`; a ValueError names what is wrong."""
-    given = json.loads(settings)
-    if not isinstance(given, dict):
-        raise ValueError(f"--settings: a JSON object expected, got {settings!r}")
-    runner, values = dict(RUNNER), dict(CONFIG)
-    for name, value in given.items():
-        if name in runner:
-            runner[name] = checked(name, value, RUNNER[name])
-        elif name.upper() in CONFIG and name == name.lower():
-            values[name.upper()] = checked(name, value, CONFIG[name.upper()])
-        else:
-            known = ", ".join([*RUNNER, *(k.lower() for k in CONFIG)])
-            raise ValueError(f"unknown setting {name!r} (this process knows {known}): is the image older than slamrun?")
-    if type(runner["stride"]) is not int or runner["stride"] < 1:
-        raise ValueError(f"setting stride: {runner['stride']!r} is not a positive integer")
-    return runner, SimpleNamespace(**values)
+    values = settings_over(settings, RUNNER | {key.lower(): value for key, value in CONFIG.items()}, ("stride",))
+    runner = {name: values.pop(name) for name in RUNNER}
+    return runner, SimpleNamespace(**{name.upper(): value for name, value in values.items()})
 
 
 def frames(images: Path, times_file: Path, stride: int) -> tuple[list[Path], np.ndarray]:

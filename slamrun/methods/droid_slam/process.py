@@ -30,7 +30,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from slamrun.methods.dpvo.process import checked, frames, intrinsics, weights_note, write_tum
+from slamrun.methods.dpvo.process import frames, intrinsics, settings_over, weights_note, write_tum
 
 # demo.py's options and defaults (the ones slamrun's parameters set; tests compare them with demo.py)
 DEMO = {
@@ -64,20 +64,7 @@ def parse(argv: list[str] | None) -> argparse.Namespace:
 def settings(text: str) -> dict:
     """Every setting (SETTINGS' defaults, the given ones over them) from `--settings`; a ValueError names what is
     wrong."""
-    given = json.loads(text)
-    if not isinstance(given, dict):
-        raise ValueError(f"--settings: a JSON object expected, got {text!r}")
-    unknown = [name for name in given if name not in SETTINGS]
-    if unknown:
-        raise ValueError(
-            f"unknown setting {unknown[0]!r} (this process knows {', '.join(SETTINGS)}): is the image older than "
-            "slamrun?"
-        )
-    values = SETTINGS | {name: checked(name, value, SETTINGS[name]) for name, value in given.items()}
-    for name in ("stride", "buffer", "warmup"):
-        if values[name] < 1:
-            raise ValueError(f"setting {name}: {values[name]!r} is not a positive integer")
-    return values
+    return settings_over(text, SETTINGS, ("stride", "buffer", "warmup"))
 
 
 def droid_args(values: dict, weights: Path, image_size: tuple[int, int]) -> SimpleNamespace:
