@@ -77,6 +77,32 @@ def test_levene_on_groups_without_spread_to_rounding_is_null_with_its_reason():
     assert "kruskal" in m.notes  # 0.3 and 0.30000000000000004 are one value
 
 
+def test_levene_on_groups_of_two_distinct_values_is_null_with_its_reason():
+    """Two values per group: each lies as far from the group's median as the other, so the absolute deviations that
+    Levene's test compares have no spread within any group and its F divides by zero (the issue: F 1.27e+30, p
+    1.3e-45; F inf, p 0.0). The test's own input has no spread: no figure, the reason said."""
+    groups = [np.array([0.1, 0.3]), np.array([0.2, 0.7]), np.array([0.15, 0.16])]
+    with np.errstate(all="ignore"):
+        raw = scipy_stats.levene(*groups, center="median")
+    assert not np.isfinite(raw.statistic) or raw.statistic > 1e10  # what was printed before
+    f, p = levene(groups)
+    assert np.isnan(f) and np.isnan(p)
+    df = pd.DataFrame(
+        {
+            "method": ["a", "a", "b", "b", "c", "c"],
+            "sequence": ["s1", "s2"] * 3,
+            "direction": "forward",
+            "ate_rmse": np.concatenate(groups),
+        }
+    )
+    m = study_statistics(df, ["ate_rmse"]).metrics["ate_rmse"]
+    assert np.isnan(m.levene_F) and "absolute deviations" in m.notes["levene"]
+    assert np.isfinite(m.kruskal_p)  # the values themselves spread: the rank test stands
+    # one group whose deviations do spread: the test has within-group variance and gives its figure
+    f, p = levene([*groups, np.array([0.1, 0.2, 0.9])])
+    assert np.isfinite(f) and 0 <= p <= 1
+
+
 def test_all_values_tied_gives_no_rank_test_and_no_letters_apart():
     df = pd.DataFrame({"method": ["a", "a", "b", "b"], "ate_rmse": [0.5] * 4})
     m = study_statistics(df, ["ate_rmse"]).metrics["ate_rmse"]

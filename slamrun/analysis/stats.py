@@ -123,11 +123,21 @@ def levene(groups: list[np.ndarray]) -> tuple[float, float]:
 
 
 def levene_problem(groups: list[np.ndarray]) -> str | None:
-    """Why Levene's test means nothing on `groups` (every group without spread, to rounding), or None."""
+    """Why Levene's test means nothing on `groups`, or None. The test is an analysis of variance of each value's
+    absolute deviation from its group's median: where those deviations have no spread within any group (to rounding:
+    every group without spread, or of two values, each as far from the median as the other) its F divides by
+    rounding or by zero (1e30, inf) and means nothing."""
     if len(groups) < 2:
         return "fewer than two methods with two runs or more"
-    if all(_no_spread(np.asarray(v, float), _scale(groups)) for v in groups):
+    scale = _scale(groups)
+    if all(_no_spread(np.asarray(v, float), scale) for v in groups):
         return "no spread within any method's runs (identical to rounding): variances cannot be compared"
+    deviations = [np.abs(np.asarray(v, float) - np.median(v)) for v in groups]
+    if all(_no_spread(d, scale) for d in deviations):
+        return (
+            "the absolute deviations from each method's median, which the test compares, have no spread within any "
+            "method (to rounding; e.g. two runs each, equally far from their median): its F would divide by zero"
+        )
     return None
 
 
