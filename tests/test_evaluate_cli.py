@@ -375,7 +375,8 @@ def test_every_wrong_format_or_combination_is_one_line_naming_the_file(campaign,
         (["--gt", gt, "--gt-format", "tum", "--metric", "tum-mono"], "groundtruthSync"),
         (["--gt", garbage], f"{garbage}"),
         (["--gt", empty, "--metric", "ate"], f"{empty}: no finite pose"),
-        (["--gt", empty], f"{empty}: no pose row"),
+        (["--gt", empty], f"{empty}: no finite pose; expected a TUM trajectory"),  # no NaN row: a plain TUM file
+        (["--gt", empty, "--gt-format", "tum-mono"], f"{empty}: no pose row"),
         (["--gt", gt, "--est-format", "kitti"], "give the sequence's times.txt with --times"),
         (["--gt", euroc, "--tolerance", "0.1"], f"{euroc}: a sequence folder is evaluated as a campaign does"),
         (["--gt", gt, "--delta-unit", "frames"], "--delta-unit frames counts the sequence's frames"),
@@ -387,3 +388,149 @@ def test_every_wrong_format_or_combination_is_one_line_naming_the_file(campaign,
         out = slamrun("evaluate", *args, est)
         assert out.returncode == 1 and said in out.stderr, (args, out.stderr)
         assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1, out.stderr
+
+
+# ---------------------------------------------------------------- a ground-truth file's default metrics
+
+
+EVO_DEFAULTS = [  # (ground truth, estimate) of evo's test data: plain TUM files and an EuRoC state csv
+    ("freiburg1_xyz-groundtruth.txt", "freiburg1_xyz-rgbdslam.txt"),
+    ("fr2_desk_groundtruth.txt", "fr2_desk_ORB_kf_mono.txt"),
+    ("V102_groundtruth.csv", "V102.txt"),
+]
+
+
+@pytest.mark.parametrize(("gt_name", "est_name"), EVO_DEFAULTS)
+def test_a_plain_tum_or_euroc_ground_truth_file_gives_ate_and_rpe_by_default(shared_data, gt_name, est_name):
+    """The issue: fr1/xyz's groundtruth.txt once got TUM-Mono's metric by default ("unassociated": no ground truth
+    within 1 ms), where an evo user expects ATE and RPE. Now a file that is not TUM-Mono's gets ATE and RPE at 1 s,
+    the very figures `--metric ate --metric rpe` gives."""
+    gt, est = shared_data / "evo_test_data" / gt_name, shared_data / "evo_test_data" / est_name
+    default = slamrun("evaluate", "--gt", gt, "--json", est)
+    asked = slamrun("evaluate", "--gt", gt, "--metric", "ate", "--metric", "rpe", "--json", est)
+    assert default.returncode == asked.returncode == 0, (default.stdout, default.stderr)
+    (row,) = json_rows(default)
+    assert row == json_rows(asked)[0] and default.stderr == asked.stderr
+    assert row["status"] == "ok" and row["ate_rmse"] > 0 and row["rpe_t_rmse"] > 0 and row["rpe_pairs"] > 0
+    assert (row["delta"], row["delta_unit"]) == (1.0, "s") and "e_t" not in row
+
+
+def test_an_explicit_tum_mono_metric_on_a_plain_tum_file_keeps_its_behaviour(shared_data, loop):
+    """--metric tum-mono reads a TUM file as a groundtruthSync (its halves the segments), as before: fr1/xyz's
+    estimate at the camera's frames has no ground truth within 1 ms; an estimate at the file's own times has
+    TUM-Mono's figures, the benchmark's evaluator's on that file."""
+    from slamrun.core.evaluation import tum_mono
+    from slamrun.core.trajectory import read_tum
+    from slamrun.datasets.groundtruth import read_groundtruth_sync
+
+    data = shared_data / "evo_test_data"
+    fr1 = slamrun(
+        "evaluate", "--gt", data / "freiburg1_xyz-groundtruth.txt", "--metric", "tum-mono", "--json",
+        data / "freiburg1_xyz-rgbdslam.txt",
+    )  # fmt: skip
+    assert fr1.returncode == 1 and "1 of 1 file(s) could not be evaluated" in fr1.stderr
+    (row,) = json_rows(fr1)
+    assert row["status"] == "unassociated" and row["n_poses"] == 788
+    assert row["detail"] == "633 poses (first t=1305031102.160407) have no GT within 1 ms"
+    gt, est = loop
+    out = slamrun("evaluate", "--gt", gt, "--metric", "tum-mono", "--json", est)
+    assert out.returncode == 0, out.stderr
+    (row,) = json_rows(out)
+    ref = tum_mono(read_groundtruth_sync(gt), read_tum(est))
+    assert row["status"] == "ok" and "ate_rmse" not in row
+    for name in ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse"):
+        assert row[name] == pytest.approx(getattr(ref, name), rel=1e-12, abs=1e-15), name
+    default = slamrun("evaluate", "--gt", gt, "--json", est)  # the same file without --metric: ATE and RPE
+    assert default.returncode == 0 and "ate_rmse" in json_rows(default)[0] and "e_t" not in json_rows(default)[0]
+
+
+@pytest.fixture(scope="module")
+def tum_mono_sequence(tmp_path_factory) -> tuple[Path, Path]:
+    """A TUM-Mono sequence written by `slamrun synth` (groundtruthSync.txt: poses at the start and the end, NaN rows
+    between) and an estimate: its full path at the frames, at another scale and place, drifting. Returns the
+    groundtruthSync.txt and the estimate."""
+    from slamrun.core.trajectory import read_tum
+
+    root = tmp_path_factory.mktemp("tum_mono")
+    folder = generate(root / "sequence_01", frames=60, seed=4, size=(160, 120), layout="tum-mono")
+    full = read_tum(folder / "groundtruth_full.txt")
+    drift = np.linspace(0, 0.05, len(full))[:, None] * [1.0, -0.5, 0.2]
+    est = tum_file(root / "est.txt", full.timestamps, 0.4 * full.positions + [1.0, 2.0, 3.0] + drift)
+    return folder / "groundtruthSync.txt", est
+
+
+def test_tum_monos_groundtruthsync_keeps_tum_monos_metric_by_default_also_renamed(tum_mono_sequence, tmp_path):
+    """groundtruthSync.txt gives TUM-Mono's figures by default (by its name), and so does a copy under another name
+    (by its content: poses at the start and the end, NaN rows between), with a note saying why; explicit metrics
+    still win."""
+    sync, est = tum_mono_sequence
+    renamed = tmp_path / "sequence_01_gt.txt"
+    shutil.copyfile(sync, renamed)
+    asked = slamrun("evaluate", "--gt", sync, "--metric", "tum-mono", "--json", est)
+    assert asked.returncode == 0, asked.stderr
+    (ref,) = json_rows(asked)
+    assert ref["status"] == "ok" and ref["e_t"] > 0 and ref["e_align"] > 0 and "ate_rmse" not in ref
+    by_name = slamrun("evaluate", "--gt", sync, "--json", est)
+    by_content = slamrun("evaluate", "--gt", renamed, "--json", est)
+    assert by_name.returncode == by_content.returncode == 0, (by_name.stderr, by_content.stderr)
+    assert json_rows(by_name) == json_rows(by_content) == [ref]
+    assert by_name.stderr == "" and "TUM-Mono's ground truth" in by_content.stderr
+    assert str(renamed) in by_content.stderr and "--metric ate" in by_content.stderr
+    ate = slamrun("evaluate", "--gt", renamed, "--metric", "ate", "--json", est)  # its poses only, as before
+    assert ate.returncode == 0 and json_rows(ate)[0]["ate_n"] == 24 and "e_t" not in json_rows(ate)[0]
+
+
+def test_recognising_a_renamed_groundtruthsync_keeps_evaluate_lean(tum_mono_sequence, tmp_path):
+    """Telling TUM-Mono's ground truth by its content loads no layout, no OpenCV, no PyYAML."""
+    from tests.test_layout import loaded_by_evaluate
+
+    sync, est = tum_mono_sequence
+    renamed = tmp_path / "gt.txt"
+    shutil.copyfile(sync, renamed)
+    stdout, loaded = loaded_by_evaluate("--gt", str(renamed), str(est))
+    assert "e_t=" in stdout and loaded == [], (stdout, loaded)
+
+
+def nan_rows(gt: Path, out: Path, rows) -> Path:
+    """`gt` with the poses of `rows` (0-based) written as NaN."""
+    lines = gt.read_text().splitlines()
+    for i in rows:
+        lines[i] = lines[i].split()[0] + " NaN NaN NaN NaN NaN NaN NaN"
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+@pytest.mark.parametrize(
+    ("rows", "metrics"),
+    [
+        (range(0), ("ate", "rpe")),  # a plain TUM file
+        (range(15, 45), ("tum-mono",)),  # poses at the start and the end, NaN rows between: TUM-Mono's shape
+        (range(0, 5), ("ate", "rpe")),  # NaN rows at the start: a tracker's lost poses, not TUM-Mono's
+        ((3, 17, 41, 52), ("ate", "rpe")),  # dropouts here and there
+        (range(40, 60), ("ate", "rpe")),  # poses at the start only
+        (range(10, 25), ("ate", "rpe")),  # a gap in the first half: the middle row has a pose
+    ],
+)
+def test_a_tum_files_default_metrics_follow_its_nan_rows(loop, tmp_path, rows, metrics):
+    """A TUM file is TUM-Mono's ground truth by its content when the rows with a pose lie in its first and its last
+    half with NaN rows between them (over the middle row); any other TUM file is evaluated with ATE and RPE."""
+    from slamrun.datasets.groundtruth import open_groundtruth
+
+    gt, _ = loop
+    gt = nan_rows(gt, tmp_path / "gt_nan.txt", rows)
+    assert open_groundtruth(gt).default_metrics == metrics
+    assert open_groundtruth(gt, "tum").default_metrics == ("ate", "rpe")  # a format given wins
+    assert open_groundtruth(gt, None, ("ate",)).default_metrics == ("ate", "rpe")  # read as TUM: NaN rows dropped
+
+
+def test_a_layouts_file_in_no_format_still_names_its_folder_without_a_metric(loop, tmp_path):
+    """TartanAir's pose_left.txt (7 numbers a row, no time) without --metric, now read as TUM: the reader's error
+    and TartanAir's note naming the folder form, in one line (as with a TUM-Mono read before)."""
+    gt, est = loop
+    poses = tmp_path / "P000" / "pose_left.txt"
+    poses.parent.mkdir()
+    poses.write_text("".join(" ".join(line.split()[1:]) + "\n" for line in gt.read_text().splitlines()))
+    for metric in ([], ["--metric", "ate"]):
+        out = slamrun("evaluate", "--gt", poses, *metric, est)
+        assert out.returncode == 1 and "Traceback" not in out.stderr and len(out.stderr.splitlines()) == 1
+        assert "7 values, expected 8" in out.stderr and f"--gt {poses.parent}" in out.stderr, out.stderr

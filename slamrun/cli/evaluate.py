@@ -40,14 +40,16 @@ def add_commands(sub) -> None:
         "--gt-format",
         choices=GT_FORMATS,
         help="a ground-truth file's format: tum-mono (groundtruthSync, NaN rows kept), tum, euroc (state csv, ns), "
-        "kitti (poses, with --times); default: recognised from its first row",
+        "kitti (poses, with --times); default: recognised from its first row, and a TUM file as TUM-Mono's by its "
+        "name (groundtruthSync.txt) or its rows (poses at the start and the end, NaN rows between)",
     )
     e.add_argument(
         "--metric",
         action="append",
         choices=METRIC_NAMES,
         help="a metric (repeat for several); default: the dataset's (a folder's layout: tum-mono for TUM-Mono, ate "
-        "and rpe, and kitti for KITTI), for a file its format's (tum-mono for a TUM file)",
+        "and rpe, and kitti for KITTI); for a file its format's: tum-mono for TUM-Mono's groundtruthSync.txt, ate "
+        "and rpe for any other TUM file and an EuRoC csv, and kitti too for KITTI poses",
     )
     e.add_argument("--align", help="sim3 (monocular, default), se3, none, first:N, se3:first:N")
     e.add_argument("--delta", type=_positive_float, help="RPE: the interval of a pose pair, in --delta-unit")

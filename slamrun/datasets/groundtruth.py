@@ -3,8 +3,10 @@
 A sequence folder of any layout gives the campaign's ground truth: the layout's own reader (`open_sequence`), in
 the camera's frame at the frames' times (EuRoC's body poses carried to the camera with T_BS and interpolated), with
 the layout's default metrics. A ground-truth file is read as it is (TUM-Mono's groundtruthSync.txt, TUM, an
-EuRoC/ASL state csv, KITTI poses with their times); where that file is in another frame than the camera's, a note
-says so and names the folder form.
+EuRoC/ASL state csv, KITTI poses with their times), with its dataset's metrics: TUM-Mono's for TUM-Mono's ground
+truth (named groundtruthSync.txt, or shaped as it: poses at the start and the end, NaN rows between), ATE and RPE
+for any other TUM file and an EuRoC csv, and KITTI's segments too for KITTI poses. Where that file is in another
+frame than the camera's, a note says so and names the folder form.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from slamrun.core.inputs import read_text_bounded
 from slamrun.core.metrics import RpeInterval
 from slamrun.core.trajectory import Trajectory, read_times
 from slamrun.datasets.file_notes import EUROC_GT, TUMVI_GT, asl_file_note, asl_folder, layout_note
-from slamrun.errors import DatasetError
+from slamrun.errors import DatasetError, TrajectoryFormatError
 
 FORMAT_NAMES = {  # the trajectory formats (core/formats.py), and TUM-Mono's ground-truth file
     "tum-mono": "a TUM-Mono groundtruthSync.txt ('timestamp tx ty tz qx qy qz qw' rows, NaN rows kept)",
@@ -40,6 +42,7 @@ FILE_DEFAULT_METRICS = {
     "kitti": ("ate", "rpe", "kitti"),
 }
 FILE_LAYOUTS = {"tum-mono": "tum-mono", "tum": "tum-rgbd", "euroc": "euroc", "kitti": "kitti"}  # whose defaults
+TUM_MONO_GT = "groundtruthSync.txt"  # TUM-Mono's ground truth by its name (else by its shape: tum_mono_shaped)
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,13 +67,15 @@ def open_groundtruth(
     path: Path, fmt: str | None = None, metrics: tuple[str, ...] | None = None, times: Path | None = None
 ) -> GroundTruth:
     """The ground truth at `path`: a sequence folder of any layout, or a file of format `fmt` (default: recognised
-    from its first row). `metrics` are the ones asked for (checked against the file's format); `times`, the frame
-    times of KITTI poses. DatasetError naming the file and what was expected."""
+    from its first row, a TUM file as TUM-Mono's by its name or its shape). `metrics` are the ones asked for
+    (checked against the file's format); `times`, the frame times of KITTI poses. DatasetError naming the file and
+    what was expected."""
     path = Path(path)
     if path.is_dir():
         return sequence_groundtruth(path)
     if problem := file_problem(path, MAX_FILE_BYTES, "the ground truth (a file or a sequence folder)"):
         raise DatasetError(problem)
+    given = fmt
     fmt = fmt or sniff_format(path, metrics)
     if metrics and "tum-mono" in metrics and fmt != "tum-mono":
         raise DatasetError(
@@ -83,11 +88,13 @@ def open_groundtruth(
     frame_times = read_frame_times(times) if times is not None else None
     try:
         traj = _read_file(path, fmt, frame_times)
-    except DatasetError as exc:
+    except (DatasetError, TrajectoryFormatError) as exc:
         if (note := layout_note(path)) is None:
             raise
         raise DatasetError(f"{exc}. {note}") from None  # a layout's file in no format of evaluate's says so
     notes = file_notes(path, fmt)
+    if given is None and not metrics and fmt == "tum" and traj.report.n_nonfinite_dropped:
+        fmt, traj, notes = _tum_mono_by_shape(path, traj, notes)
     if not np.isfinite(traj.positions).all(axis=1).any():
         raise DatasetError(f"{path}: no finite pose; expected {FORMAT_NAMES[fmt]}")
     return GroundTruth(traj, path, None, FILE_DEFAULT_METRICS[fmt], frame_times, notes)
@@ -113,13 +120,49 @@ def sequence_groundtruth(root: Path) -> GroundTruth:
 
 def sniff_format(path: Path, metrics: tuple[str, ...] | None) -> str:
     """A ground-truth file's format from its first row: commas (an ASL csv), 12 numbers (KITTI poses), else TUM
-    (TUM-Mono's groundtruthSync.txt when TUM-Mono's metric is asked for, or no metric)."""
+    (TUM-Mono's groundtruthSync.txt when TUM-Mono's metric is asked for, or with no metric asked for when the file
+    is named groundtruthSync.txt; a TUM file of TUM-Mono's shape under another name is told after it is read:
+    `_tum_mono_by_shape`)."""
     first = _first_row(path)
     if "," in first:
         return "euroc"
     if len(first.split()) == 12:
         return "kitti"
-    return "tum-mono" if not metrics or "tum-mono" in metrics else "tum"
+    if metrics:
+        return "tum-mono" if "tum-mono" in metrics else "tum"
+    return "tum-mono" if path.name == TUM_MONO_GT else "tum"
+
+
+def tum_mono_shaped(traj: Trajectory) -> bool:
+    """Whether rows read with their NaN rows kept have the shape of TUM-Mono's ground truth (one row per frame,
+    poses at the start and the end only): every row a pose or a NaN row (seven NaN), rows with a pose in the first
+    half and in the last half (the benchmark's start and end segments), NaN rows between them over the middle row.
+    A tracker's lost poses (NaN rows at the start or the end) or a motion capture's dropouts here and there are
+    not."""
+    pose = np.column_stack([traj.positions, traj.quaternions])
+    posed, blank = np.isfinite(pose).all(axis=1), np.isnan(pose).all(axis=1)
+    n = len(pose)
+    if n < 3 or not (posed | blank).all():
+        return False
+    half = n // 2
+    return bool(posed[:half].any() and posed[n - half :].any() and blank[(n - 1) // 2 : half + 1].all())
+
+
+def _tum_mono_by_shape(path: Path, traj: Trajectory, notes: tuple[str, ...]) -> tuple[str, Trajectory, tuple[str, ...]]:
+    """A TUM file with NaN rows, no format nor metric asked for: TUM-Mono's ground truth under another name where
+    its rows have that shape (`tum_mono_shaped`), read again with its NaN rows kept and said on stderr; else the
+    TUM trajectory as read (its NaN rows dropped). A plain TUM file (no NaN row) is never read twice."""
+    try:
+        sync = read_groundtruth_sync(path)
+    except DatasetError:
+        return "tum", traj, notes
+    if not tum_mono_shaped(sync):
+        return "tum", traj, notes
+    note = (
+        f"{path}: TUM-Mono's ground truth (poses at the start and the end, NaN rows between): evaluated with "
+        "TUM-Mono's metric; --metric ate --metric rpe for ATE and RPE over its poses"
+    )
+    return "tum-mono", sync, (*notes, note)
 
 
 def file_notes(path: Path, fmt: str) -> tuple[str, ...]:
