@@ -14,7 +14,8 @@ import pandas as pd
 import pytest
 
 from slamrun.analysis.stats import study_statistics
-from slamrun.analysis.tables import medians_with_letters, write_all
+from slamrun.analysis.table_files import write_all
+from slamrun.analysis.tables import medians_with_letters
 
 
 def stats_of_three_methods():

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from slamrun.analysis.left_out import reasons
 from slamrun.analysis.load import by_dataset, evaluated, metrics_for, one_dataset
 from slamrun.analysis.stats import StudyStats, study_statistics
 from slamrun.analysis.summary import pooled_summary, ranked_by
@@ -58,8 +59,15 @@ def per_dataset_statistics(
     out = {}
     for name, part in groups.items():
         chosen = dataset_metrics(part, name, metrics, source)
-        out[name] = study_statistics(evaluated(part, chosen), chosen, level=level, adjust=adjust, alpha=alpha)
+        st = study_statistics(evaluated(part, chosen), chosen, level=level, adjust=adjust, alpha=alpha)
+        out[name] = with_left_out(st, part)
     return out
+
+
+def with_left_out(st: StudyStats, section: pd.DataFrame) -> StudyStats:
+    """`st` with, per metric, each method of the dataset's runs (`section`) its tests leave out and why."""
+    st.left_out = {m: reasons(section, set(s.medians), [m]) for m, s in st.metrics.items()}
+    return st
 
 
 def pooled_json(df: pd.DataFrame) -> dict:

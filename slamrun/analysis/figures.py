@@ -18,6 +18,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
 from slamrun.analysis.colours import method_colours  # noqa: E402
+from slamrun.analysis.load import counted  # noqa: E402
 from slamrun.analysis.paths import SequencePaths  # noqa: E402
 from slamrun.analysis.stats import StudyStats  # noqa: E402
 from slamrun.core.ticks import log_steps  # noqa: E402
@@ -87,10 +88,13 @@ def cumulative(
 def cumulative_figure(
     df: pd.DataFrame, metric: str, bold_all: bool = False, label: str = "", colours: dict[str, str] | None = None
 ) -> plt.Figure:
-    """Runs (y, whole numbers) whose error is below x, one curve per method: best methods reach the top left; x is
-    logarithmic where the values span a decade or more, else linear; `label` (the dataset) heads the title; the
-    legend beside the axes, never over a curve; `colours`: the campaign's (method_colours), else these methods'."""
+    """Runs (y, whole numbers) whose error is below x, one curve per method, over the runs `counted` (done, with a
+    figure, copies of a run once: a deterministic method's identical trials are one run), each method's n in its
+    legend entry: best methods reach the top left; x is logarithmic where the values span a decade or more, else
+    linear; `label` (the dataset) heads the title; the legend beside the axes, never over a curve; `colours`: the
+    campaign's (method_colours), else these methods'."""
     fig, ax = plt.subplots(figsize=(7.4, 4.2), layout="constrained")
+    df = counted(df, metric)
     methods = sorted(df.method.unique())
     colors = {**method_colours(methods), **(colours or {})}
     log = use_log_scale(df[metric].to_numpy(float))
@@ -103,14 +107,15 @@ def cumulative_figure(
                     ax.step(v, np.arange(1, len(v) + 1), where="post", ls=style, lw=1, color=colors[m])
         v = _sorted(g[metric], log)
         if len(v):
-            ax.step(v, np.arange(1, len(v) + 1), where="post", lw=2.2 if bold_all else 1.6, color=colors[m], label=m)
+            lw = 2.2 if bold_all else 1.6
+            ax.step(v, np.arange(1, len(v) + 1), where="post", lw=lw, color=colors[m], label=f"{m} (n={len(v)})")
     if log:
         v = df[metric].to_numpy(float)
         v = v[np.isfinite(v) & (v > 0)]
         ax.set_xscale("log")
         readable_log_ticks(ax.xaxis, v.min(), v.max())
     ax.set_xlabel(LABELS.get(metric, metric) + (" (log scale)" if log else ""))
-    ax.set_ylabel("number of runs with a smaller error")
+    ax.set_ylabel("runs with a smaller error (copies once)")
     ax.yaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))  # counts: 1, 2, 3, never 1.5
     ax.set_title(_labelled(label, f"cumulative {LABELS.get(metric, metric)}"), fontsize=9)
     ax.grid(True, which="both", alpha=0.3)
@@ -262,7 +267,8 @@ def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "", adjust: 
     Kruskal-Wallis' chi-square, df and p."""
     s = st.metrics[metric]
     methods = sorted(s.medians, key=lambda m: s.medians[m])
-    data = [st.kept.loc[st.kept.method == m, metric].to_numpy(float) for m in methods]
+    values = st.kept[metric].to_numpy(float)
+    data = [values[(st.kept.method == m).to_numpy() & np.isfinite(values)] for m in methods]  # this metric's runs
     fig, ax = plt.subplots(figsize=(6.4, 1.7 + 0.42 * len(methods)), layout="constrained")
     positions = list(range(len(methods), 0, -1))
     parts = ax.boxplot(data, positions=positions, showfliers=False, widths=0.55, **HORIZONTAL)

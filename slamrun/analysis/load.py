@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from slamrun.errors import SlamRunError
@@ -49,12 +50,31 @@ def read_csv(path: Path) -> pd.DataFrame:
 
 
 def evaluated(df: pd.DataFrame, metrics: list[str]) -> pd.DataFrame:
-    """Runs that ended `done` with every metric finite (the study's 'blank runs' are the others; a run that
-    timed out or got lost is a failure even when it wrote poses that could be evaluated)."""
+    """Runs that ended `done` with a figure of at least one of `metrics` (the study's 'blank runs' are the others; a
+    run that timed out or got lost is a failure even when it wrote poses that could be evaluated). Each metric's
+    views take those of them with a figure for it (`counted`): a run without KITTI's segment figure (a track under
+    100 m) stays in ATE's."""
     present = [m for m in metrics if m in df.columns]
     if "status" in df.columns:
         df = df[df["status"] == "done"]
-    return df.dropna(subset=present)
+    if not present:
+        return df
+    return df[np.isfinite(df[present].to_numpy(float)).any(axis=1)]
+
+
+WITHIN = ("sequence", "direction")  # a copy is a run of the same method, sequence and direction with equal figures
+
+
+def counted(df: pd.DataFrame, metric: str, group: str = "method") -> pd.DataFrame:
+    """The runs every view of `metric` counts: done, with a figure for it, and each distinct figure of a method,
+    sequence and direction once (a deterministic method's identical trials are one run, as in the statistics:
+    analysis.stats.distinct_runs)."""
+    ok = evaluated(df, [metric])
+    ok = ok[np.isfinite(ok[metric].to_numpy(float))] if metric in ok.columns else ok.iloc[0:0]
+    within = [c for c in WITHIN if c in ok.columns]
+    if len(within) < len(WITHIN):
+        return ok  # a table of plain observations: every row a sample
+    return ok[~ok.duplicated(subset=[group, *within, metric], keep="first")]
 
 
 def metrics_for(df: pd.DataFrame) -> list[str]:

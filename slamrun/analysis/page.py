@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from slamrun.analysis import tables
+from slamrun.analysis import table_files
 from slamrun.analysis.interactive import MAX_POINTS, PLOTLY_JS
 from slamrun.analysis.paths import SequencePaths
 from slamrun.analysis.provenance import Provenance
@@ -29,6 +29,7 @@ th{background:#f3f3f3;vertical-align:bottom;max-width:16em}
 td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
 td:first-child,th:first-child{text-align:left}
 p.caption{font-size:13px;color:#444;margin:.4em 0 .2em;max-width:60em}
+p.note{font-size:13px;color:#7a3b00;margin:.2em 0 .4em;max-width:60em}
 .files{font-size:12px;color:#555;margin:.2em 0 1em}.files a{margin-right:.6em}
 figure{margin:1.5em 0}img{max-width:100%;height:auto}figcaption{font-size:13px}
 pre{overflow:auto;max-height:28em;background:#f6f6f6;padding:.6em;font-size:12px}
@@ -86,28 +87,36 @@ def table(
     caption: str,
     show: bool = True,
     lower_is_better: tuple[str, ...] = (),
+    notes: tuple[str, ...] = (),
 ) -> str:
     """Write a table's CSV, Markdown and LaTeX files, and return its HTML: what its values are, the table in a box
-    that scrolls sideways where it is wider than the page, the links to its files (only the links where not `show`).
-    The LaTeX file sets the best value of each column of `lower_is_better` in bold."""
-    tables.write_all(df, folder, name, title, caption, lower_is_better)
+    that scrolls sideways where it is wider than the page, `notes` under it (who it leaves out and why), the links
+    to its files (only the links where not `show`). The LaTeX file sets the best value of each column of
+    `lower_is_better` in bold."""
+    table_files.write_all(df, folder, name, title, caption, lower_is_better)
     files = {f"{name}.{ext} ({kind})": folder / f"{name}.{ext}" for ext, kind in _FORMATS}
     if not show:
         return f"<p>{esc(title)}:</p>" + links(files, root)
     cap = f'<p class="caption">{esc(caption)}</p>' if caption else ""
-    return f'{cap}<div class="table-box">{tables.to_html(df)}</div>' + links(files, root)
+    return f'{cap}<div class="table-box">{table_files.to_html(df)}</div>' + note_lines(notes) + links(files, root)
+
+
+def note_lines(notes) -> str:
+    """Lines under a table or figure (who it leaves out and why), those not empty."""
+    return "".join(f'<p class="note">{esc(n)}</p>' for n in notes if n)
 
 
 _FORMATS = (("csv", "CSV"), ("md", "Markdown"), ("tex", "LaTeX"))
 
 
-def figure(png: Path, root: Path, caption: str) -> str:
-    """A figure: its PNG shown, its caption, links to its PNG and SVG."""
+def figure(png: Path, root: Path, caption: str, notes: tuple[str, ...] = ()) -> str:
+    """A figure: its PNG shown, its caption, `notes` under it (who it leaves out and why), links to its PNG and
+    SVG."""
     svg = png.with_suffix(".svg")
     files = links({f"{png.name} (PNG)": png, f"{svg.name} (SVG)": svg}, root)
     return (
         f'<figure><img alt="{esc(caption)}" src="{href(png, root)}" loading="eager">'
-        f"<figcaption>{esc(caption)}</figcaption>{files}</figure>"
+        f"<figcaption>{esc(caption)}</figcaption>{note_lines(notes)}{files}</figure>"
     )
 
 
@@ -166,7 +175,7 @@ def _images(images: dict[str, dict[str, str]]) -> str:
         row = {"method label": label, **{k: labels.get(k, "-") for k in IMAGE_KEYS}}
         row["other labels"] = "; ".join(f"{k}: {v}" for k, v in labels.items() if k not in IMAGE_KEYS) or "-"
         rows.append(row)
-    return f'<div class="table-box">{tables.to_html(pd.DataFrame(rows))}</div>'
+    return f'<div class="table-box">{table_files.to_html(pd.DataFrame(rows))}</div>'
 
 
 def _anchor(title: str, used: set[str]) -> str:

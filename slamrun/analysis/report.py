@@ -16,7 +16,9 @@ import pandas as pd
 
 from slamrun.analysis import figures, interactive, page, tables
 from slamrun.analysis.colours import method_colours
-from slamrun.analysis.load import NO_DATASET, by_dataset, evaluated, load_results, main_metric, metrics_for
+from slamrun.analysis.datasets import with_left_out
+from slamrun.analysis.left_out import left_out, shown_in
+from slamrun.analysis.load import NO_DATASET, by_dataset, counted, evaluated, load_results, main_metric, metrics_for
 from slamrun.analysis.paths import sequence_paths
 from slamrun.analysis.provenance import provenance
 from slamrun.analysis.robustness import (
@@ -240,15 +242,14 @@ def dataset_report(
     sections.append(Section(title, html_fails + "".join(f"<p>{page.esc(n)}</p>" for n in notes)))
 
     st = None
-    if ok.method.nunique() >= 2 and len(ok) > len(metrics) + 1:
-        st = study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha)
+    if ok.method.nunique() >= 2:
+        st = with_left_out(study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha), df)
         out.mkdir(parents=True, exist_ok=True)
         (out / "statistics.json").write_text(jsonio.dumps(st.to_json(), indent=1))
-        sections.append(_statistics(st, ok, metrics, out, root, where, level, adjust, alpha))
+        sections.append(_statistics(st, df, metrics, out, root, where, level, adjust, alpha))
     else:
-        sections.append(
-            Section("Statistics", "<p>Fewer than two methods with evaluated runs: no group comparison.</p>")
-        )
+        none = "<p>Fewer than two methods with evaluated runs: no group comparison.</p>"
+        sections.append(Section("Statistics", none + page.note_lines([left_out(df, ok.method.unique(), metrics)])))
 
     sections += _resources(df, tab_dir, root, where, measurement, contention_pct)
     # the campaign's accuracy figure per run: TUM-Mono's e_align, else ATE (datasets without TUM-Mono's metrics)
@@ -256,23 +257,29 @@ def dataset_report(
     if main is not None and "direction" in df.columns:
         sections += _per_run_tables(df, main, tab_dir, root, where)
 
-    figs = []
+    figs = []  # (figure, its metric)
     if not ok.empty:
         for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "ate_rmse", "rpe_t_rmse"):
             if m in metrics:
-                figs.append(figures.cumulative(ok, m, fig_dir, label=dataset, colours=colours))
+                figs.append((figures.cumulative(ok, m, fig_dir, label=dataset, colours=colours), m))
         if main is not None:
-            figs.append(
-                figures.cumulative(
-                    ok, main, fig_dir, f"cumulative_{main}_motion_bias", bold_all=True, label=dataset, colours=colours
-                )
-            )
-            figs.append(figures.heatmap(df, fig_dir, main, label=dataset))
+            name = f"cumulative_{main}_motion_bias"
+            figs.append((figures.cumulative(ok, main, fig_dir, name, True, dataset, colours), main))
+            figs.append((figures.heatmap(df, fig_dir, main, label=dataset), None))
     if st is not None:
         for m in metrics:
-            figs.append(figures.boxplot(st, m, fig_dir, label=dataset, adjust=adjust, alpha=alpha))
+            figs.append((figures.boxplot(st, m, fig_dir, label=dataset, adjust=adjust, alpha=alpha), m))
     if figs:
-        sections.append(Section("Figures", "".join(page.figure(f, root, _caption(f, dataset)) for f in figs)))
+        html = ""
+        for f, m in figs:
+            if m is None:  # the heat map: every run of every method
+                notes = ()
+            elif st is not None and f.stem.startswith("box_"):
+                notes = (left_out(df, set(st.metrics[m].medians), [m]),)
+            else:
+                notes = (left_out(df, set(counted(ok, m).method.astype(str)), [m]),)
+            html += page.figure(f, root, _caption(f, dataset), notes)
+        sections.append(Section("Figures", html))
     traj = _trajectories(df, out, root, trajectory_sequences, dataset)
     if traj is not None:
         sections.append(traj)
@@ -409,23 +416,23 @@ def coverage_note(df: pd.DataFrame) -> str:
     )
 
 
-def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Section:
+def _statistics(st, df, metrics, out, root, where, level, adjust, alpha) -> Section:
     """The statistics' sections: what was done, the medians with letters, every test with its p-value, the
-    pairwise tests, and the same per direction."""
+    pairwise tests, and the same per direction; under each, the methods of the dataset (`df`, its runs) it leaves
+    out and why."""
     tab_dir = out / "tables"
+    ok = evaluated(df, metrics)
     acc = [m for m in ("e_t", "e_r", "e_s_sym", "e_s") if m in metrics][:3]
     seg = [m for m in ("e_start", "e_end", "e_rmse") if m in metrics]
     trajectory = [m for m in TRAJECTORY_STATS_METRICS if m in metrics]
-    outliers = st.outlier_note or (
-        f"{st.n_outliers} multivariate outliers removed (squared Mahalanobis distance over {len(metrics)} metrics "
-        f"above {st.cutoff:.4f}, the chi-square {level} quantile)"
-    )
     counting = f" Of these, {st.counting_note()}." if st.counting_note() else ""
     note = (
-        f"{len(ok)} evaluated runs{where}; {outliers}.{counting} "
+        f"{len(ok)} evaluated runs{where}, each metric tested on every run with a figure of it (a run without one "
+        f"metric stays in the others'); {st.outlier_text()} (chi-square {level} quantile).{counting} "
         f"Letters: pairwise Wilcoxon rank-sum tests, {adjust} adjustment, alpha {alpha}; methods that share a letter "
         "do not differ significantly."
     )
+    tested = {m: set(s.medians) for m, s in st.metrics.items()}
     html = f"<p>{page.esc(note)}</p>" + page.links({"statistics (JSON)": out / "statistics.json"}, root)
     parts = []
     what = (
@@ -441,38 +448,40 @@ def _statistics(st, ok, metrics, out, root, where, level, adjust, alpha) -> Sect
     ):
         if chosen:
             table = tables.medians_with_letters(st, chosen)
-            html_table = page.table(table, tab_dir, root, name, title + where, what, lower_is_better=tuple(chosen))
+            gaps = (left_out(df, shown_in(table, chosen), chosen),)
+            html_table = page.table(
+                table, tab_dir, root, name, title + where, what, lower_is_better=tuple(chosen), notes=gaps
+            )
             parts.append(Section(title, html_table))
     title = "Tests of each metric"
     caption = (
         "Kruskal-Wallis rank-sum test across the methods (chi-square, df, p); Levene's test of equal variances "
         "(median-centred: F, p); Lilliefors' normality test per method (p; none under five runs or without spread)."
     )
-    parts.append(Section(title, page.table(tables.tests_table(st), tab_dir, root, "tests", title + where, caption)))
+    gaps = (left_out(df, tested, metrics),)
+    html_tests = page.table(tables.tests_table(st), tab_dir, root, "tests", title + where, caption, notes=gaps)
+    parts.append(Section(title, html_tests))
     title = "Pairwise Wilcoxon rank-sum tests"
     caption = f"Each pair of methods: p adjusted ({adjust}) and unadjusted; different when the adjusted p < {alpha}."
     pairs = tables.pairwise_table(st, adjust, alpha)
-    parts.append(Section(title, page.table(pairs, tab_dir, root, "pairwise", title + where, caption)))
+    parts.append(Section(title, page.table(pairs, tab_dir, root, "pairwise", title + where, caption, notes=gaps)))
     # the same procedure per direction: motion bias can change the ranking
     chosen, name = (acc, "table3_drift") if acc else (trajectory, "trajectory_metrics")
     what_dir = "Drift" if acc else trajectory_title(trajectory)
     skipped = []
     for direction in ("forward", "backward"):
         part = ok[ok.direction == direction] if "direction" in ok.columns else ok.iloc[0:0]
-        if not chosen or part.method.nunique() < 2 or len(part) <= len(metrics) + 1:
-            why = (
-                "fewer than two methods with evaluated runs"
-                if part.method.nunique() < 2
-                else f"{len(part)} evaluated runs, the outlier test over {len(metrics)} metrics needs more"
-            )
-            skipped.append(f"{direction} runs only: {why}" if chosen else f"{direction} runs only: no metric")
+        if not chosen or part.method.nunique() < 2:
+            why = "fewer than two methods with evaluated runs" if chosen else "no metric"
+            skipped.append(f"{direction} runs only: {why}")
             continue
-        sd = study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha)
+        sd = with_left_out(study_statistics(part, metrics, level=level, adjust=adjust, alpha=alpha), df)
         (out / f"statistics_{direction}.json").write_text(jsonio.dumps(sd.to_json(), indent=1))
         td = tables.medians_with_letters(sd, chosen)
         title = f"{what_dir}: medians with letter groups, {direction} runs only"
+        gaps = (left_out(df[df.direction == direction], shown_in(td, chosen), chosen),)
         html_dir = page.table(
-            td, tab_dir, root, f"{name}_{direction}", title + where, what, lower_is_better=tuple(chosen)
+            td, tab_dir, root, f"{name}_{direction}", title + where, what, lower_is_better=tuple(chosen), notes=gaps
         )
         html_dir += page.links({f"statistics, {direction} runs (JSON)": out / f"statistics_{direction}.json"}, root)
         parts.append(Section(title, html_dir))
@@ -489,12 +498,12 @@ def _per_run_tables(df: pd.DataFrame, main: str, tab_dir: Path, root: Path, wher
     mb = tables.motion_bias_table(df, main)
     title = f"Motion bias: forward vs backward {main}"
     caption = (
-        f"Per method, the number of evaluated runs per direction, the median {label} of each direction, and the "
-        "p-value of a Wilcoxon rank-sum test between the directions."
+        f"Per method, the number of evaluated runs per direction (copies of a run once), the median {label} of each "
+        "direction, and the p-value of a Wilcoxon rank-sum test between the directions."
     )
-    out.append(
-        Section(title, page.table(mb, tab_dir, root, "motion_bias", f"Forward vs backward {main}{where}", caption))
-    )
+    gaps = (left_out(df, set(mb.method.astype(str)) if not mb.empty else set(), [main]),)
+    full = f"Forward vs backward {main}{where}"
+    out.append(Section(title, page.table(mb, tab_dir, root, "motion_bias", full, caption, notes=gaps)))
     repro = tables.reproduction_table(df[df.status == "done"] if "status" in df else df, main)
     if not repro.empty:
         title = "Reproduction: new runs vs published"
@@ -507,9 +516,10 @@ def _per_run_tables(df: pd.DataFrame, main: str, tab_dir: Path, root: Path, wher
     seq = tables.per_sequence_table(df, main)
     if not seq.empty:
         title = f"Median {main} per sequence"
-        caption = f"The median {label} of each method's evaluated runs on each sequence (rows: methods)."
+        caption = f"The median {label} of each method's evaluated runs on each sequence (rows: methods; copies once)."
         full = f"Median {main} per method and sequence{where}"
-        out.append(Section(title, page.table(seq, tab_dir, root, f"{main}_per_sequence", full, caption)))
+        gaps = (left_out(df, set(seq.method.astype(str)), [main]),)
+        out.append(Section(title, page.table(seq, tab_dir, root, f"{main}_per_sequence", full, caption, notes=gaps)))
     return out
 
 

@@ -271,6 +271,7 @@ class MetricStats:
     adjust: str = "holm"
     pairwise_adjusted: list[dict] = field(default_factory=list)
     notes: dict[str, str] = field(default_factory=dict)  # test -> why it gave no figure
+    runs: dict[str, int] = field(default_factory=dict)  # per method: the runs this metric's tests took
 
 
 @dataclass
@@ -283,11 +284,33 @@ class StudyStats:
     counted: dict[str, dict] = field(default_factory=dict)  # per method: runs, distinct runs, deterministic
     outlier_note: str = ""  # why no outlier test was made
     coverage: dict[str, float] = field(default_factory=dict)  # per method: the median coverage of its kept runs
+    outlier_tests: list[dict] = field(default_factory=list)  # per set of metrics the runs had: outlier_tests
+    left_out: dict[str, dict[str, str]] = field(default_factory=dict)  # per metric: method -> why it has no figure
 
     @property
     def deterministic(self) -> list[str]:
         """The methods every sequence and direction of which gave identical figures over its trials."""
         return [g for g, c in self.counted.items() if c["deterministic"]]
+
+    def outlier_text(self) -> str:
+        """What the outlier tests did, in one sentence: the study's test over every metric, and where some runs lack a
+        metric, the test of those runs on the metrics they have."""
+        if self.outlier_note:
+            return self.outlier_note
+        parts = []
+        for t in self.outlier_tests:
+            which = ", ".join(t["metrics"])
+            if t["cutoff"] is None:
+                parts.append(
+                    f"{t['runs']} run(s) with figures of {which} only not tested (too few runs for a covariance)"
+                )
+                continue
+            over = f"over {len(t['metrics'])} metric(s)" + ("" if t is self.outlier_tests[0] else f" ({which})")
+            parts.append(
+                f"{t['outliers']} of {t['runs']} run(s) removed {over} (squared Mahalanobis distance above "
+                f"{t['cutoff']:.4f}, the chi-square quantile, against the {t['population']} runs with those metrics)"
+            )
+        return "multivariate outliers: " + "; ".join(parts) if parts else "no run to test for outliers"
 
     def counting_note(self) -> str:
         """How copies were counted, in one sentence (empty where no run was a copy of another)."""
@@ -312,6 +335,7 @@ class StudyStats:
             "counted": self.counted,
             "counting_note": self.counting_note() or None,
             "coverage": self.coverage,
+            "outlier_tests": self.outlier_tests,
             "metrics": {},
         }
         for name, m in self.metrics.items():
@@ -326,11 +350,37 @@ class StudyStats:
                 "pairwise_holm": m.pairwise_holm,
                 "pairwise_none": m.pairwise_none,
                 "letters": m.letters,
+                "runs": m.runs,
+                "left_out": self.left_out.get(name, {}),
                 "notes": m.notes,
             }
             if m.adjust not in ("holm", "none"):
                 out["metrics"][name][f"pairwise_{m.adjust}"] = m.pairwise_adjusted
         return out
+
+
+def outlier_tests(data: pd.DataFrame, metrics: list[str], level: float) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+    """The multivariate outlier test of each run on the metrics it has figures of: the squared Mahalanobis distance
+    of every run, against the other runs that have those metrics, over those metrics, and the chi-square `level`
+    quantile it is cut at (inf where untested). A run with every metric is tested as the study tests it; a run
+    without one metric (KITTI's segments on a short track) is tested on the others, never dropped. Also, per set of
+    metrics, what was tested: its metrics, runs, the population they were tested against, cut-off and outliers."""
+    finite = np.isfinite(data[metrics].to_numpy(float)) if len(data) else np.zeros((0, len(metrics)), bool)
+    d2, cutoff, tests = np.zeros(len(data)), np.full(len(data), np.inf), []
+    for pattern in sorted({tuple(row) for row in finite if row.any()}, key=lambda r: (-sum(r), r)):
+        cols = [m for m, has in zip(metrics, pattern, strict=True) if has]
+        rows = (finite == pattern).all(axis=1)
+        population = finite[:, list(pattern)].all(axis=1)
+        test = {"metrics": cols, "runs": int(rows.sum()), "population": int(population.sum())}
+        if population.sum() > len(cols):
+            dist = mahalanobis_sq(data.loc[population, cols].to_numpy(float))
+            d2[rows] = dist[rows[population]]
+            cutoff[rows] = chi2_cutoff(level, len(cols))
+            test |= {"cutoff": float(cutoff[rows][0]), "outliers": int((d2[rows] > cutoff[rows]).sum())}
+        else:
+            test |= {"cutoff": None, "outliers": 0}
+        tests.append(test)
+    return d2, cutoff, tests
 
 
 def study_statistics(
@@ -341,68 +391,71 @@ def study_statistics(
     adjust: str = "holm",
     alpha: float = 0.05,
 ) -> StudyStats:
-    """The study's procedure on evaluated runs (rows with every metric finite), each distinct result of a method,
-    sequence and direction counted once (`distinct_runs`); no metric or no run gives no figure (empty medians and
-    tests), not an error, and a test its data cannot support gives none, with the reason."""
-    data, counted = distinct_runs(df.dropna(subset=metrics), metrics, group)
+    """The study's procedure on evaluated runs, each distinct result of a method, sequence and direction counted once
+    (`distinct_runs`). Each metric's tests take every run with a figure for that metric: a run without one metric
+    (KITTI's segments on a track under 100 m) stays in the others' (the outlier test takes each run on the metrics it
+    has: `outlier_tests`). No metric or no run gives no figure (empty medians and tests), not an error, and a test
+    its data cannot support gives none, with the reason."""
+    have = np.isfinite(df[metrics].to_numpy(float)).any(axis=1) if metrics else np.zeros(len(df), bool)
+    data, counted = distinct_runs(df[have], metrics, group)
     data = data.reset_index(drop=True)
-    x = data[metrics].to_numpy(float)
+    d2, cutoffs, tests = outlier_tests(data, metrics, level)
     outlier_note = ""
-    if metrics and len(data) > len(metrics):
-        d2 = mahalanobis_sq(x)
-    else:
-        d2 = np.zeros(len(data))
-        if metrics and len(data):
-            outlier_note = (
-                f"no outlier test: {len(data)} run(s) for {len(metrics)} metric(s); a covariance needs more runs than "
-                "metrics"
-            )
-    cutoff = chi2_cutoff(level, len(metrics)) if metrics else math.nan
-    kept = data[~(d2 > cutoff)].reset_index(drop=True)
-    order = list(kept.groupby(group, sort=True).groups)
-    out = {}
-    for metric in metrics:
-        groups = {g: kept.loc[kept[group] == g, metric].to_numpy(float) for g in order}
-        usable = {g: v for g, v in groups.items() if len(v) > 0}
-        medians = {g: float(np.median(v)) for g, v in usable.items()}
-        lillie = {g: lilliefors_p(v) for g, v in usable.items()}
-        multi = [v for v in usable.values() if len(v) > 1]
-        notes = {}
-        if why := levene_problem(multi):
-            notes["levene"] = why
-        lev_f, lev_p = levene(multi) if len(multi) > 1 else (math.nan, math.nan)
-        if why := kruskal_problem(list(usable.values())):
-            notes["kruskal"] = notes["pairwise"] = why
-            kw = (math.nan, max(len(usable) - 1, 0), math.nan)
-        else:
-            kw = kruskal(list(usable.values()))
-        if any(v != v for v in lillie.values()):
-            notes["lilliefors"] = "a method with fewer than 5 runs, or without spread, has none"
-        holm = pairwise_wilcoxon(usable, "holm")
-        none = pairwise_wilcoxon(usable, "none")
-        chosen = {"holm": holm, "none": none}.get(adjust) or pairwise_wilcoxon(usable, adjust)
-        pmap = {frozenset((r["a"], r["b"])): r["p"] for r in chosen if r["p"] == r["p"]}  # no test: no difference
-        if "pairwise" not in notes and len(pmap) < len(chosen):
-            notes["pairwise"] = "no test between two methods whose values are all the same (to rounding)"
-        by_median = sorted(usable, key=lambda g: medians[g])
-        letters = compact_letters(by_median, pmap, alpha)
-        out[metric] = MetricStats(
-            medians,
-            lillie,
-            lev_f,
-            lev_p,
-            kw[0],
-            kw[1],
-            kw[2],
-            holm,
-            none,
-            {g: letters[g] for g in usable},
-            adjust,
-            chosen,
-            notes,
+    if tests and all(t["cutoff"] is None for t in tests):
+        outlier_note = (
+            f"no outlier test: {len(data)} run(s) for {len(metrics)} metric(s); a covariance needs more runs than "
+            "metrics"
         )
-    d2_list = [float(v) for v in d2] if not outlier_note else []
+    outlier = d2 > cutoffs
+    kept = data[~outlier].reset_index(drop=True)
+    out = {metric: metric_statistics(kept, metric, group, adjust, alpha) for metric in metrics}
+    d2_list = [] if outlier_note else [float(v) if np.isfinite(c) else None for v, c in zip(d2, cutoffs, strict=True)]
     coverage = {}
     if "coverage" in kept.columns:
-        coverage = {str(g): float(v) for g, v in kept.groupby(group, sort=True)["coverage"].median().items()}
-    return StudyStats(d2_list, cutoff, int(np.sum(d2 > cutoff)), out, kept, counted, outlier_note, coverage)
+        coverage = {str(g): float(v) for g, v in kept.groupby(group, sort=True)["coverage"].median().items() if v == v}
+    cutoff = chi2_cutoff(level, len(metrics)) if metrics else math.nan
+    st = StudyStats(d2_list, cutoff, int(outlier.sum()), out, kept, counted, outlier_note, coverage)
+    st.outlier_tests = tests
+    return st
+
+
+def metric_statistics(kept: pd.DataFrame, metric: str, group: str, adjust: str, alpha: float) -> MetricStats:
+    """One metric's tests on the runs of `kept` with a figure for it: medians, Lilliefors, Levene, Kruskal-Wallis,
+    the pairwise tests and letters, and per method the runs counted."""
+    rows = kept[np.isfinite(kept[metric].to_numpy(float))]
+    usable = {g: part[metric].to_numpy(float) for g, part in rows.groupby(group, sort=True)}
+    medians = {g: float(np.median(v)) for g, v in usable.items()}
+    lillie = {g: lilliefors_p(v) for g, v in usable.items()}
+    multi = [v for v in usable.values() if len(v) > 1]
+    notes = {}
+    if why := levene_problem(multi):
+        notes["levene"] = why
+    lev_f, lev_p = levene(multi) if len(multi) > 1 else (math.nan, math.nan)
+    if why := kruskal_problem(list(usable.values())):
+        notes["kruskal"] = notes["pairwise"] = why
+        kw = (math.nan, max(len(usable) - 1, 0), math.nan)
+    else:
+        kw = kruskal(list(usable.values()))
+    if any(v != v for v in lillie.values()):
+        notes["lilliefors"] = "a method with fewer than 5 runs, or without spread, has none"
+    holm = pairwise_wilcoxon(usable, "holm")
+    none = pairwise_wilcoxon(usable, "none")
+    chosen = {"holm": holm, "none": none}.get(adjust) or pairwise_wilcoxon(usable, adjust)
+    pmap = {frozenset((r["a"], r["b"])): r["p"] for r in chosen if r["p"] == r["p"]}  # no test: no difference
+    if "pairwise" not in notes and len(pmap) < len(chosen):
+        notes["pairwise"] = "no test between two methods whose values are all the same (to rounding)"
+    letters = compact_letters(sorted(usable, key=lambda g: medians[g]), pmap, alpha)
+    return MetricStats(
+        medians,
+        lillie,
+        lev_f,
+        lev_p,
+        *kw,
+        holm,
+        none,
+        {g: letters[g] for g in usable},
+        adjust,
+        chosen,
+        notes,
+        {str(g): len(v) for g, v in usable.items()},
+    )

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from slamrun.analysis.load import by_dataset, evaluated, main_metric
+from slamrun.analysis.load import by_dataset, counted, main_metric
 from slamrun.results.summary import tally
 from slamrun.results.vocabulary import INFRA_FAILURES, METHOD_FAILURES, SUMMARY_METRICS
 
@@ -19,8 +19,8 @@ POOLED_COLUMNS = ("method", "runs", "done", "failed", "infra", "pending", "succe
 
 def method_summary(df: pd.DataFrame) -> pd.DataFrame:
     """Per method: runs, done, failed (the method's), infra, pending, success and failure rates over the
-    method's results, evaluated and not evaluable runs, each failure kind, and medians of the main metrics
-    and of fps."""
+    method's results, evaluated and not evaluable runs, each failure kind, and medians of the main metrics over the
+    runs `counted` (done, with a figure of that metric, copies once, as in the statistics) and of fps."""
     rows = []
     for method, g in df.groupby("method", sort=False):
         status = g["status"] if "status" in g.columns else ["done"] * len(g)  # a table of observations: results
@@ -39,11 +39,9 @@ def method_summary(df: pd.DataFrame) -> pd.DataFrame:
             "not_evaluable": t.not_evaluable,
             **{kind: t.failures.get(kind, 0) for kind in METHOD_FAILURES},
         }
-        ok = g[
-            (pd.Series(status, index=g.index) == "done") & (pd.Series(_text(g, "eval_status"), index=g.index) == "ok")
-        ]
-        for m in SUMMARY_METRICS:
-            row[f"median_{m}"] = ok[m].median() if m in ok.columns and len(ok) else np.nan
+        for m in SUMMARY_METRICS:  # over the runs the statistics count: done, with a figure, copies once
+            values = counted(g, m)[m] if m in g.columns else pd.Series(dtype=float)
+            row[f"median_{m}"] = values.median() if len(values) else np.nan
         row["median_fps"] = g["fps"].median() if "fps" in g.columns and g["fps"].notna().any() else np.nan
         rows.append(row)
     return pd.DataFrame(rows)
@@ -74,7 +72,7 @@ def sequence_ranks(df: pd.DataFrame) -> pd.DataFrame:
         if "status" in part.columns:
             failure = part["failure"] if "failure" in part.columns else pd.Series(None, index=part.index)
             results = part[(part["status"] == "done") | ((part["status"] == "failed") & ~failure.isin(INFRA_FAILURES))]
-        medians = evaluated(part, [metric]).groupby(["sequence", "method"])[metric].median()
+        medians = counted(part, metric).groupby(["sequence", "method"])[metric].median()
         for sequence, g in results.groupby("sequence", sort=True):
             methods = sorted(g["method"].astype(str).unique())
             values = [medians.get((sequence, m), np.nan) for m in methods]

@@ -248,14 +248,8 @@ def _num(v: float, digits: int = 4) -> str:
 def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list[str]:
     """`slamrun stats`' text of one dataset: every test the procedure computed (outliers, Lilliefors, Levene,
     Kruskal-Wallis, pairwise Wilcoxon rank-sum tests adjusted and not), with the medians and letters."""
-    if st.outlier_note:
-        outliers = f"{len(st.kept)} evaluated runs, {st.outlier_note}"
-    else:
-        outliers = (
-            f"{len(st.mahalanobis)} evaluated runs, {len(st.kept)} kept, {st.n_outliers} multivariate outlier(s) "
-            f"(squared Mahalanobis distance over {len(st.metrics)} metrics above {_num(st.cutoff, 6)})"
-        )
-    lines = [f"dataset {dataset}: {outliers}"]
+    n = len(st.kept) + st.n_outliers
+    lines = [f"dataset {dataset}: {n} evaluated runs (copies once), {len(st.kept)} kept; {st.outlier_text()}"]
     if note := st.counting_note():
         lines.append(f"  {note}")
     if st.coverage:
@@ -267,8 +261,13 @@ def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list
         order = sorted(m.medians, key=lambda g: m.medians[g])
         lines.append(
             f"  {name}: median and letters (pairwise tests, {adjust} adjustment, alpha {alpha}): "
-            + (", ".join(f"{g} {_num(m.medians[g])} {m.letters.get(g, '')}" for g in order) or "no run")
+            + (
+                ", ".join(f"{g} {_num(m.medians[g])} {m.letters.get(g, '')} (n={m.runs.get(g)})" for g in order)
+                or "no run"
+            )
         )
+        if gone := st.left_out.get(name):
+            lines.append("    not in this metric's tests: " + "; ".join(f"{g} ({why})" for g, why in gone.items()))
         lines.append(
             "    Lilliefors normality p: "
             + (", ".join(f"{g} {_num(m.lilliefors_p[g], 3)}" for g in order) or "-")

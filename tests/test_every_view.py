@@ -1,0 +1,127 @@
+"""Every view tells the same story (issue 62): each metric's statistics, tables and figures take every run with a
+figure of that metric (a run without KITTI's segment figure stays in ATE's), every view of a dataset section shows
+its methods or says in one line who it leaves out and why, and copies of a run count once everywhere (motion bias,
+cumulative plots, medians).
+
+A real campaign: a synthetic KITTI drive (two laps, about 130 m), three methods (real processes writing real
+trajectories): `full` tracks the whole drive, `short` the first fifth of it (about 26 m: ATE and RPE, no segment of
+KITTI's 100 m), `copies` is deterministic (its two trials are one run); forward and backward, two trials."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from slamrun.analysis.stats import study_statistics, wilcoxon_rank_sum_p
+from slamrun.analysis.tables import motion_bias_table
+from slamrun.cli import main
+from slamrun.datasets.make_synthetic import generate
+from tests.conftest import fake_method, write_spec
+
+
+@pytest.fixture(scope="module")
+def kitti(tmp_path_factory):
+    root = tmp_path_factory.mktemp("every_view")
+    generate(
+        root / "kitti" / "sequences" / "00", frames=200, seed=2, size=(160, 120), layout="kitti", scene_kind="outdoor"
+    )
+    datasets = [{"name": "kitti", "path": str(root / "kitti" / "sequences"), "sequences": ["00"], "layout": "kitti"}]
+    methods = [
+        fake_method(label="full", extra=["--noise", "0.05", "--vary"]),
+        fake_method(label="short", extra=["--noise", "0.01", "--vary", "--part", "0.2"]),
+        fake_method(label="copies", extra=["--noise", "0.08"]),
+    ]
+    spec = write_spec(root, root, methods, datasets=datasets, trials=2, report=True)
+    assert main(["campaign", str(spec)]) == 0
+    results = root / "results"
+    df = pd.read_csv(results / "results.csv", dtype={"sequence": str})
+    return results, df
+
+
+def cli(*args) -> str:
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main([*map(str, args)]) == 0
+    return buf.getvalue()
+
+
+def test_the_campaign_is_what_the_views_are_tested_on(kitti):
+    _, df = kitti
+    assert df.status.eq("done").all() and len(df) == 12
+    short = df[df.method == "short"]
+    assert short.ate_rmse.notna().all() and short.kitti_t_pct.isna().all()
+    assert df[df.method != "short"].kitti_t_pct.notna().all()
+
+
+def test_a_run_without_one_metric_stays_in_the_others_tests(kitti):
+    """The issue's reproduction: `stats --metrics ate_rmse kitti_t_pct` left `short` out of ATE's medians."""
+    results, _ = kitti
+    for args in ((), ("--metrics", "ate_rmse", "kitti_t_pct")):
+        st = json.loads(cli("stats", results, "--json", *args))["datasets"]["kitti"]["metrics"]
+        assert set(st["ate_rmse"]["medians"]) == {"full", "short", "copies"}, args
+        assert st["ate_rmse"]["runs"] == {"copies": 2, "full": 4, "short": 4}
+        assert set(st["kitti_t_pct"]["medians"]) == {"full", "copies"}
+        assert "100 m" in st["kitti_t_pct"]["left_out"]["short"]
+    text = cli("stats", results, "--metrics", "ate_rmse", "kitti_t_pct")
+    assert re.search(r"not in this metric's tests: short \(no figure in its 4 done run\(s\): .*100 m", text), text
+
+
+def test_every_view_of_the_section_shows_the_method_or_says_why_not(kitti):
+    results, _ = kitti
+    tables = results / "report" / "tables"
+    traj = pd.read_csv(tables / "trajectory_metrics.csv")
+    row = traj.set_index("method").loc["short"]
+    assert np.isfinite(row.ate_rmse) and np.isnan(row.kitti_t_pct) and row["runs"] == 4
+    html = (results / "report" / "index.html").read_text()
+    said = re.findall(r'<p class="note">Not shown: short \(([^<]*)\)', html)
+    assert said and all("100 m" in s for s in said), said  # the KITTI columns, tests, box plots of KITTI's errors
+    # ATE's figures and tables name it, KITTI's say why it is absent
+    for name in ("box_ate_rmse", "cumulative_ate_rmse", "box_rpe_t_rmse"):
+        assert "short" in (results / "report" / "figures" / f"{name}.svg").read_text(), name
+    assert "short" not in (results / "report" / "figures" / "box_kitti_t_pct.svg").read_text()
+    box = html.index("box_kitti_t_pct.png")
+    assert "Not shown: short" in html[box : html.index("</figure>", box)]
+
+
+def test_copies_count_once_in_motion_bias_cumulative_plots_and_medians(kitti):
+    results, df = kitti
+    copies = df[df.method == "copies"]
+    assert copies.groupby("direction").ate_rmse.nunique().eq(1).all()  # the method is deterministic
+    mb = pd.read_csv(results / "report" / "tables" / "motion_bias.csv").set_index("method")
+    assert mb.loc["copies", "n forward"] == 1 and mb.loc["copies", "n backward"] == 1
+    one_trial = motion_bias_table(df[df.trial == 0], "ate_rmse").set_index("method")
+    pd.testing.assert_series_equal(mb.loc["copies"], one_trial.loc["copies"], check_names=False)  # one trial's
+    full = df[df.method == "full"]
+    fw, bw = (full.loc[full.direction == d, "ate_rmse"].to_numpy() for d in ("forward", "backward"))
+    assert mb.loc["full", "p (rank-sum)"] == pytest.approx(wilcoxon_rank_sum_p(fw, bw))  # R's rank-sum test
+    svg = (results / "report" / "figures" / "cumulative_ate_rmse.svg").read_text()
+    assert "copies (n=2)" in svg and "full (n=4)" in svg
+
+
+def test_a_table_of_runs_with_a_metric_missing_keeps_them_in_the_other_metrics():
+    """The rule on a plain table: ATE's tests take the run without KITTI's figure; the outlier test takes each run
+    on the metrics it has."""
+    rng = np.random.default_rng(1)
+    rows = []
+    for method, centre, kitti in (("a", 0.1, True), ("b", 0.3, True), ("c", 0.02, False)):
+        for k in range(6):
+            rows.append(
+                {
+                    "method": method,
+                    "sequence": f"s{k % 3}",
+                    "direction": "forward" if k < 3 else "backward",
+                    "ate_rmse": centre * (1 + 0.1 * rng.random()),
+                    "kitti_t_pct": (2 + rng.random()) if kitti else np.nan,
+                }
+            )
+    st = study_statistics(pd.DataFrame(rows), ["ate_rmse", "kitti_t_pct"])
+    assert set(st.metrics["ate_rmse"].medians) == {"a", "b", "c"}
+    assert set(st.metrics["kitti_t_pct"].medians) == {"a", "b"}
+    assert [t["metrics"] for t in st.outlier_tests] == [["ate_rmse", "kitti_t_pct"], ["ate_rmse"]]
+    assert st.outlier_tests[1]["population"] == 18 and st.outlier_tests[1]["runs"] == 6
