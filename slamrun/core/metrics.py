@@ -259,7 +259,12 @@ def ate(
 SEQUENCE_UNITS = ("frames", "s", "m")  # an interval of the sequence, whatever the estimate's rate
 EVO_UNITS = ("evo-f", "evo-m")  # evo_rpe's --delta_unit f and m: steps of the estimate's own associated poses
 RPE_UNITS = SEQUENCE_UNITS + EVO_UNITS
-RPE_SLACK = 0.1  # s and m: a pair's interval within 10 % of delta (an estimate written every few frames finds one)
+# s and m: each pose is paired with the pose at exactly its time (path) + delta, interpolated between the estimate's
+# two poses around that point where none lies on it; both must lie within RPE_BRACKET x delta of it (within
+# [axis + delta/2, axis + 3 delta/2]), so that a hole in the track wider than delta gives no pair through it and no
+# interpolation spans more than the interval it measures.
+RPE_BRACKET = 0.5
+RPE_M_ROUNDING = 1e-9  # m: an estimate pose "at" the point, relative to the distance (the path's rounding)
 
 
 @dataclass(frozen=True)
@@ -327,8 +332,12 @@ def rpe(
     error pose E = (Q_i^-1 Q_j)^-1 (P_i^-1 P_j): |t(E)| and the angle of R(E).
 
     With a sequence unit every pose starts a pair where a partner lies at its interval (pairs overlap, as TUM RGB-D's
-    evaluate_rpe.py with a fixed delta); the estimate's poses are taken in time order, one per timestamp. With an evo
-    unit the pairs are evo's: consecutive, on the associated rows as the files hold them."""
+    evaluate_rpe.py with a fixed delta); the estimate's poses are taken in time order, one per timestamp. With `s` and
+    `m` the partner is the pose at exactly the pose's time (path along the ground truth) + delta: the estimate's pose
+    there (within `tolerance_s` for `s`, to rounding for `m`), else the aligned estimate and the ground truth both
+    interpolated there between the estimate's two poses around it (the same weight; positions linearly, rotations by
+    slerp), where both lie within RPE_BRACKET x delta of it; so an estimate's RPE does not depend on the rate it was
+    written at. With an evo unit the pairs are evo's: consecutive, on the associated rows as the files hold them."""
     interval = RpeInterval(float(delta), unit)
     alignment = Alignment.parse(alignment) if isinstance(alignment, str) else alignment
     if unit in EVO_UNITS:
@@ -345,23 +354,28 @@ def rpe(
     sim = alignment.fit(est_p.positions, gt_p.positions)
     p = aligned(est_p, sim)
     q = matrices(gt_p)
-    if unit == "evo-f":
-        i, j = _pairs_by_index(len(p), int(delta))
-    elif unit == "evo-m":
-        i, j = _pairs_by_path(p[:, :3, 3], float(delta))
-    elif unit == "frames":
-        i, j = _pairs_by_frames(est_p.timestamps, np.asarray(frame_times, float), int(delta), tolerance_s)
-    elif unit == "s":
-        i, j = _pairs_by_axis(est_p.timestamps, float(delta))
+    if unit in ("s", "m"):  # the pose at exactly delta further, interpolated where the estimate has none there
+        if unit == "s":
+            axis, snap = est_p.timestamps, min(tolerance_s, RPE_BRACKET * float(delta))
+        else:
+            axis, snap = _path_along(_finite(gt), est_p.timestamps), None
+        i, a, b, w = _pairs_by_axis(axis, float(delta), snap)
+        q_j, p_j = _interpolated(q, a, b, w), _interpolated(p, a, b, w)
     else:
-        i, j = _pairs_by_axis(_path_along(_finite(gt), est_p.timestamps), float(delta))
+        if unit == "evo-f":
+            i, j = _pairs_by_index(len(p), int(delta))
+        elif unit == "evo-m":
+            i, j = _pairs_by_path(p[:, :3, 3], float(delta))
+        else:
+            i, j = _pairs_by_frames(est_p.timestamps, np.asarray(frame_times, float), int(delta), tolerance_s)
+        q_j, p_j = q[j], p[j]
     if not len(i):
         raise NoPairs(f"no pose pair {interval} apart among {len(p)} poses paired with the ground truth")
-    q_rel = np.linalg.inv(q[i]) @ q[j]
-    p_rel = np.linalg.inv(p[i]) @ p[j]
+    q_rel = np.linalg.inv(q[i]) @ q_j
+    p_rel = np.linalg.inv(p[i]) @ p_j
     err = np.linalg.inv(q_rel) @ p_rel
     trans = np.linalg.norm(err[:, :3, 3], axis=1)
-    rot = np.array([_angle_deg(r) for r in err[:, :3, :3]])
+    rot = _angles_deg(err[:, :3, :3])
     return RpeResult(ErrorStats.of(trans), ErrorStats.of(rot), float(delta), unit, str(alignment), len(i))
 
 
@@ -379,15 +393,49 @@ def _pairs_by_frames(
     return ids[ok], ids[at[ok]]
 
 
-def _pairs_by_axis(axis: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs (i, j) of poses along a non-decreasing `axis` (time, or distance travelled): for each i the j nearest
-    to axis[i] + delta, where within RPE_SLACK x delta of it."""
+def _pairs_by_axis(
+    axis: np.ndarray, delta: float, snap: float | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The point exactly `delta` further along a non-decreasing `axis` (time, or distance travelled) from each pose:
+    (i, a, b, w), the pose i and its partner at axis[a] + w (axis[b] - axis[a]). Where a pose lies within `snap` of
+    the point (None: to rounding, RPE_M_ROUNDING x the distance), that pose (a = b, w = 0); otherwise the poses a
+    before and b after it, where both lie within RPE_BRACKET x delta of it."""
+    n = len(axis)
+    i = np.arange(n)
     target = axis + delta
-    hi = np.minimum(np.searchsorted(axis, target), len(axis) - 1)
-    lo = np.maximum(hi - 1, 0)
-    j = np.where(np.abs(axis[lo] - target) <= np.abs(axis[hi] - target), lo, hi)
-    ok = (np.abs(axis[j] - target) <= RPE_SLACK * delta) & (j > np.arange(len(axis)))
-    return np.flatnonzero(ok), j[ok]
+    if snap is None:
+        snap = RPE_M_ROUNDING * np.maximum(delta, np.abs(target))
+    a = np.searchsorted(axis, target, side="left") - 1  # the last pose before the point
+    b = np.searchsorted(axis, target, side="right")  # the first pose beyond it
+    a_c, b_c = np.maximum(a, 0), np.minimum(b, n - 1)
+    at = np.minimum(a + 1, n - 1)  # the first pose at or beyond it
+    near = np.where(np.abs(axis[a_c] - target) <= np.abs(axis[at] - target), a_c, at)
+    on = (np.abs(axis[near] - target) <= snap) & (near > i)
+    reach = RPE_BRACKET * delta
+    around = ~on & (a >= 0) & (b < n) & (axis[a_c] >= target - reach) & (axis[b_c] <= target + reach) & (a_c > i)
+    keep = on | around
+    a_k = np.where(on, near, a_c)[keep]
+    b_k = np.where(on, near, b_c)[keep]
+    span = axis[b_k] - axis[a_k]
+    w = np.where(on[keep], 0.0, (target[keep] - axis[a_k]) / np.where(span > 0, span, 1.0))
+    return i[keep], a_k, b_k, w
+
+
+def _interpolated(poses: np.ndarray, a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The 4x4 poses at weight `w` between poses[a] and poses[b]: positions linearly, rotations by slerp
+    (R_a exp(w log(R_a^T R_b))), batched; poses[a] itself where w is 0."""
+    from scipy.spatial.transform import Rotation
+
+    out = poses[a].copy()
+    move = w > 0
+    if not move.any():
+        return out
+    ra, rb, wm = poses[a[move], :3, :3], poses[b[move], :3, :3], w[move]
+    rel = np.swapaxes(ra, 1, 2) @ rb
+    step = Rotation.from_rotvec(Rotation.from_matrix(rel).as_rotvec() * wm[:, None]).as_matrix()
+    out[move, :3, :3] = ra @ step
+    out[move, :3, 3] = (1.0 - wm)[:, None] * poses[a[move], :3, 3] + wm[:, None] * poses[b[move], :3, 3]
+    return out
 
 
 def _path_along(gt: Trajectory, times: np.ndarray) -> np.ndarray:
@@ -416,11 +464,12 @@ def _pairs_by_path(positions: np.ndarray, delta_m: float) -> tuple[np.ndarray, n
     return ids_a[:-1], ids_a[1:]
 
 
-def _angle_deg(rot: np.ndarray) -> float:
-    """The rotation angle of a rotation matrix in degrees, accurate near 0 (from the axis-angle vector's norm)."""
-    cos = (np.trace(rot) - 1.0) / 2.0
-    sin = np.linalg.norm([rot[2, 1] - rot[1, 2], rot[0, 2] - rot[2, 0], rot[1, 0] - rot[0, 1]]) / 2.0
-    return math.degrees(math.atan2(sin, cos))
+def _angles_deg(rot: np.ndarray) -> np.ndarray:
+    """The rotation angles of rotation matrices (N, 3, 3) in degrees, accurate near 0 (from the axis-angle vector's
+    norm)."""
+    cos = (np.trace(rot, axis1=1, axis2=2) - 1.0) / 2.0
+    skew = np.stack([rot[:, 2, 1] - rot[:, 1, 2], rot[:, 0, 2] - rot[:, 2, 0], rot[:, 1, 0] - rot[:, 0, 1]], axis=1)
+    return np.degrees(np.arctan2(np.linalg.norm(skew, axis=1) / 2.0, cos))
 
 
 # ----------------------------------------------------------------------------------------------- KITTI
