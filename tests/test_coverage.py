@@ -51,7 +51,7 @@ def test_min_coverage_makes_a_sparse_run_lost_and_the_report_says_so(campaign):
     strict = df[df.dataset == "strict"]
     lost = strict[strict.method == "fifth"]
     assert (lost.status == "failed").all() and (lost.failure == "lost").all()
-    assert lost.message.str.contains("poses for 20 % of the frames, under the dataset's min_coverage 0.5").all()
+    assert lost.message.str.contains("poses for 20 % of its frames, under the dataset's min_coverage 0.5").all()
     assert (strict[strict.method == "every"].status == "done").all()
     html = write_report(res.results).read_text()
     assert "4 run(s) gave poses for fewer than min_coverage 0.5" in html
@@ -67,7 +67,7 @@ def test_statistics_and_tables_show_coverage(campaign):
     out = json.loads(subprocess.run([*base, "--json"], capture_output=True, text=True, check=True).stdout)
     assert out["datasets"]["open"]["coverage"] == {"every": 1.0, "fifth": 0.2}
     text = subprocess.run(base, capture_output=True, text=True, check=True).stdout
-    assert "median coverage (share of the sequence's frames with a pose) of the runs tested: every 1, fifth 0.2" in text
+    assert "median coverage (share of the frames each method was given with a pose) of the runs tested: every 1, fifth 0.2" in text
     write_report(res.results)
     table = pd.read_csv(res.results / "report" / "datasets" / "open" / "tables" / "trajectory_metrics.csv")
     assert table.set_index("method").loc["fifth", "coverage"] == pytest.approx(0.2)

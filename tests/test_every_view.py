@@ -125,3 +125,44 @@ def test_a_table_of_runs_with_a_metric_missing_keeps_them_in_the_other_metrics()
     assert set(st.metrics["kitti_t_pct"].medians) == {"a", "b"}
     assert [t["metrics"] for t in st.outlier_tests] == [["ate_rmse", "kitti_t_pct"], ["ate_rmse"]]
     assert st.outlier_tests[1]["population"] == 18 and st.outlier_tests[1]["runs"] == 6
+
+
+def test_a_diverged_run_is_flagged_everywhere_and_a_failure_where_the_dataset_says_so(tmp_path):
+    """glomap's spiral on a 129 m drive was `done`, 100 % success (issue 62). `ate_rel` (ATE over the ground truth's
+    spread) flags a run over 0.5 in results.csv even where the dataset sets no threshold; with `max_ate_rel` such a
+    run is a tracking failure, `diverged`, charged to the method."""
+    data = tmp_path / "data"
+    for name, seed in (("seq_a", 1), ("seq_b", 2)):
+        generate(data / name, frames=60, seed=seed, size=(160, 120), layout="euroc")
+    methods = [
+        fake_method(label="steady", extra=["--noise", "0.01", "--vary"]),
+        fake_method(label="spiral", extra=["--noise", "0.01", "--diverge", "0.05"]),
+    ]
+    datasets = [
+        {"name": "open", "path": str(data), "sequences": ["seq_a"], "layout": "euroc"},
+        {"name": "strict", "path": str(data), "sequences": ["seq_b"], "layout": "euroc", "max_ate_rel": 0.5},
+    ]
+    spec = write_spec(tmp_path, data, methods, datasets=datasets, trials=1, report=True)
+    assert main(["campaign", str(spec)]) == 0
+    df = pd.read_csv(tmp_path / "results" / "results.csv")
+    steady, spiral = df[df.method == "steady"], df[df.method == "spiral"]
+    assert (steady.ate_rel < 0.1).all() and (steady.diverged == 0).all() and (steady.status == "done").all()
+    assert (spiral.ate_rel > 0.5).all() and (spiral.diverged == 1).all()
+    open_, strict = spiral[spiral.dataset == "open"], spiral[spiral.dataset == "strict"]
+    assert (open_.status == "done").all()  # flagged, not failed: the dataset sets no threshold
+    assert (strict.status == "failed").all() and (strict.failure == "diverged").all()
+    assert strict.message.str.contains("over the dataset's max_ate_rel 0.5").all()
+
+
+def test_ate_rel_is_near_one_for_an_estimate_without_likeness_and_zero_for_a_similar_one():
+    from slamrun.core.metrics import ate
+    from slamrun.core.trajectory import Trajectory
+
+    t = np.arange(50) * 0.1
+    path = np.column_stack([np.cos(t), np.sin(t), 0.1 * t])
+    quats = np.tile([0.0, 0.0, 0.0, 1.0], (50, 1))
+    gt = Trajectory(t, path, quats)
+    noise = Trajectory(t, np.random.default_rng(0).normal(size=(50, 3)), quats)  # no likeness to the path
+    rel = ate(gt, noise).relative
+    assert 0.8 < rel <= 1.0  # under Sim(3) the alignment can always shrink it to a point: at most 1
+    assert ate(gt, Trajectory(t, 2 * path + 1, quats)).relative == pytest.approx(0.0, abs=1e-9)

@@ -49,6 +49,11 @@ def test_colmap_forward_and_backward(tmp_path, vo_dataset):
     df = _run(tmp_path, vo_dataset, [{"name": "colmap", "params": params}])
     assert len(df) == 2 and (df.status == "done").all() and (df.eval_status == "ok").all(), df.message.tolist()
     assert (df.n_poses >= 20).all() and (df.e_align < 0.1).all()
+    # coverage is of the 26 frames it was given (every 8th and the last), beside the share of the sequence's 200
+    # (issue 62: at stride 5 it topped out at 0.20, so any min_coverage above failed every run)
+    assert df.coverage.to_numpy() == pytest.approx(df.n_poses.to_numpy() / 26)
+    assert df.coverage_of_sequence.to_numpy() == pytest.approx(df.n_poses.to_numpy() / 200)
+    assert (df.coverage > 0.75).all() and (df.low_coverage == 0).all()
 
 
 def _vo(tmp_path, images: list[np.ndarray]) -> subprocess.CompletedProcess:

@@ -63,3 +63,25 @@ def test_a_resume_with_nothing_to_run_keeps_the_span(campaign):
     assert again.results == res.results
     after = read_figures(res.results)
     assert after.elapsed_s == pytest.approx(before.elapsed_s) and not after.active
+
+
+def test_each_run_records_the_code_that_ran_it_and_the_report_names_the_runs_commits(campaign):
+    """run.json said `slamrun 0.1.0`; the report showed the commit of the code writing it, not of the runs (issue
+    62). Each run records slamrun's commit (and whether its tree had changes); the report names the runs' commits
+    and says when they came from more than one."""
+    import subprocess
+
+    from slamrun.analysis.provenance import provenance, run_commits
+
+    _, res = campaign
+    df = pd.read_csv(res.results_csv)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    head = subprocess.run(["git", "-C", root, "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
+    assert head and df.slamrun_commit.str.startswith(head).all(), df.slamrun_commit.tolist()
+    for run_dir in df.run_dir:
+        assert json.loads((res.results / run_dir / "run.json").read_text())["slamrun_commit"].startswith(head)
+    p = provenance(res.results, df)
+    assert p.run_commits.startswith(f"{head}") and "2 run(s)" in p.run_commits
+    two = df.assign(slamrun_commit=[f"{head}", "0123abc"])
+    said = run_commits(two)
+    assert said.startswith("made by 2 versions of the code") and "0123abc: 1 run(s)" in said

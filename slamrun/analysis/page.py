@@ -141,7 +141,8 @@ def provenance_html(p: Provenance, root: Path, results: Path) -> str:
     """The provenance block: campaign, slamrun, backend, host, dates, runs, images, the spec as run."""
     items = [
         ("campaign", esc(p.campaign)),
-        ("slamrun", f"version {esc(p.version)}, commit {esc(p.commit)}"),
+        ("slamrun", f"version {esc(p.version)}; this report written by commit {esc(p.commit)}"),
+        ("runs made by", esc(p.run_commits)),
         ("backend", esc(p.backend)),
         ("runs ran on", esc(p.runs_host)),
         *([("measurement", esc(p.measurement))] if p.measurement else []),

@@ -9,14 +9,12 @@ import datetime
 import json
 import os
 import platform
-import shutil
-import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pandas as pd
 
-from slamrun.backends.machine import cpu_model
+from slamrun.backends.machine import cpu_model, source_commit
 from slamrun.core.inputs import load_yaml_file, read_text_bounded
 from slamrun.engine.session import measurement_conditions
 from slamrun.errors import SlamRunError
@@ -32,7 +30,7 @@ class Provenance:
     spec_text: str | None  # the spec as run (spec.resolved.yaml), None where the folder has none
     spec_note: str  # where it came from, or why it is missing
     version: str  # slamrun's
-    commit: str  # slamrun's source tree, where it is a git checkout
+    commit: str  # slamrun's source tree, where it is a git checkout: the code writing the report
     backend: str
     images: dict[str, dict[str, str]]  # run label -> image label -> text
     images_note: str
@@ -44,6 +42,7 @@ class Provenance:
     notes: list[str] = field(default_factory=list)
     measurement: str = ""  # under which measurement the resources were taken (parallel with N lanes, exclusive)
     contention_pct: float | None = None  # the spec's threshold of cpu_wait_pct for `contended` runs
+    run_commits: str = ""  # the code that ran the runs: each commit and how many runs it made
 
 
 def provenance(results: Path, df: pd.DataFrame) -> Provenance:
@@ -71,7 +70,26 @@ def provenance(results: Path, df: pd.DataFrame) -> Provenance:
         runs=_runs(df, meta.get("session")),
         measurement=measurement_conditions(spec),
         contention_pct=(spec or {}).get("contention_pct"),
+        run_commits=run_commits(df),
     )
+
+
+def run_commits(df: pd.DataFrame) -> str:
+    """The slamrun commits the finished runs were made with, each with its count, and a warning where there are
+    several (figures made by different code); runs recorded before commits were kept are counted apart."""
+    if "status" in df.columns:
+        df = df[df["status"].isin(["done", "failed"])]
+    if df.empty:
+        return "no finished run"
+    commits = df["slamrun_commit"] if "slamrun_commit" in df.columns else pd.Series(None, index=df.index)
+    counts = commits.fillna("not recorded (run before slamrun kept it)").astype(str).value_counts()
+    text = "; ".join(f"{c}: {n} run(s)" for c, n in counts.items())
+    known = [c for c in counts.index if not c.startswith("not recorded")]
+    if len(counts) > 1:
+        text = f"made by {len(counts)} versions of the code ({text}): their figures may differ by it"
+    elif known and any("local changes" in c for c in known):
+        text += " (a tree with changes not committed: the commit alone does not name the code)"
+    return text
 
 
 def _ledger_meta(results: Path) -> dict:
@@ -161,28 +179,6 @@ def slamrun_version() -> str:
         return version("slamrun")
     except PackageNotFoundError:
         return "not installed as a package"
-
-
-def source_commit() -> str:
-    """The git commit of slamrun's source tree (`+ local changes` where it differs from it), where it is a git
-    checkout and git is installed; else why not."""
-    root = Path(__file__).resolve().parents[2]
-    git = shutil.which("git")
-    if git is None or not (root / ".git").exists():
-        return "not known (slamrun is not run from a git checkout)"
-    try:
-        head = subprocess.run([git, "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
-        dirty = subprocess.run(
-            [git, "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
-            capture_output=True,
-            text=True,
-            timeout=10,
-        )
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        return f"not known ({exc})"
-    if head.returncode != 0:
-        return f"not known ({head.stderr.strip()[:200]})"
-    return head.stdout.strip() + (" + local changes" if dirty.stdout.strip() else "")
 
 
 def host_description() -> dict[str, str]:

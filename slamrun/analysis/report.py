@@ -407,7 +407,8 @@ def coverage_note(df: pd.DataFrame) -> str:
     if under.empty:
         return (
             "No coverage threshold (min_coverage) excluded a run: every done run's figures are tested, and each "
-            "table and box plot gives the methods' median coverage (the share of the sequence's frames with a pose)."
+            "table and box plot gives the methods' median coverage (the share of the frames each was given with a "
+            "pose)."
         )
     least = sorted({m.rsplit(" ", 1)[-1] for m in under})
     return (

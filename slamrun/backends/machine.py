@@ -6,6 +6,9 @@ from __future__ import annotations
 import functools
 import os
 import platform
+import shutil
+import subprocess
+from pathlib import Path
 
 from slamrun.core.inputs import read_text_bounded
 from slamrun.errors import SlamRunError
@@ -66,3 +69,27 @@ def package_versions(modules: tuple[str, ...]) -> dict[str, str]:
 def packages_text(versions: dict[str, str]) -> str | None:
     """`versions` on one line, as results.csv's packages column holds them ('numpy 2.4.6, scipy 1.17.1')."""
     return ", ".join(f"{k} {v}" for k, v in sorted(versions.items())) or None
+
+
+@functools.cache
+def source_commit() -> str:
+    """The git commit of slamrun's source tree (`+ local changes` where it differs from it), where it is a git
+    checkout and git is installed; else why not. Recorded with every run (the code that ran it) and by the report
+    (the code that wrote it); looked up once per process."""
+    root = Path(__file__).resolve().parents[2]
+    git = shutil.which("git")
+    if git is None or not (root / ".git").exists():
+        return "not known (slamrun is not run from a git checkout)"
+    try:
+        head = subprocess.run([git, "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
+        dirty = subprocess.run(
+            [git, "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            timeout=10,
+        )
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        return f"not known ({exc})"
+    if head.returncode != 0:
+        return f"not known ({head.stderr.strip()[:200]})"
+    return head.stdout.strip() + (" + local changes" if dirty.stdout.strip() else "")

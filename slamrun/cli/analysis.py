@@ -73,9 +73,11 @@ def cmd_stats(args) -> int:
 def cmd_report(args) -> int:
     from slamrun.analysis.report import write_report
     from slamrun.engine.folders import REPORT, claim_output_folder, require_output_folder
+    from slamrun.engine.reevaluate import reevaluate_folder
 
     folder = args.results / "report"
     require_output_folder(folder, REPORT)  # never over a report/ of someone else's
+    reevaluate_folder(args.results, log=lambda line: console.print(line, markup=False, highlight=False))
     path = write_report(args.results)
     claim_output_folder(folder, REPORT)
     console.print(f"report: {path}")

@@ -126,6 +126,7 @@ def _print_dry_run(spec) -> int:
     from rich.table import Table
 
     from slamrun.engine.dryrun import dry_run
+    from slamrun.engine.plan import seed_warnings
     from slamrun.engine.progress import duration
     from slamrun.engine.spec_file import cpu_warnings
 
@@ -141,6 +142,12 @@ def _print_dry_run(spec) -> int:
         f"{d.to_run} run(s) to run of {d.total} ({d.done} done, {d.failed} failed as the method's result)"
         + (f"; {d.infra} infrastructure failure(s) to retry" if d.infra else "")
     )
+    if d.to_reevaluate:
+        console.print(
+            f"{d.to_reevaluate} run(s) to re-evaluate: finished with other evaluation settings than their dataset's "
+            "now (metrics, alignment, rpe, min_coverage, coverage_mark, max_ate_rel, or the evaluation code); their "
+            "stored trajectories are evaluated again, no method runs again"
+        )
     if d.views_to_prepare or d.views_unknown:
         console.print(
             f"{d.views_to_prepare} view(s) to prepare in {spec.cache}, about {d.view_bytes / 2**30:.2f} GB"
@@ -158,8 +165,8 @@ def _print_dry_run(spec) -> int:
             f"robustness: {d.perturbed_runs} of the {d.total} runs are on perturbed views (README, Robustness); "
             f"{d.perturbed_views} of the views to prepare, about {d.perturbed_bytes / 2**30:.2f} GB"
         )
-    for warning in cpu_warnings(spec):
-        console.print(f"warning: {warning}")
+    for warning in cpu_warnings(spec) + seed_warnings(spec):
+        console.print(f"warning: {warning}", markup=False, highlight=False)
     if d.to_run:
         basis = f" ({d.eta_basis}, from this results folder's timings)" if d.eta_s is not None else ""
         console.print(
@@ -229,11 +236,11 @@ def cmd_status(args) -> int:
 
 def cmd_validate(args) -> int:
     from slamrun.engine.campaign import check_sequences
-    from slamrun.engine.plan import plan
+    from slamrun.engine.plan import plan, seed_warnings
     from slamrun.engine.spec_file import cpu_warnings, load_spec
 
     spec = load_spec(args.spec)
-    for warning in check_sequences(spec, skip_ungenerated=True) + cpu_warnings(spec):
+    for warning in check_sequences(spec, skip_ungenerated=True) + cpu_warnings(spec) + seed_warnings(spec):
         console.print(f"warning: {warning}")
     from slamrun.datasets.layouts import holds_sequence
 

@@ -254,7 +254,9 @@ def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list
         lines.append(f"  {note}")
     if st.coverage:
         shares = ", ".join(f"{g} {_num(v, 3)}" for g, v in st.coverage.items())
-        lines.append(f"  median coverage (share of the sequence's frames with a pose) of the runs tested: {shares}")
+        lines.append(
+            f"  median coverage (share of the frames each method was given with a pose) of the runs tested: {shares}"
+        )
     if not st.metrics:
         lines.append("  no metric with values: no test")
     for name, m in st.metrics.items():

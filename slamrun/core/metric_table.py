@@ -66,6 +66,7 @@ METRICS: dict[str, Metric] = {
                 "ate_mean": r.translation.mean,
                 "ate_median": r.translation.median,
                 "ate_max": r.translation.max,
+                "ate_rel": r.relative,
             },
         ),
         Metric(

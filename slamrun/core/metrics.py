@@ -238,9 +238,18 @@ class AteResult:
     scale: float  # of the alignment (1 unless sim3)
     alignment: str
     errors: np.ndarray  # per associated pose, in the estimate's order
+    gt_spread: float = math.nan  # the associated ground truth's RMS distance from its centroid
+
+    @property
+    def relative(self) -> float:
+        """The RMSE relative to the ground truth's spread (`ate_rel`): 1 is the error of the whole estimate collapsed
+        to one point (its ATE under Sim(3) is at most about this); 1 - ate_rel^2 is the share of the path's variance
+        the aligned estimate explains. NaN where the ground truth does not move."""
+        return self.translation.rmse / self.gt_spread if self.gt_spread > 0 else math.nan
 
     def to_dict(self) -> dict:
-        return {"metric": "ate", "alignment": self.alignment, "scale": self.scale, **_flat("ate", self.translation)}
+        flat = {"metric": "ate", "alignment": self.alignment, "scale": self.scale, **_flat("ate", self.translation)}
+        return flat | {"ate_rel": None if math.isnan(self.relative) else self.relative}
 
 
 def ate(
@@ -251,7 +260,9 @@ def ate(
     pairs = associate(gt, est, tolerance_s)
     sim = alignment.fit(pairs.est.positions, pairs.gt.positions)
     errors = np.linalg.norm(sim.apply(pairs.est.positions) - pairs.gt.positions, axis=1)
-    return AteResult(ErrorStats.of(errors), float(sim.scale), str(alignment), errors)
+    centred = pairs.gt.positions - pairs.gt.positions.mean(axis=0)
+    spread = math.sqrt(float(np.einsum("ij,ij->", centred, centred)) / len(centred))
+    return AteResult(ErrorStats.of(errors), float(sim.scale), str(alignment), errors, spread)
 
 
 # ------------------------------------------------------------------------------------------------- RPE

@@ -27,9 +27,10 @@ from slamrun.engine.folders import (
 )
 from slamrun.engine.importer import reimport_lost
 from slamrun.engine.ledger import Ledger, ResultsLock
-from slamrun.engine.plan import PlannedRun, plan
+from slamrun.engine.plan import PlannedRun, plan, seed_warnings
 from slamrun.engine.preparer import ViewPreparer
 from slamrun.engine.recovery import collect_leftovers, import_finished, recover
+from slamrun.engine.reevaluate import reevaluate
 from slamrun.engine.scheduler import Event, Scheduler
 from slamrun.engine.session import session_record
 from slamrun.engine.spec import CampaignSpec
@@ -162,7 +163,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
     if problems := output_problems(spec):  # every door to a campaign (spec, --results, a caller's spec) ends here
         raise FolderRefused("\n".join(problems))
     ensure_datasets(spec, log)
-    for warning in check_sequences(spec) + cpu_warnings(spec):
+    for warning in check_sequences(spec) + cpu_warnings(spec) + seed_warnings(spec):
         log(f"warning: {warning}")
     lock = ResultsLock(results)
     lock.acquire()
@@ -183,6 +184,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         lanes = 1 if spec.measurement == "exclusive" else spec.lanes
         views = ViewPreparer(order, spec.cache, spec.frame_format, head=lanes).start()  # the idle lanes' first views
         gts = load_groundtruths(runs) if spec.evaluate else {}
+        recovered["reevaluated"] = reevaluate(ledger, spec, gts, log)  # settings changed since: no run again
         sched = Scheduler(spec, ledger, backend, views, gts, on_event)
         # containers left by a killed runner or a lost daemon
         leftovers = (spec.name, ledger.meta("results_id"))

@@ -19,9 +19,10 @@ from slamrun.engine.ledger import Ledger
 from slamrun.engine.paths import RunPaths, finished_record
 from slamrun.engine.plan import plan
 from slamrun.engine.progress import eta, overhead_per_run, run_group, wall_times
+from slamrun.engine.reevaluate import stale
 from slamrun.engine.spec import CampaignSpec
 from slamrun.errors import DatasetError
-from slamrun.results.vocabulary import is_infra
+from slamrun.results.vocabulary import IMPORTED, is_infra
 
 
 @dataclass
@@ -42,6 +43,7 @@ class DryRun:
     perturbed_runs: int = 0  # of `total`: runs on perturbed views (the robustness axis)
     perturbed_views: int = 0  # of `views_to_prepare`
     perturbed_bytes: int = 0  # of `view_bytes`
+    to_reevaluate: int = 0  # finished runs whose evaluation settings changed: evaluated again, not run again
 
 
 def dry_run(spec: CampaignSpec) -> DryRun:
@@ -102,6 +104,18 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         lanes=lanes,
         groups=groups,
     )
+    _count_views(out, todo_views, spec)
+    out.perturbed_runs = sum(1 for r in runs if not r.perturbation.is_none)
+    planned = {r.key.id for r in runs}
+    active = [r for k, r in rows.items() if k in planned or r.get("method") == IMPORTED]
+    out.to_reevaluate = len(stale(active, spec))
+    overhead = last_session_overhead(list(rows.values()), session)
+    out.eta_s, out.eta_basis = eta(dict(todo_by_group), wall_times(rows.values()), lanes, overhead)
+    return out
+
+
+def _count_views(out: DryRun, todo_views: set[tuple], spec: CampaignSpec) -> None:
+    """The views the runs to do need that are not prepared yet, and their estimated disk, into `out`."""
     frames_counted: set[tuple] = set()  # a view's other direction links the same frames
     ungenerated: set[Path] = set()
     for seq_dir, direction, profile, perturbation in sorted(todo_views, key=str):
@@ -117,11 +131,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
                 out.perturbed_views += 1
                 out.perturbed_bytes += bytes_
             frames_counted.add((seq_dir, profile, perturbation))
-    out.perturbed_runs = sum(1 for r in runs if not r.perturbation.is_none)
     out.sequences_unknown = len(ungenerated)
-    overhead = last_session_overhead(list(rows.values()), session)
-    out.eta_s, out.eta_basis = eta(dict(todo_by_group), wall_times(rows.values()), lanes, overhead)
-    return out
 
 
 def last_session_overhead(rows: list[dict], session: dict) -> float:

@@ -20,15 +20,15 @@ import numpy as np
 import slamrun.methods
 from slamrun.backends.base import Backend, ExecRequest, ExecResult, disk_reserve_bytes, folder_bytes
 from slamrun.backends.logcap import tail
-from slamrun.backends.machine import machine, package_versions, packages_text
-from slamrun.core import jsonio, metrics
+from slamrun.backends.machine import machine, package_versions, packages_text, source_commit
+from slamrun.core import jsonio
 from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S
-from slamrun.core.metric_table import campaign_figures
 from slamrun.core.trajectory import Trajectory, write_tum
 from slamrun.datasets.cache import verify_view
 from slamrun.datasets.view import PreparedView
 from slamrun.engine.paths import RunPaths, finished_record
 from slamrun.engine.plan import PlannedRun
+from slamrun.engine.run_evaluation import Frames, evaluate_trajectory, run_frames, settle
 from slamrun.errors import (
     BackendUnreachable,
     Contended,
@@ -39,7 +39,7 @@ from slamrun.errors import (
     storage_problem,
 )
 from slamrun.methods.base import Method
-from slamrun.results.vocabulary import CONTENDABLE, OWN_WAIT_PER_THREAD_PCT, UNDER_MIN_COVERAGE, EvalStatus
+from slamrun.results.vocabulary import CONTENDABLE, OWN_WAIT_PER_THREAD_PCT
 
 METHOD_ERROR = "method_error"  # in Launched.extra: (kind, message) of a method that failed before its process started
 
@@ -177,14 +177,19 @@ def finish_attempt(
         extra = dict(extra)
         failure, message, traj = _judged(extra.pop(METHOD_ERROR, None), result, method, raw, view, log_tail)
         _not_the_methods_fault(run, view, stage, failure, message, log_tail)
-        values: dict = {"exit_code": result.exit_code, "failure": failure, "message": message, **result.resources}
+        values: dict = {"exit_code": result.exit_code, **result.resources, "method_failure": failure}
         values["host"] = (extra.get("machine") or {}).get("name")
         values["packages"] = packages_text(extra.get("package_versions") or {})
+        values["slamrun_commit"] = source_commit()  # the code that ran it
+        values["eval_settings"] = run.evaluation.text()
+        detail = ""
         if traj is None or not len(traj):
             values["fps"] = None  # frames per second of processing: nothing was processed to a pose
         else:
-            _evaluated(run, view, stage, traj, groundtruth, values)
-        _settle_failure(run, values)
+            write_tum(RunPaths.trajectory(stage), traj)
+            figures, detail = evaluate_trajectory(traj, groundtruth, run_frames_of(run, method, view), run.evaluation)
+            values.update(figures)
+        settle(values, failure, message, detail, run.evaluation)
         values["cpu_wait_own_pct"] = own_wait_pct(method, extra.get("cpus"))
         _not_contended(run, stage, values, contention_pct, values["cpu_wait_own_pct"])
         if traj is not None and traj.report.n_nonfinite_dropped and not values["message"]:
@@ -228,37 +233,21 @@ def _not_the_methods_fault(run: PlannedRun, view: PreparedView, stage: Path, fai
             raise InfraError(f"{run.key.id}: its input view changed during the run ({damaged}); not charged")
 
 
-def _evaluated(
-    run: PlannedRun, view: PreparedView, stage: Path, traj: Trajectory, groundtruth: Trajectory | None, values: dict
-) -> None:
-    """The trajectory written, its poses and coverage counted, its metrics against the ground truth (if any)."""
-    write_tum(RunPaths.trajectory(stage), traj)
-    values["n_poses"] = len(traj)
-    values["coverage"] = metrics.coverage(traj, view.original_timestamps())
-    if groundtruth is not None:
-        figures, detail = campaign_figures(
-            groundtruth, traj, run.metrics, run.alignment, run.rpe, view.original_timestamps()
-        )
-        values.update(figures)
-        if detail and not values["message"]:
-            values["message"] = detail
+def run_frames_of(run: PlannedRun, method: Method, view: PreparedView) -> Frames:
+    """The run's frames: the sequence's, its view's and those its method takes with its parameters (a frame_drop
+    view's dropped frames are the sequence's, read from its folder)."""
+    view_times = view.original_timestamps()
+    if run.perturbation.kind == "frame_drop":
+        from slamrun.datasets.layouts import open_sequence
 
-
-def _settle_failure(run: PlannedRun, values: dict) -> None:
-    """The failure the evaluation decides: too few poses to evaluate, a loss it recovered from, too little coverage."""
-    failure = values["failure"]
-    if failure is None and values.get("eval_status") == EvalStatus.incomplete.value:
-        failure = "lost"  # too few poses in a segment to evaluate: the method did not track the sequence
-        values.update(failure=failure, message=f"too few poses to evaluate ({values['message']})")
-    if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
-        recovered = values.get("eval_status") == EvalStatus.ok.value
-        failure = None if recovered else "lost"
-        values["failure"] = failure
-    share = values.get("coverage")
-    if failure is None and run.min_coverage and share is not None and share < run.min_coverage:
-        failure = "lost"  # it tracked too little of the sequence for its accuracy to be compared
-        message = f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {run.min_coverage:g}"
-        values.update(failure=failure, message=message)
+        sequence_times = open_sequence(run.sequence_dir).timestamps
+    else:
+        sequence_times = view_times
+    try:
+        given = method.frames_given(len(view_times))
+    except MethodFailure:  # a plug-in's bug: its coverage is then of the view's frames
+        given = None
+    return run_frames(sequence_times, run.perturbation, run.key.direction, given)
 
 
 def own_wait_pct(method: Method, cpus: list[int] | None) -> float:
@@ -317,6 +306,7 @@ def _record(
         "level": run.perturbation.level,
         "perturbation_seed": run.perturbation.seed,
         "trial": run.key.trial,
+        "seed": run.seed,  # the trial's seed the plan derived (params holds it too), None where the spec fixed it
         "settings": run.key.settings,
         "params": method.params.model_dump(mode="json"),
         "provider": slamrun.methods.provider_record(run.method),  # which package's implementation made this run

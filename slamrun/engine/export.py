@@ -33,6 +33,8 @@ COLUMNS = (
     "message",
     "host",
     "packages",
+    "slamrun_commit",
+    "eval_settings",
     "run_dir",
     "key",
 )

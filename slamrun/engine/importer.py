@@ -38,23 +38,25 @@ from pathlib import Path
 
 import numpy as np
 
-from slamrun.core import jsonio, metrics
+from slamrun.backends.machine import source_commit
+from slamrun.core import jsonio
 from slamrun.core.archives import ZIP_ERRORS, files_of, read_member
 from slamrun.core.formats import read_trajectory
 from slamrun.core.inputs import read_bounded, regular_file_problem
-from slamrun.core.metric_table import campaign_figures
 from slamrun.core.trajectory import Trajectory, write_tum
 from slamrun.datasets.layouts import open_sequence, sequence_identity
+from slamrun.datasets.perturb import BASELINE
 from slamrun.datasets.view import Direction
 from slamrun.engine.execute import foreign_timestamps_of
 from slamrun.engine.folders import path_part_problem
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.paths import RunPaths
 from slamrun.engine.plan import RunKey
+from slamrun.engine.run_evaluation import evaluate_trajectory, run_frames, settle
 from slamrun.engine.spec import CampaignSpec
 from slamrun.engine.spec_file import load_spec
 from slamrun.errors import SlamRunError, TrajectoryFormatError
-from slamrun.results.vocabulary import IMPORTED, UNDER_MIN_COVERAGE
+from slamrun.results.vocabulary import IMPORTED
 
 STUDY_PATTERN = r"(?:^|/)[a-z0-9-]+_(?P<direction>fw|bw)(?:__|/)sequence_(?P<sequence>\d+)_(?P<trial>\d+)\.txt$"
 DIRECTIONS = {
@@ -432,25 +434,17 @@ def _recorded_sha(run_dir: Path) -> str | None:
 def _record(key: RunKey, source: str, sha256: str, ds, seq, gt, traj: Trajectory | None) -> dict:
     """The run.json of an imported run: a result of the method as published (done, or no_output when the file
     has no finite pose), its metrics by the campaign's own evaluation, no resources."""
-    values: dict = {"failure": None, "message": None}
+    values: dict = {"failure": None, "message": None, "method_failure": None, "eval_settings": ds.evaluation.text()}
+    values["slamrun_commit"] = source_commit()  # the code that imported and evaluated it
     if traj is None or not len(traj):
         values.update(failure="no_output", message="the published file holds no finite pose")
-    else:
-        values.update(n_poses=len(traj), coverage=metrics.coverage(traj, seq.timestamps))
-        if traj.report.n_nonfinite_dropped:
-            values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the file dropped"
-        if gt is not None:
-            figures, detail = campaign_figures(
-                gt, traj, tuple(ds.metrics), ds.alignment, ds.rpe_interval, seq.timestamps
-            )
-            values.update(figures)
-            if detail and not values["message"]:
-                values["message"] = detail
-        share, least = values["coverage"], getattr(ds, "min_coverage", None)
-        if least and share == share and share < least:  # as a campaign's own run: too little tracked to compare
-            values.update(
-                failure="lost", message=f"poses for {100 * share:.0f} % of the frames, {UNDER_MIN_COVERAGE} {least:g}"
-            )
+    else:  # evaluated as a campaign's own run (coverage of every frame: a published file has no stride of ours)
+        frames = run_frames(seq.timestamps, BASELINE, key.direction)
+        figures, detail = evaluate_trajectory(traj, gt, frames, ds.evaluation)
+        values.update(figures)
+        dropped = traj.report.n_nonfinite_dropped
+        note = f"{dropped} NaN or infinite row(s) of the file dropped" if dropped else None
+        settle(values, None, note, detail, ds.evaluation)
     return {
         "key": key.id,
         "label": key.label,

@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from slamrun.errors import LedgerLockedError, LedgerLostError, SlamRunError, StorageError
-from slamrun.results.vocabulary import IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
+from slamrun.results.vocabulary import FLAG_COLUMNS, IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
 
 if TYPE_CHECKING:
     from slamrun.engine.plan import PlannedRun
@@ -50,6 +50,9 @@ STATE_COLUMNS = (
     "packages",  # a native method's Python packages and versions
     "contended_attempts",  # attempts lost while waiting for a CPU (the machine's load): retried, never charged
     "contended_message",  # the last of them: its wait and the machine's pressure
+    "method_failure",  # the failure its process left, before its evaluation decided (re-evaluation starts there)
+    "eval_settings",  # the evaluation settings its figures were made with (engine.run_evaluation.EvalSettings.text)
+    "slamrun_commit",  # the code that ran it: slamrun's git commit, '+' when its tree had changes
 )
 ALL_COLUMNS = KEY_COLUMNS + STATE_COLUMNS + METRIC_COLUMNS + RESOURCE_COLUMNS
 
@@ -65,6 +68,7 @@ _TYPES = {
     "rpe_pairs": "INTEGER",
     "rpe_interval": "TEXT",
     "level": "REAL",
+    **dict.fromkeys(FLAG_COLUMNS, "INTEGER"),
 }
 _REAL = set(METRIC_COLUMNS + RESOURCE_COLUMNS + ("started_at", "ended_at", "pid_start")) - set(_TYPES)
 

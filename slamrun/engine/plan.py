@@ -9,10 +9,10 @@ from itertools import product
 from pathlib import Path
 
 import slamrun.methods
-from slamrun.core.metrics import RpeInterval
 from slamrun.datasets.layouts import sequence_identity
 from slamrun.datasets.perturb import BASELINE, NONE, Perturbation
 from slamrun.datasets.view import Direction, Profile
+from slamrun.engine.run_evaluation import EvalSettings
 from slamrun.engine.spec import CampaignSpec, DatasetSpec, MethodSpec
 
 
@@ -60,11 +60,9 @@ class PlannedRun:
     sequence_dir: Path
     profile: Profile
     timeout_s: float
-    metrics: tuple[str, ...] = ("tum-mono",)  # the dataset's metrics
-    alignment: str = "sim3"
-    rpe: RpeInterval = RpeInterval()  # the dataset's RPE interval
-    min_coverage: float | None = None  # under it, a run is lost
+    evaluation: EvalSettings = EvalSettings()  # the dataset's metrics, alignment, RPE interval, thresholds
     perturbation: Perturbation = BASELINE  # how its view's frames were made worse (none: the ordinary view)
+    seed: int | None = None  # its method's seed for this trial (trial_seed), where the spec does not fix one
 
     @property
     def view_key(self) -> tuple[str, Direction, Profile, Perturbation]:
@@ -72,17 +70,52 @@ class PlannedRun:
         return (str(self.sequence_dir), self.key.direction, self.profile, self.perturbation)
 
 
-def settings_hash(m: MethodSpec) -> str:
-    """Hash of what changes a method's results: its name, its (validated, defaulted) parameters, and for a plug-in
-    the distribution and version that provide it (another package or release under the same name is another
-    implementation: its runs are never pooled with these)."""
+def settings_hash(m: MethodSpec, campaign_seed: int = 0) -> str:
+    """Hash of what changes a method's results: its name, its (validated, defaulted) parameters, the campaign's seed
+    where its trials' seeds are derived from it, and for a plug-in the distribution and version that provide it
+    (another package or release under the same name is another implementation: its runs are never pooled with
+    these)."""
     cls = slamrun.methods.get(m.name)
     params = cls.Params.model_validate(m.params).model_dump(mode="json")
     settings: dict = {"method": m.name, "params": params}
+    if derives_seed(cls, params):
+        settings["seeds"] = f"per trial from campaign seed {campaign_seed}"
     if (provider := slamrun.methods.PLUGINS.get(m.name)) is not None:
         settings["provider"] = [provider.distribution, provider.version]
     blob = json.dumps(settings, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:10]
+
+
+def derives_seed(cls, params: dict) -> bool:
+    """Whether a method's trials take seeds derived per trial: it takes a seed and its params do not fix one."""
+    return bool(cls.seed_param) and params.get(cls.seed_param) is None
+
+
+def trial_seed(campaign_seed: int, trial: int) -> int:
+    """A trial's seed for a method that takes one: from the campaign's seed and the trial alone (the same on any
+    machine, different per trial), 31 bits."""
+    digest = hashlib.sha256(f"slamrun trial seed {campaign_seed} {trial}".encode()).digest()
+    return int.from_bytes(digest[:4], "big") >> 1
+
+
+def seed_warnings(spec: CampaignSpec) -> list[str]:
+    """A method whose trials will be copies (deterministic, its seed fixed by the spec or none to take), named with
+    what that means: its trials are counted once."""
+    out = []
+    for m in spec.methods:
+        cls = slamrun.methods.get(m.name)
+        trials = m.trials or spec.trials
+        params = cls.Params.model_validate(m.params).model_dump(mode="json")
+        if trials < 2 or not cls.deterministic or derives_seed(cls, params):
+            continue
+        why = f"its seed fixed at {params[cls.seed_param]} by the spec" if cls.seed_param else "it takes no seed"
+        out.append(
+            f"{m.run_label}: its {trials} trials will be identical (deterministic, {why}); trials are counted once, "
+            f"so the statistics are those of 1 trial (drop params.{cls.seed_param} for a seed per trial)"
+            if cls.seed_param
+            else f"{m.run_label}: its {trials} trials will be identical (deterministic, {why}); trials are counted once"
+        )
+    return out
 
 
 def perturbations(spec: CampaignSpec, ds: DatasetSpec) -> list[Perturbation]:
@@ -99,7 +132,8 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
     for mi, m in enumerate(spec.methods):
         cls = slamrun.methods.get(m.name)
         method = cls(m.params)
-        h = settings_hash(m)
+        h = settings_hash(m, spec.seed)
+        seeded = derives_seed(cls, method.params.model_dump(mode="json"))
         trials = m.trials or spec.trials
         directions = m.directions or spec.directions
         for ds in spec.datasets:
@@ -115,11 +149,9 @@ def plan(spec: CampaignSpec) -> list[PlannedRun]:
                         ds.path / seq,
                         method.profile,
                         m.timeout_s or spec.timeout_s,
-                        tuple(ds.metrics),
-                        ds.alignment,
-                        ds.rpe_interval,
-                        ds.min_coverage,
+                        ds.evaluation,
                         pert,
+                        trial_seed(spec.seed, trial) if seeded else None,
                     )
                     runs.append(((trial, pert.label != NONE, mi, seq, direction.value, pert.label), run))
     runs.sort(key=lambda r: r[0])

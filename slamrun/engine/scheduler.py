@@ -37,6 +37,7 @@ from slamrun.errors import (
     storage_problem,
 )
 from slamrun.methods import get as get_method
+from slamrun.methods.base import Method
 from slamrun.results.vocabulary import CONTENDED, INFRA
 
 
@@ -84,6 +85,18 @@ class Scheduler:
         self.fatal_error: SlamRunError | None = None  # the error that stopped it (full disk, ledger lost)
         self.methods = {i: get_method(m.name)(m.params).for_backend(backend.name) for i, m in enumerate(spec.methods)}
         self.results_id = str(ledger.meta("results_id") or "")  # on each container, beside the campaign's name
+        self._seeded: dict[tuple[int, int], Method] = {}
+
+    def method_of(self, run: PlannedRun) -> Method:
+        """The method as the run takes it: with its trial's seed where the plan derived one (engine.plan.trial_seed)."""
+        if run.seed is None:
+            return self.methods[run.method_index]
+        key = (run.method_index, run.seed)
+        if key not in self._seeded:
+            m = self.spec.methods[run.method_index]
+            cls = get_method(m.name)
+            self._seeded[key] = cls({**m.params, cls.seed_param: run.seed}).for_backend(self.backend.name)
+        return self._seeded[key]
 
     def on_event(self, kind: str, run: PlannedRun, lane: Lane, info: dict) -> None:
         """Tell the observer (the live display, a caller's hook). What it raises is printed and never changes a
@@ -189,7 +202,7 @@ class Scheduler:
         return view
 
     def _run_with_retries(self, run: PlannedRun, lane: Lane) -> None:
-        method = self.methods[run.method_index]
+        method = self.method_of(run)
         paths = RunPaths(self.spec.results, run.key)
         rec = finished_record(paths.final, run.key.id)
         if rec is not None:  # finished earlier and not in the ledger (it was lost): record it, never redo it

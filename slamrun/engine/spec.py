@@ -177,11 +177,48 @@ class DatasetSpec(Strict):
         "(coverage is shown beside every figure).",
     )
 
+    coverage_mark: float = Field(
+        0.5,
+        gt=0,
+        le=1,
+        description="Runs with poses for fewer than this share of the frames their method was given are marked low "
+        "coverage in results.csv and in every view that shows their method (never ranked or set in bold without the "
+        "mark); 0.5 by default.",
+    )
+    max_ate_rel: float | None = Field(
+        None,
+        gt=0,
+        description="A run whose ATE RMSE exceeds this share of the ground truth's spread (its RMS distance from its "
+        "centroid; 1 = no better than collapsing the estimate to one point) is a tracking failure, `diverged`; "
+        "default: none (runs over 0.5 are flagged diverged in results.csv and every view either way). Needs `ate` "
+        "among the metrics.",
+    )
+
     rpe: RpeSpec | None = Field(
         None,
         description="RPE's interval, e.g. {delta: 1, unit: s}. Default by layout: one second of the sequence "
         "(slamrun list-datasets).",
     )
+
+    @model_validator(mode="after")
+    def _divergence_needs_ate(self):
+        if self.max_ate_rel is not None and self.metrics is not None and "ate" not in self.metrics:
+            raise ValueError(f"max_ate_rel judges a run by its ATE: add ate to metrics (now {', '.join(self.metrics)})")
+        return self
+
+    @property
+    def evaluation(self):
+        """How this dataset's runs are evaluated (engine.run_evaluation.EvalSettings)."""
+        from slamrun.engine.run_evaluation import EvalSettings
+
+        return EvalSettings(
+            tuple(self.metrics or ()),
+            self.alignment,
+            self.rpe_interval,
+            self.min_coverage,
+            self.max_ate_rel,
+            self.coverage_mark,
+        )
 
     @property
     def rpe_interval(self):
@@ -263,6 +300,12 @@ class CampaignSpec(Strict):
         description="Robustness: each sequence also played with its frames made worse, e.g. [{kind: gaussian_noise, "
         "sigma: [2, 5]}, {kind: frame_drop, every: [2]}]; every level a view of its own beside the baseline "
         "(README, Robustness). A dataset's own `perturbations` replace these.",
+    )
+    seed: int = Field(
+        0,
+        ge=0,
+        description="The campaign's seed: each trial of a method that takes a seed (colmap, glomap, reference_vo, "
+        "DPVO, DROID-SLAM) gets its own, derived from this and the trial, unless its params fix one.",
     )
     perturbation_seed: int = Field(
         0, ge=0, description="Seed of the perturbations' random parts (noise, blur angles): the same views anywhere."

@@ -64,6 +64,12 @@ class Method(ABC):
     network: ClassVar[Weights | None] = None  # the trained network its image needs (weights file)
     verify_bound: ClassVar[float] = 0.05  # `slamrun verify`: settled e_align / scene extent it must stay under
     native_build: ClassVar[NativeMethod | None] = None  # how `slamrun native-build` makes it
+    # The parameter that seeds its randomness (None: it takes no seed). Unless the spec fixes it, each trial gets its
+    # own seed, derived from the trial and the campaign's `seed` (engine.plan.trial_seed), recorded in run.json.
+    seed_param: ClassVar[str | None] = None
+    # Given the same input and seed, the same output bit for bit: with its seed fixed, its trials are copies (counted
+    # once by the statistics; validate, plan and the dry run say so)
+    deterministic: ClassVar[bool] = False
     # Threads it keeps busy at once (tracking, mapping, ...): a lane with fewer CPUs makes its threads wait for one;
     # None: it uses as many as its lane has (COLMAP's thread count follows the CPUs it is pinned to)
     threads: ClassVar[int | None] = 1
@@ -87,6 +93,11 @@ class Method(ABC):
         Pure: the runner writes them, so the same call serves a local process and a container.
         """
         return {}
+
+    def frames_given(self, n: int) -> np.ndarray | None:
+        """The indices of a view's `n` frames (in the order the view plays them) this method takes with its parameters,
+        e.g. every stride-th (`strided`); None: all of them. A run's coverage is of the frames it was given."""
+        return None
 
     def busy_threads(self) -> int | None:
         """The threads this method keeps busy with its parameters (`threads`, unless a setting changes it)."""
@@ -152,6 +163,13 @@ class Method(ABC):
         return None
 
 
+def strided(n: int, stride: int) -> np.ndarray:
+    """Every `stride`-th of `n` frames from the first, and the last (as colmap's, glomap's and DPVO's processes take
+    them)."""
+    chosen = np.arange(0, n, max(1, int(stride)))
+    return chosen if not n or chosen[-1] == n - 1 else np.append(chosen, n - 1)
+
+
 def executable_problem(program: str) -> str | None:
     """Why `program` cannot be started as a run's argv[0] (a run's working folder is its own work folder), or None:
     a name is looked up on PATH; a path must be absolute, a file, and executable."""
@@ -193,6 +211,7 @@ def require_poses(traj: Trajectory, path: Path) -> Trajectory:
 
 GUARDED_CALLS = (
     "__init__",
+    "frames_given",
     "configure",
     "command",
     "read_trajectory",

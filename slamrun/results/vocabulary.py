@@ -21,6 +21,7 @@ METHOD_FAILURES = (
     "oom",  # killed out of memory
     "bad_timestamps",  # poses at times that are not the sequence's frame times
     "output_limit",  # wrote more than max_output_mb, or filled the disk
+    "diverged",  # its ATE beyond the dataset's max_ate_rel: its path bears no likeness to the ground truth's
 )
 INFRA = "infra"  # the machine's fault: retried, never counted in a rate
 # lost or never initialised while its threads waited for a CPU longer than the spec's contention_pct: the machine's
@@ -32,6 +33,12 @@ OWN_WAIT_PER_THREAD_PCT = 60.0  # the wait a run causes itself per busy thread b
 CONTENDABLE = ("lost", "not_initialized")  # the failures a starved real-time method shows
 INFRA_FAILURES = (INFRA, CONTENDED)
 UNDER_MIN_COVERAGE = "under the dataset's min_coverage"  # in the message of a run lost for its coverage
+DIVERGED = "diverged"
+# ATE RMSE relative to the ground truth's RMS distance from its centroid over the run's poses (ate_rel: 1 = no better
+# than collapsing the trajectory to one point; 1 - ate_rel^2 is the share of the path's variance the aligned estimate
+# explains). A run over this is flagged diverged in results.csv and every view, also where the dataset sets no
+# max_ate_rel (which makes it a failure): README, Metrics, Divergence.
+DIVERGED_FLAG_REL = 0.5
 FAILURES = (*METHOD_FAILURES, *INFRA_FAILURES)
 
 
@@ -63,7 +70,7 @@ class EvalStatus(StrEnum):
 METRIC_NAMES = ("tum-mono", "ate", "rpe", "kitti")
 TUM_MONO_METRICS = ("e_t", "e_r", "e_s", "e_align", "e_start", "e_end", "e_rmse")
 # ATE, RPE and KITTI's segment errors as a campaign records them
-ATE_COLUMNS = ("ate_rmse", "ate_mean", "ate_median", "ate_max")
+ATE_COLUMNS = ("ate_rmse", "ate_mean", "ate_median", "ate_max", "ate_rel")  # ate_rel: RMSE / the path's spread
 RPE_COLUMNS = ("rpe_t_rmse", "rpe_r_rmse", "rpe_pairs", "rpe_interval")  # the interval as text: "1 s"
 TEXT_METRIC_COLUMNS = ("rpe_interval",)
 KITTI_COLUMNS = ("kitti_t_pct", "kitti_r_deg_m")
@@ -76,8 +83,12 @@ METRIC_COLUMNS = (
     *ATE_COLUMNS,
     *RPE_COLUMNS,
     *KITTI_COLUMNS,
-    "coverage",  # share of the sequence's frames with a pose
+    "coverage",  # share of the frames the method was given (its stride over the view) with a pose
+    "coverage_of_sequence",  # share of the sequence's frames with a pose
+    "low_coverage",  # 1: coverage under the dataset's coverage_mark (marked in every view)
+    "diverged",  # 1: ate_rel over the dataset's max_ate_rel, or over DIVERGED_FLAG_REL where it sets none
 )
+FLAG_COLUMNS = ("low_coverage", "diverged")  # 0 or 1 (empty where the run has no figure to judge)
 RESOURCE_COLUMNS = (
     "wall_s",
     "fps",
@@ -105,14 +116,15 @@ SUMMARY_METRICS = ("e_t", "e_r", "e_s_sym", "e_align", "e_rmse", "ate_rmse", "rp
 MAIN_METRICS = ("e_align", "ate_rmse")
 
 LABELS = {
-    "e_t": "translation drift e_t",
+    # TUM-Mono's ground truth has an arbitrary scale, shared by its two segments: its lengths are in its units
+    "e_t": "translation drift e_t (GT units)",
     "e_r": "rotation drift e_r (deg)",
-    "e_s": "scale drift e_s",
-    "e_s_sym": "scale drift e_s'",
-    "e_align": "alignment error e_align",
-    "e_start": "start-segment RMSE",
-    "e_end": "end-segment RMSE",
-    "e_rmse": "RMSE (both segments)",
+    "e_s": "scale drift e_s (factor)",
+    "e_s_sym": "scale drift e_s' (factor)",
+    "e_align": "alignment error e_align (GT units)",
+    "e_start": "start-segment RMSE (GT units)",
+    "e_end": "end-segment RMSE (GT units)",
+    "e_rmse": "RMSE, both segments (GT units)",
     "ate_rmse": "ATE RMSE (m)",
     "ate_mean": "ATE mean (m)",
     "ate_median": "ATE median (m)",
@@ -123,7 +135,9 @@ LABELS = {
     "rpe_interval": "RPE interval",
     "kitti_t_pct": "KITTI translation error (%)",
     "kitti_r_deg_m": "KITTI rotation error (deg/m)",
-    "coverage": "frames with a pose",
+    "ate_rel": "ATE / path spread",
+    "coverage": "coverage (share of its frames)",
+    "coverage_of_sequence": "share of the sequence's frames",
     "cpu_wait_pct": "waiting for a CPU (% of wall time)",
     "host_cpu_pressure_pct": "machine's CPU pressure (%)",
 }

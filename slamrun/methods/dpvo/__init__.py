@@ -22,7 +22,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import Profile
-from slamrun.methods.base import folder_name, image_tag
+from slamrun.methods.base import folder_name, image_tag, strided
 from slamrun.methods.declare import NativeMethod, Source, Weights
 from slamrun.methods.native_gpu import NativeGpuMethod, native_root
 
@@ -67,11 +67,16 @@ class DpvoParams(BaseModel):
         "RANDOM", description="CENTROID_SEL_STRAT: where patches are taken (default.yaml: RANDOM)."
     )
     buffer_size: int = Field(4096, ge=16, description="BUFFER_SIZE: most keyframes kept (config.py: 4096).")
-    seed: int | None = Field(None, description="Seed of PyTorch's generators (default: unseeded, as upstream).")
+    seed: int | None = Field(
+        None,
+        description="Seed of PyTorch's generators; default: one per trial, from the trial and the campaign's seed "
+        "(a fixed value makes every trial the same seed; the GPU's own order still varies).",
+    )
 
 
 class Dpvo(NativeGpuMethod):
     name = folder_name(__name__)  # its folder's
+    seed_param = "seed"
     image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 2  # the network's process and its frame reader (PREFETCH frames ahead), beside the GPU
     sources = (
@@ -110,6 +115,10 @@ class Dpvo(NativeGpuMethod):
     process = "slamrun.methods.dpvo.process"  # run as `python -m`, given these params as one JSON object
     image_build = IMAGE_BUILD
     weights_name = WEIGHTS_NAME
+
+    def frames_given(self, n: int):
+        """Every `stride`-th frame of the view and its last (its process takes those): coverage is of them."""
+        return strided(n, self.params.stride)
 
     def default_build(self) -> Path:
         return default_build()

@@ -67,11 +67,16 @@ class DroidSlamParams(BaseModel):
     motion_damping: float = Field(
         0.0, ge=0, le=1, description="Damped constant-velocity guess of the next pose (demo.py sets none: 0)."
     )
-    seed: int | None = Field(None, description="Seed of PyTorch's generators (default: unseeded, as upstream).")
+    seed: int | None = Field(
+        None,
+        description="Seed of PyTorch's generators; default: one per trial, from the trial and the campaign's seed "
+        "(a fixed value makes every trial the same seed; the GPU's own order still varies).",
+    )
 
 
 class DroidSlam(NativeGpuMethod):
     name = folder_name(__name__)  # its folder's
+    seed_param = "seed"
     image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 2  # the network's process and its frame reader, beside the GPU
     # with its submodules at the commits it records: thirdparty/lietorch (Lie groups on PyTorch, compiled with it)

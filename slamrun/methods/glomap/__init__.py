@@ -15,7 +15,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import PreparedView, Profile
-from slamrun.methods.base import Method, PythonProcess, folder_name
+from slamrun.methods.base import Method, PythonProcess, folder_name, strided
 
 
 class GlomapParams(BaseModel):
@@ -27,11 +27,17 @@ class GlomapParams(BaseModel):
     first_octave: int = Field(0, ge=-1, le=2, description="SIFT first octave (-1 doubles the image: slower).")
     min_num_matches: int = Field(15, ge=5, description="Image pairs with fewer inlier matches are left out.")
     ba_iterations: int = Field(3, ge=1, le=20, description="Rounds of bundle adjustment and retriangulation.")
-    seed: int = Field(0, description="Random seed of the global mapper.")
+    seed: int | None = Field(
+        None,
+        description="Random seed of the global mapper; default: one per trial, from the trial and the campaign's seed "
+        "(a fixed value makes every trial the same: identical runs).",
+    )
 
 
 class Glomap(PythonProcess, Method):
     name = folder_name(__name__)  # its folder's
+    seed_param = "seed"
+    deterministic = True  # measured: identical trials with one seed
     threads = None  # its thread count follows the CPUs it is pinned to
     image = None
     profile = Profile.rectified
@@ -39,6 +45,10 @@ class Glomap(PythonProcess, Method):
     modules = ("pycolmap", "numpy", "scipy")
     Params = GlomapParams
     not_initialized_pattern = r"^NOT INITIALIZED"
+
+    def frames_given(self, n: int):
+        """Every `stride`-th frame of the view and its last (its process takes those): coverage is of them."""
+        return strided(n, self.params.stride)
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         p = self.params
@@ -49,5 +59,5 @@ class Glomap(PythonProcess, Method):
             "--workdir", str(workdir), "--stride", str(p.stride), "--max-features", str(p.max_features),
             "--overlap", str(p.overlap), "--max-image-size", str(p.max_image_size),
             "--first-octave", str(p.first_octave), "--min-num-matches", str(p.min_num_matches),
-            "--ba-iterations", str(p.ba_iterations), "--seed", str(p.seed),
+            "--ba-iterations", str(p.ba_iterations), "--seed", str(p.seed or 0),
         ]  # fmt: skip
