@@ -38,9 +38,12 @@ def kitti(tmp_path_factory):
         fake_method(label="copies", extra=["--noise", "0.08"]),
     ]
     spec = write_spec(root, root, methods, datasets=datasets, trials=2, report=True)
-    assert main(["campaign", str(spec)]) == 0
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        assert main(["campaign", str(spec)]) == 0
     results = root / "results"
     df = pd.read_csv(results / "results.csv", dtype={"sequence": str})
+    (results / "campaign-output.txt").write_text(buf.getvalue())
     return results, df
 
 
@@ -96,7 +99,9 @@ def test_copies_count_once_in_motion_bias_cumulative_plots_and_medians(kitti):
     mb = pd.read_csv(results / "report" / "tables" / "motion_bias.csv").set_index("method")
     assert mb.loc["copies", "n forward"] == 1 and mb.loc["copies", "n backward"] == 1
     one_trial = motion_bias_table(df[df.trial == 0], "ate_rmse").set_index("method")
-    pd.testing.assert_series_equal(mb.loc["copies"], one_trial.loc["copies"], check_names=False)  # one trial's
+    pd.testing.assert_series_equal(
+        mb.loc["copies"].drop("marks").astype(float), one_trial.loc["copies"], check_names=False
+    )  # one trial's
     full = df[df.method == "full"]
     fw, bw = (full.loc[full.direction == d, "ate_rmse"].to_numpy() for d in ("forward", "backward"))
     assert mb.loc["full", "p (rank-sum)"] == pytest.approx(wilcoxon_rank_sum_p(fw, bw))  # R's rank-sum test
@@ -166,3 +171,38 @@ def test_ate_rel_is_near_one_for_an_estimate_without_likeness_and_zero_for_a_sim
     rel = ate(gt, noise).relative
     assert 0.8 < rel <= 1.0  # under Sim(3) the alignment can always shrink it to a point: at most 1
     assert ate(gt, Trajectory(t, 2 * path + 1, quats)).relative == pytest.approx(0.0, abs=1e-9)
+
+
+def test_a_method_tracking_under_the_coverage_mark_is_marked_in_every_view(kitti):
+    """`short` posed a fifth of the frames it was given (under coverage_mark 0.5): no view shows it as best, bold or
+    ranked first without its mark, and the mark is said under each view."""
+    from slamrun.engine.ledger import Ledger
+    from slamrun.serve.snapshot import MEDIAN_COLUMNS, medians
+
+    results, df = kitti
+    short = df[df.method == "short"]
+    assert short.coverage.between(0.19, 0.21).all() and short.low_coverage.eq(1).all()
+    assert df[df.method != "short"].low_coverage.eq(0).all()
+    said = "† low coverage: done runs with poses for fewer than 0.5 of the frames their method was given (short 4 of 4)"
+    terminal = (results / "campaign-output.txt").read_text()
+    assert "short †" in terminal and said in " ".join(terminal.split())
+    assert "short †" in cli("stats", results) and said in cli("stats", results)
+    assert json.loads(cli("stats", results, "--json"))["datasets"]["kitti"]["marks"]["short"]["mark"] == "†"
+    html = (results / "report" / "index.html").read_text()
+    assert html.count(said) >= 6  # under the runs table, the medians tables, motion bias, the figures ...
+    tables = results / "report" / "tables"
+    traj = pd.read_csv(tables / "trajectory_metrics.csv").set_index("method")
+    assert traj.loc["short", "marks"] == "†" and traj.loc["full", "marks"] != "†"
+    assert "short †" in (tables / "trajectory_metrics.tex").read_text()
+    assert "short †" in (tables / "trajectory_metrics.md").read_text()
+    for name in ("box_ate_rmse", "cumulative_ate_rmse", "heatmap_ate_rmse"):
+        assert "short †" in (results / "report" / "figures" / f"{name}.svg").read_text(), name
+    ledger = Ledger(results / "ledger.sqlite", read_only=True)
+    try:
+        live = medians(ledger.rows(state="done", columns=MEDIAN_COLUMNS))["kitti"]
+    finally:
+        ledger.close()
+    assert "short †" in {m["method"] for m in live["methods"]} and said in live["notes"][0]
+    copies = next(m for m in live["methods"] if m["method"] == "copies")
+    assert len(live["values"]["copies"]) == 2  # its 4 runs are 2 distinct ones
+    assert copies["ate_rmse"] == pytest.approx(df[df.method == "copies"].ate_rmse.median())

@@ -263,6 +263,7 @@ def test_a_dataset_without_an_evaluated_run_gives_an_empty_block_not_an_error(tm
         "counting_note": None,
         "coverage": {},
         "outlier_tests": [],
+        "marks": {},
         "metrics": {},
     }
     assert "dataset b: 0 evaluated runs" in stats_out(tmp_path / "results.csv")

@@ -106,7 +106,8 @@ def test_stats_cli_json(tmp_path, shared_data, capsys):
         "counting_note",
         "coverage",
         "outlier_tests",
-    }  # R's figures, and how runs were counted and tested for outliers
+        "marks",
+    }  # R's figures, how runs were counted and tested for outliers, the methods' marks
     assert set(out["metrics"]) == set(ref["metrics"]) and out["counted"] == {} and out["outlier_note"] is None
     assert out["n_outliers"] == ref["n_outliers"]
     assert set(out["metrics"]["e_t"]) >= set(ref["metrics"]["e_t"])

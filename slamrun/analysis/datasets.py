@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from slamrun.analysis.left_out import reasons
+from slamrun.analysis.left_out import reasons, section_flags
 from slamrun.analysis.load import by_dataset, evaluated, metrics_for, one_dataset
 from slamrun.analysis.stats import StudyStats, study_statistics
 from slamrun.analysis.summary import pooled_summary, ranked_by
@@ -65,8 +65,10 @@ def per_dataset_statistics(
 
 
 def with_left_out(st: StudyStats, section: pd.DataFrame) -> StudyStats:
-    """`st` with, per metric, each method of the dataset's runs (`section`) its tests leave out and why."""
+    """`st` with, per metric, each method of the dataset's runs (`section`) its tests leave out and why, and each
+    method's marks (low coverage, diverged)."""
     st.left_out = {m: reasons(section, set(s.medians), [m]) for m, s in st.metrics.items()}
+    st.marks = section_flags(section)
     return st
 
 

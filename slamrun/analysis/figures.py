@@ -80,21 +80,29 @@ def cumulative(
     bold_all: bool = False,
     label: str = "",
     colours: dict[str, str] | None = None,
+    names: dict[str, str] | None = None,
 ) -> Path:
     """The cumulative figure of `metric` (cumulative_figure), saved in `folder`."""
-    return save(cumulative_figure(df, metric, bold_all, label, colours), folder, name or f"cumulative_{metric}")
+    figure = cumulative_figure(df, metric, bold_all, label, colours, names)
+    return save(figure, folder, name or f"cumulative_{metric}")
 
 
 def cumulative_figure(
-    df: pd.DataFrame, metric: str, bold_all: bool = False, label: str = "", colours: dict[str, str] | None = None
+    df: pd.DataFrame,
+    metric: str,
+    bold_all: bool = False,
+    label: str = "",
+    colours: dict[str, str] | None = None,
+    names: dict[str, str] | None = None,
 ) -> plt.Figure:
     """Runs (y, whole numbers) whose error is below x, one curve per method, over the runs `counted` (done, with a
     figure, copies of a run once: a deterministic method's identical trials are one run), each method's n in its
     legend entry: best methods reach the top left; x is logarithmic where the values span a decade or more, else
     linear; `label` (the dataset) heads the title; the legend beside the axes, never over a curve; `colours`: the
-    campaign's (method_colours), else these methods'."""
+    campaign's (method_colours), else these methods'; `names`: a method's name as shown (with its marks)."""
     fig, ax = plt.subplots(figsize=(7.4, 4.2), layout="constrained")
     df = counted(df, metric)
+    names = names or {}
     methods = sorted(df.method.unique())
     colors = {**method_colours(methods), **(colours or {})}
     log = use_log_scale(df[metric].to_numpy(float))
@@ -108,7 +116,8 @@ def cumulative_figure(
         v = _sorted(g[metric], log)
         if len(v):
             lw = 2.2 if bold_all else 1.6
-            ax.step(v, np.arange(1, len(v) + 1), where="post", lw=lw, color=colors[m], label=f"{m} (n={len(v)})")
+            shown = f"{names.get(m, m)} (n={len(v)})"
+            ax.step(v, np.arange(1, len(v) + 1), where="post", lw=lw, color=colors[m], label=shown)
     if log:
         v = df[metric].to_numpy(float)
         v = v[np.isfinite(v) & (v > 0)]
@@ -178,9 +187,11 @@ def heatmap_cells(
     return methods, cols, values, kinds
 
 
-def heatmap(df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "") -> Path:
+def heatmap(
+    df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "", names: dict[str, str] | None = None
+) -> Path:
     """The heat map of `metric` (heatmap_figure), saved in `folder`."""
-    return save(heatmap_figure(df, metric, label), folder, f"heatmap_{metric}")
+    return save(heatmap_figure(df, metric, label, names), folder, f"heatmap_{metric}")
 
 
 def colour_norm(finite: np.ndarray) -> Normalize:
@@ -196,7 +207,9 @@ def colour_norm(finite: np.ndarray) -> Normalize:
     return Normalize(low, max(float(finite.max()), low + 1e-12))
 
 
-def heatmap_figure(df: pd.DataFrame, metric: str = "e_align", label: str = "") -> plt.Figure:
+def heatmap_figure(
+    df: pd.DataFrame, metric: str = "e_align", label: str = "", names: dict[str, str] | None = None
+) -> plt.Figure:
     """Colour-coded error per method (rows) and run (columns: sequence at the top, direction and trial below);
     failed runs, runs without a value and runs never planned (a method with fewer trials or directions) each drawn
     apart and named in the legend; the colour scale as colour_norm says."""
@@ -222,7 +235,7 @@ def heatmap_figure(df: pd.DataFrame, metric: str = "e_align", label: str = "") -
                 j = k
             else:
                 j += 1
-    ax.set_yticks(range(len(methods)), methods)
+    ax.set_yticks(range(len(methods)), [(names or {}).get(m, m) for m in methods])
     _heatmap_columns(ax, cols, col_pt)
     cbar = fig.colorbar(im, ax=ax, label=LABELS.get(metric, metric) + (" (log scale)" if log else ""))
     if log:
@@ -261,7 +274,15 @@ def _heatmap_columns(ax, cols: list[tuple[str, str, str]], col_pt: float) -> Non
     top.tick_params(labelsize=6, length=0)
 
 
-def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "", adjust: str = "holm", alpha: float = 0.05):
+def boxplot(
+    st: StudyStats,
+    metric: str,
+    folder: Path,
+    label: str = "",
+    adjust: str = "holm",
+    alpha: float = 0.05,
+    names: dict[str, str] | None = None,
+):
     """Box plots of a metric per method (outliers removed; best median at the top), each method's letter group in a
     column inside the axes at the right, beside its box (methods sharing a letter do not differ); the title holds
     Kruskal-Wallis' chi-square, df and p."""
@@ -279,7 +300,10 @@ def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "", adjust: 
 
     def tick(m: str, values: np.ndarray) -> str:
         cov = st.coverage.get(m)
-        return f"{m} (n={len(values)}" + (f", coverage {100 * cov:.0f} %)" if cov is not None and cov == cov else ")")
+        shown = (names or {}).get(m, m)
+        return f"{shown} (n={len(values)}" + (
+            f", coverage {100 * cov:.0f} %)" if cov is not None and cov == cov else ")"
+        )
 
     ax.set_yticks(positions, [tick(m, v) for m, v in zip(methods, data, strict=True)])
     for pos, m in zip(positions, methods, strict=True):
@@ -302,7 +326,7 @@ def boxplot(st: StudyStats, metric: str, folder: Path, label: str = "", adjust: 
     return save(fig, folder, f"box_{metric}")
 
 
-def trajectories(paths: SequencePaths, folder: Path, label: str = "") -> Path:
+def trajectories(paths: SequencePaths, folder: Path, label: str = "", names: dict[str, str] | None = None) -> Path:
     """Top view of each method's best, median and worst run (by the paths' metric) over the ground truth, one panel
     per method: the ground truth's two most spread coordinates, equal aspect, in the ground truth's units; the
     start and the end of the ground truth marked; one legend for what the panels draw."""
@@ -313,7 +337,7 @@ def trajectories(paths: SequencePaths, folder: Path, label: str = "") -> Path:
         nrows, ncols, figsize=(4.0 * ncols + 0.6, 3.9 * nrows + 1.0), squeeze=False, layout="constrained"
     )
     a, b = paths.plane()
-    names = "xyz"
+    axes_names = "xyz"
     for ax in axes.flat[len(methods) :]:
         ax.set_visible(False)
     for ax, method in zip(axes.flat, methods, strict=False):
@@ -328,9 +352,9 @@ def trajectories(paths: SequencePaths, folder: Path, label: str = "") -> Path:
         ax.plot(*end[[a, b]], marker="s", mfc="white", mec="black", ms=10, ls="none", label="end (ground truth)")
         ax.plot(*start[[a, b]], marker="^", color="black", ms=6, ls="none", label="start (ground truth)")
         ax.set_aspect("equal", adjustable="datalim")
-        ax.set_xlabel(f"{names[a]} ({paths.units})")
-        ax.set_ylabel(f"{names[b]} ({paths.units})")
-        ax.set_title(method, fontsize=9)
+        ax.set_xlabel(f"{axes_names[a]} ({paths.units})")
+        ax.set_ylabel(f"{axes_names[b]} ({paths.units})")
+        ax.set_title((names or {}).get(method, method), fontsize=9)
         ax.grid(True, alpha=0.25)
     handles: dict[str, object] = {}
     for ax in axes.flat[: len(methods)]:

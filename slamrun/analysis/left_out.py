@@ -10,6 +10,7 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
+from slamrun.results.marks import flags
 from slamrun.results.vocabulary import INFRA_FAILURES, LABELS, UNDER_MIN_COVERAGE
 
 # the name a run's message gives a metric's problem under (metric_table.campaign_figures: "kitti: ...", "rpe: ...")
@@ -101,3 +102,13 @@ def shown_in(table: pd.DataFrame, metrics: Iterable[str], group: str = "method")
             values = pd.to_numeric(table[m], errors="coerce").to_numpy(float)
             out[m] = {str(g) for g, v in zip(table[group], values, strict=True) if np.isfinite(v)}
     return out
+
+
+def section_flags(section: pd.DataFrame, group: str = "method") -> dict:
+    """Per method of a dataset's runs, its done runs' flags (results.marks.flags): low coverage, diverged."""
+    if group not in section.columns or section.empty:
+        return {}
+    status = section["status"] if "status" in section.columns else pd.Series("done", index=section.index)
+    cols = [c for c in ("low_coverage", "diverged", "eval_settings") if c in section.columns]
+    runs = section[cols].assign(method=section[group].astype(str).to_numpy(), done=status.eq("done").to_numpy())
+    return flags(runs.to_dict("records"))

@@ -16,6 +16,8 @@ from slamrun.analysis import table_files
 from slamrun.analysis.interactive import MAX_POINTS, PLOTLY_JS
 from slamrun.analysis.paths import SequencePaths
 from slamrun.analysis.provenance import Provenance
+from slamrun.results.marks import marked
+from slamrun.results.marks import notes as notes_of
 
 VIEW_CLASS = "view"
 
@@ -88,17 +90,30 @@ def table(
     show: bool = True,
     lower_is_better: tuple[str, ...] = (),
     notes: tuple[str, ...] = (),
+    marks: dict | None = None,
 ) -> str:
     """Write a table's CSV, Markdown and LaTeX files, and return its HTML: what its values are, the table in a box
     that scrolls sideways where it is wider than the page, `notes` under it (who it leaves out and why), the links
     to its files (only the links where not `show`). The LaTeX file sets the best value of each column of
-    `lower_is_better` in bold."""
-    table_files.write_all(df, folder, name, title, caption, lower_is_better)
+    `lower_is_better` in bold. `marks` (results.marks.flags of the section's runs): a marked method's name carries
+    its mark, whose meaning is said under the table and in its files' caption; the CSV has them in a column."""
+    csv = None
+    if marks and "method" in df.columns and (said := mark_notes(marks, df["method"])):
+        csv = df.assign(marks=[marks[m].symbol if m in marks else "" for m in df["method"].astype(str)])
+        df = df.assign(method=[marked(str(m), marks) for m in df["method"]])
+        title, notes = f"{title}. {' '.join(said)}", (*notes, *said)
+    table_files.write_all(df, folder, name, title, caption, lower_is_better, csv)
     files = {f"{name}.{ext} ({kind})": folder / f"{name}.{ext}" for ext, kind in _FORMATS}
     if not show:
         return f"<p>{esc(title)}:</p>" + links(files, root)
     cap = f'<p class="caption">{esc(caption)}</p>' if caption else ""
     return f'{cap}<div class="table-box">{table_files.to_html(df)}</div>' + note_lines(notes) + links(files, root)
+
+
+def mark_notes(marks: dict, shown) -> list[str]:
+    """What the marks of the methods `shown` mean ([] where none of them is marked)."""
+    names = {str(m) for m in shown}
+    return notes_of({m: f for m, f in marks.items() if m in names and f.symbol})
 
 
 def note_lines(notes) -> str:

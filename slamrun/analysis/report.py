@@ -17,7 +17,7 @@ import pandas as pd
 from slamrun.analysis import figures, interactive, page, tables
 from slamrun.analysis.colours import method_colours
 from slamrun.analysis.datasets import with_left_out
-from slamrun.analysis.left_out import left_out, shown_in
+from slamrun.analysis.left_out import left_out, section_flags, shown_in
 from slamrun.analysis.load import NO_DATASET, by_dataset, counted, evaluated, load_results, main_metric, metrics_for
 from slamrun.analysis.paths import sequence_paths
 from slamrun.analysis.provenance import provenance
@@ -34,6 +34,7 @@ from slamrun.analysis.stats import study_statistics
 from slamrun.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
 from slamrun.core import jsonio
 from slamrun.engine.folders import REPORT, claim_output_folder
+from slamrun.results.marks import marked
 from slamrun.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS, UNDER_MIN_COVERAGE
 
 RUNS_COLUMNS = {
@@ -184,7 +185,8 @@ def pooled_report(df: pd.DataFrame, out: Path) -> list[Section]:
     tab_dir = out / "tables"
     fails = runs_table(df)
     title = "Runs and failures per method, all datasets (pooled)"
-    sections = [Section(title, page.table(fails, tab_dir, out, "failures", title, RUNS_CAPTION))]
+    marks = section_flags(df)  # a method marked in any dataset is marked here
+    sections = [Section(title, page.table(fails, tab_dir, out, "failures", title, RUNS_CAPTION, marks=marks))]
     ranks = pooled_summary(df)[["method", "mean_rank", "sequences_ranked"]]
     ranks = ranks.rename(columns={"mean_rank": "mean rank", "sequences_ranked": "sequences"}).round({"mean rank": 2})
     by = ", ".join(f"{d}: {m}" for d, m in ranked_by(df).items())
@@ -195,9 +197,10 @@ def pooled_report(df: pd.DataFrame, out: Path) -> list[Section]:
         "Every other table and figure of this report is within one dataset: values in metres of different datasets "
         "are not one population."
     )
-    html = page.table(ranks, tab_dir, out, "pooled_ranks", f"{title}; ranked by {by}", note)
+    html = page.table(ranks, tab_dir, out, "pooled_ranks", f"{title}; ranked by {by}", note, marks=marks)
     seq = sequence_ranks(df)
-    html += page.table(seq, tab_dir, out, "sequence_ranks", "Each method's rank within each sequence", "", show=False)
+    title_seq = "Each method's rank within each sequence"
+    html += page.table(seq, tab_dir, out, "sequence_ranks", title_seq, "", show=False, marks=marks)
     sections.append(Section(title, html))
     return sections
 
@@ -234,10 +237,12 @@ def dataset_report(
     metrics = metrics_for(df)
     ok = evaluated(df, metrics)
     sections = []
+    marks = section_flags(df)  # low coverage, diverged: marked in every table and figure below
+    names = {m: marked(m, marks) for m in marks}
 
     fails = runs_table(df)
     title = "Runs and failures per method"
-    html_fails = page.table(fails, tab_dir, root, "failures", title + where, RUNS_CAPTION)
+    html_fails = page.table(fails, tab_dir, root, "failures", title + where, RUNS_CAPTION, marks=marks)
     notes = [coverage_note(df), *missing_metric_notes(df)]
     sections.append(Section(title, html_fails + "".join(f"<p>{page.esc(n)}</p>" for n in notes)))
 
@@ -261,26 +266,28 @@ def dataset_report(
     if not ok.empty:
         for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "ate_rmse", "rpe_t_rmse"):
             if m in metrics:
-                figs.append((figures.cumulative(ok, m, fig_dir, label=dataset, colours=colours), m))
+                figs.append((figures.cumulative(ok, m, fig_dir, label=dataset, colours=colours, names=names), m))
         if main is not None:
             name = f"cumulative_{main}_motion_bias"
-            figs.append((figures.cumulative(ok, main, fig_dir, name, True, dataset, colours), main))
-            figs.append((figures.heatmap(df, fig_dir, main, label=dataset), None))
+            figs.append((figures.cumulative(ok, main, fig_dir, name, True, dataset, colours, names), main))
+            figs.append((figures.heatmap(df, fig_dir, main, label=dataset, names=names), None))
     if st is not None:
         for m in metrics:
-            figs.append((figures.boxplot(st, m, fig_dir, label=dataset, adjust=adjust, alpha=alpha), m))
+            figs.append((figures.boxplot(st, m, fig_dir, dataset, adjust, alpha, names), m))
     if figs:
         html = ""
         for f, m in figs:
             if m is None:  # the heat map: every run of every method
-                notes = ()
+                shown, notes = set(marks), ()
             elif st is not None and f.stem.startswith("box_"):
-                notes = (left_out(df, set(st.metrics[m].medians), [m]),)
+                shown = set(st.metrics[m].medians)
+                notes = (left_out(df, shown, [m]),)
             else:
-                notes = (left_out(df, set(counted(ok, m).method.astype(str)), [m]),)
-            html += page.figure(f, root, _caption(f, dataset), notes)
+                shown = set(counted(ok, m).method.astype(str))
+                notes = (left_out(df, shown, [m]),)
+            html += page.figure(f, root, _caption(f, dataset), (*notes, *page.mark_notes(marks, shown)))
         sections.append(Section("Figures", html))
-    traj = _trajectories(df, out, root, trajectory_sequences, dataset)
+    traj = _trajectories(df, out, root, trajectory_sequences, dataset, names)
     if traj is not None:
         sections.append(traj)
     return sections
@@ -434,11 +441,12 @@ def _statistics(st, df, metrics, out, root, where, level, adjust, alpha) -> Sect
         "do not differ significantly."
     )
     tested = {m: set(s.medians) for m, s in st.metrics.items()}
+    marks = section_flags(df)
     html = f"<p>{page.esc(note)}</p>" + page.links({"statistics (JSON)": out / "statistics.json"}, root)
     parts = []
     what = (
-        "Per method: the runs counted (outliers removed, copies once), their median coverage (share of the "
-        "sequence's frames with a pose), and per metric the median over those runs and its letter groups (LaTeX: "
+        "Per method: the runs counted (outliers removed, copies once), their median coverage (share of the frames "
+        "the method was given with a pose), and per metric the median over those runs and its letter groups (LaTeX: "
         "superscripts; the best median in bold). Last rows: Kruskal-Wallis chi-square, its degrees of freedom and "
         "p-value."
     )
@@ -451,7 +459,7 @@ def _statistics(st, df, metrics, out, root, where, level, adjust, alpha) -> Sect
             table = tables.medians_with_letters(st, chosen)
             gaps = (left_out(df, shown_in(table, chosen), chosen),)
             html_table = page.table(
-                table, tab_dir, root, name, title + where, what, lower_is_better=tuple(chosen), notes=gaps
+                table, tab_dir, root, name, title + where, what, tuple(chosen), notes=gaps, marks=marks
             )
             parts.append(Section(title, html_table))
     title = "Tests of each metric"
@@ -482,7 +490,7 @@ def _statistics(st, df, metrics, out, root, where, level, adjust, alpha) -> Sect
         title = f"{what_dir}: medians with letter groups, {direction} runs only"
         gaps = (left_out(df[df.direction == direction], shown_in(td, chosen), chosen),)
         html_dir = page.table(
-            td, tab_dir, root, f"{name}_{direction}", title + where, what, lower_is_better=tuple(chosen), notes=gaps
+            td, tab_dir, root, f"{name}_{direction}", title + where, what, tuple(chosen), notes=gaps, marks=marks
         )
         html_dir += page.links({f"statistics, {direction} runs (JSON)": out / f"statistics_{direction}.json"}, root)
         parts.append(Section(title, html_dir))
@@ -496,6 +504,7 @@ def _per_run_tables(df: pd.DataFrame, main: str, tab_dir: Path, root: Path, wher
     """Motion bias, reproduction and per-sequence tables of the accuracy figure `main`."""
     label = LABELS.get(main, main)
     out = []
+    marks = section_flags(df)
     mb = tables.motion_bias_table(df, main)
     title = f"Motion bias: forward vs backward {main}"
     caption = (
@@ -504,7 +513,7 @@ def _per_run_tables(df: pd.DataFrame, main: str, tab_dir: Path, root: Path, wher
     )
     gaps = (left_out(df, set(mb.method.astype(str)) if not mb.empty else set(), [main]),)
     full = f"Forward vs backward {main}{where}"
-    out.append(Section(title, page.table(mb, tab_dir, root, "motion_bias", full, caption, notes=gaps)))
+    out.append(Section(title, page.table(mb, tab_dir, root, "motion_bias", full, caption, notes=gaps, marks=marks)))
     repro = tables.reproduction_table(df[df.status == "done"] if "status" in df else df, main)
     if not repro.empty:
         title = "Reproduction: new runs vs published"
@@ -520,7 +529,8 @@ def _per_run_tables(df: pd.DataFrame, main: str, tab_dir: Path, root: Path, wher
         caption = f"The median {label} of each method's evaluated runs on each sequence (rows: methods; copies once)."
         full = f"Median {main} per method and sequence{where}"
         gaps = (left_out(df, set(seq.method.astype(str)), [main]),)
-        out.append(Section(title, page.table(seq, tab_dir, root, f"{main}_per_sequence", full, caption, notes=gaps)))
+        html = page.table(seq, tab_dir, root, f"{main}_per_sequence", full, caption, notes=gaps, marks=marks)
+        out.append(Section(title, html))
     return out
 
 
@@ -539,7 +549,9 @@ def _caption(f: Path, dataset: str) -> str:
     return (f"{dataset}: " if dataset else "") + text
 
 
-def _trajectories(df: pd.DataFrame, out: Path, root: Path, n_static: int, dataset: str) -> Section | None:
+def _trajectories(
+    df: pd.DataFrame, out: Path, root: Path, n_static: int, dataset: str, names: dict[str, str] | None = None
+) -> Section | None:
     """Per sequence, an interactive 3D view of each method's best, median and worst run over the ground truth
     (by ATE where the campaign has it, else e_align); a static top view (PNG, SVG) of the first `n_static`."""
     metric = next((m for m in ("ate_rmse", "e_align") if m in df.columns and df[m].notna().any()), None)
@@ -554,7 +566,7 @@ def _trajectories(df: pd.DataFrame, out: Path, root: Path, n_static: int, datase
             continue
         html = ""
         if len(parts) < n_static:
-            png = figures.trajectories(paths, out / "figures", label=dataset)
+            png = figures.trajectories(paths, out / "figures", label=dataset, names=names)
             html += page.figure(png, root, (f"{dataset}: " if dataset else "") + f"{sequence}, top view")
         element = "view-" + re.sub(r"[^A-Za-z0-9_-]", "_", f"{out.relative_to(root).as_posix()}-{file}")
         script = interactive.write_view(

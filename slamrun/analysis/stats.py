@@ -286,6 +286,7 @@ class StudyStats:
     coverage: dict[str, float] = field(default_factory=dict)  # per method: the median coverage of its kept runs
     outlier_tests: list[dict] = field(default_factory=list)  # per set of metrics the runs had: outlier_tests
     left_out: dict[str, dict[str, str]] = field(default_factory=dict)  # per metric: method -> why it has no figure
+    marks: dict = field(default_factory=dict)  # per method: its done runs' flags (results.marks.Flags)
 
     @property
     def deterministic(self) -> list[str]:
@@ -336,6 +337,11 @@ class StudyStats:
             "counting_note": self.counting_note() or None,
             "coverage": self.coverage,
             "outlier_tests": self.outlier_tests,
+            "marks": {
+                m: {"mark": f.symbol, "done": f.done, "low_coverage": f.low_coverage, "diverged": f.diverged}
+                for m, f in self.marks.items()
+                if f.symbol
+            },
             "metrics": {},
         }
         for name, m in self.metrics.items():

@@ -386,12 +386,14 @@ def write_all(
     caption: str = "",
     note: str = "",
     lower_is_better: tuple[str, ...] = (),
+    csv: pd.DataFrame | None = None,
 ) -> None:
     """The table as CSV, Markdown and LaTeX (`caption` its LaTeX caption, `tab:NAME` its label, with the dataset's
     name in a dataset's own folder); `note`, what its values are, heads the Markdown file as a comment, and the
-    LaTeX file after its first line, the packages it needs (the files paste as they are)."""
+    LaTeX file after its first line, the packages it needs (the files paste as they are). `csv`: the CSV's own
+    table where it differs (names without marks, the marks in a column of their own: machines read it)."""
     folder.mkdir(parents=True, exist_ok=True)
-    df.to_csv(folder / f"{name}.csv", index=False)
+    (df if csv is None else csv).to_csv(folder / f"{name}.csv", index=False)
     what = " ".join(f"{caption}. {note}".split()) if note else ""
     (folder / f"{name}.md").write_text((f"<!-- {what.replace('--', '- -')} -->\n" if what else "") + to_markdown(df))
     dataset = folder.parent.name if folder.parent.parent.name == "datasets" else ""

@@ -179,6 +179,7 @@ def _print_dry_run(spec) -> int:
 def _print_summary(campaign: str, results: Path, csv: Path) -> None:
     """The end-of-campaign tables: per method within each dataset (medians in metres are never pooled across
     datasets), the pooled counts, rates and ranks when there are several datasets, and the failed runs."""
+    from slamrun.analysis.left_out import section_flags
     from slamrun.analysis.load import by_dataset, read_csv
     from slamrun.analysis.robustness import baseline, perturbed
     from slamrun.analysis.summary import method_summary, pooled_summary
@@ -193,9 +194,12 @@ def _print_summary(campaign: str, results: Path, csv: Path) -> None:
         console.print(f"{len(everything) - len(df)} run(s) on perturbed views: the report's Robustness section")
     groups = by_dataset(df)
     for name, part in groups.items():
-        console.print(method_table(method_summary(part), f"{campaign}: per method, dataset {name}"))
+        table = method_table(method_summary(part), f"{campaign}: per method, dataset {name}", section_flags(part))
+        console.print(table)
     if len(groups) > 1:
-        console.print(pooled_table(pooled_summary(df), f"{campaign}: per method, all datasets (pooled)"))
+        console.print(
+            pooled_table(pooled_summary(df), f"{campaign}: per method, all datasets (pooled)", section_flags(df))
+        )
     ledger = Ledger(results / "ledger.sqlite", read_only=True)
     try:
         failed, more = failed_runs_table(ledger.rows(), campaign)

@@ -18,6 +18,8 @@ from rich.text import Text
 
 from slamrun.engine.progress import Figures, Tracker, duration, one_line
 from slamrun.engine.session import read_tracker
+from slamrun.results.marks import marked
+from slamrun.results.marks import notes as mark_notes
 from slamrun.results.vocabulary import INFRA_FAILURES, MAIN_METRICS, played
 
 if TYPE_CHECKING:
@@ -206,33 +208,40 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
 SUMMARY_MEDIANS = ("e_t", "e_r", "e_s_sym", "e_align", "ate_rmse", "rpe_t_rmse")
 
 
-def method_table(summary: pd.DataFrame, title: str) -> Table:
+def method_table(summary: pd.DataFrame, title: str, marks: dict | None = None) -> Table:
     """The end-of-campaign table of one dataset's per-method summary (slamrun.analysis.summary.method_summary):
-    counts, success rate, the medians of the metrics its runs have, fps and the failure kinds that occurred."""
+    counts, success rate, the medians of the metrics its runs have, fps and the failure kinds that occurred; a
+    method marked (`marks`: low coverage, diverged) carries its mark, said under the table."""
     from slamrun.results.vocabulary import FAILURES
 
     medians = [f"median_{m}" for m in SUMMARY_MEDIANS]
     medians = [c for c in medians if summary[c].notna().any()] or medians[:4]  # the metrics the dataset has
     cols = ["method", "runs", "done", "failed", "success_pct", *medians, "median_fps"]
     fails = [k for k in (*FAILURES, "infra") if k in summary and summary[k].sum() > 0 and k not in cols]
-    t = Table(title=title)
+    t = Table(title=title, caption=_mark_caption(marks, summary["method"]), caption_justify="left")
     for c in cols + fails:
         t.add_column(c.replace("median_", "med "), justify="right" if c != "method" else "left")
     for _, r in summary.iterrows():
-        t.add_row(*[_cell(r[c]) for c in cols + fails])
+        t.add_row(marked(str(r["method"]), marks or {}), *[_cell(r[c]) for c in cols[1:] + fails])
     return t
 
 
-def pooled_table(pooled: pd.DataFrame, title: str) -> Table:
+def pooled_table(pooled: pd.DataFrame, title: str, marks: dict | None = None) -> Table:
     """The pooled view over every dataset (slamrun.analysis.summary.pooled_summary): counts, success rate and the
-    mean rank within sequences; no median in metres."""
+    mean rank within sequences; no median in metres; marked methods as in method_table."""
     cols = ["method", "runs", "done", "failed", "infra", "success_pct", "mean_rank", "sequences_ranked"]
-    t = Table(title=title)
+    t = Table(title=title, caption=_mark_caption(marks, pooled["method"]), caption_justify="left")
     for c in cols:
         t.add_column(c.replace("_", " "), justify="right" if c != "method" else "left")
     for _, r in pooled.iterrows():
-        t.add_row(*[_cell(r[c]) for c in cols])
+        t.add_row(marked(str(r["method"]), marks or {}), *[_cell(r[c]) for c in cols[1:]])
     return t
+
+
+def _mark_caption(marks: dict | None, shown) -> str | None:
+    names = {str(m) for m in shown}
+    said = mark_notes({m: f for m, f in (marks or {}).items() if m in names})
+    return "\n".join(said) or None
 
 
 def _cell(v) -> str:
@@ -257,6 +266,7 @@ def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list
         lines.append(
             f"  median coverage (share of the frames each method was given with a pose) of the runs tested: {shares}"
         )
+    lines += [f"  {note}" for note in mark_notes(st.marks)]
     if not st.metrics:
         lines.append("  no metric with values: no test")
     for name, m in st.metrics.items():
@@ -264,7 +274,10 @@ def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list
         lines.append(
             f"  {name}: median and letters (pairwise tests, {adjust} adjustment, alpha {alpha}): "
             + (
-                ", ".join(f"{g} {_num(m.medians[g])} {m.letters.get(g, '')} (n={m.runs.get(g)})" for g in order)
+                ", ".join(
+                    f"{marked(g, st.marks)} {_num(m.medians[g])} {m.letters.get(g, '')} (n={m.runs.get(g)})"
+                    for g in order
+                )
                 or "no run"
             )
         )

@@ -118,9 +118,10 @@ def _medians(snap: dict) -> str:
     for dataset, d in snap["medians"].items():
         rows = [[m["method"], m["done"], *(number(m[k]) for k in d["metrics"])] for m in d["methods"]]
         headers = ["method", "done", *(labels.get(k, k) for k in d["metrics"])]
+        said = "".join(_muted(n) for n in d.get("notes", []))
         parts.append(
             f"<h3>{_e(dataset or '(no dataset)')}: medians over the done runs so far</h3>"
-            f'<div class=scroll>{_table(headers, rows)}</div><div class="box" id="box-{_e(dataset)}"></div>'
+            f'<div class=scroll>{_table(headers, rows)}</div>{said}<div class="box" id="box-{_e(dataset)}"></div>'
         )
     return _section("medians", "Medians per dataset", "".join(parts) or _muted("no run is done yet"))
 

@@ -19,7 +19,8 @@ from slamrun.core.ticks import log_ticks
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.progress import Tracker, duration
 from slamrun.engine.session import current_session, measurement_conditions
-from slamrun.results.vocabulary import MAIN_METRICS, SUMMARY_METRICS
+from slamrun.results.marks import flags, marked, notes
+from slamrun.results.vocabulary import FLAG_COLUMNS, MAIN_METRICS, NONE, SUMMARY_METRICS
 from slamrun.serve.folders import LEDGER
 
 MAX_FAILED = 100  # the newest failed runs listed (every failure is counted by kind)
@@ -74,7 +75,7 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         progress = Tracker(rows, session, campaign).figures(now)
         running = ledger.rows(state="running", columns=RUN_COLUMNS)
         failed = ledger.rows(state="failed", columns=(*RUN_COLUMNS, "failure", "message"))
-        done = ledger.rows(state="done", columns=("label", "dataset", "coverage", *SUMMARY_METRICS))
+        done = ledger.rows(state="done", columns=MEDIAN_COLUMNS)
     finally:
         ledger.close()
     counts = progress.to_dict()
@@ -144,32 +145,62 @@ def _failed(rows: list[dict]) -> dict:
     return {"total": len(rows), "kinds": kinds, "runs": listed}
 
 
+MEDIAN_COLUMNS = (
+    "label", "dataset", "sequence", "direction", "perturbation", "coverage", *SUMMARY_METRICS, *FLAG_COLUMNS,
+    "eval_settings",
+)  # fmt: skip
+
+
 def medians(done: list[dict]) -> dict:
     """Per dataset (never pooled: metres of one dataset are not a population with another's), per method: the
-    runs done, their median coverage (the share of the sequence's frames with a pose: an ATE over 31 poses is not
-    one over 150), the median of each summary metric that has values, and up to MAX_VALUES values of the dataset's
-    main metric (e_align where the runs have it, else ATE RMSE) for the live box plot, with its log axis's ticks."""
+    runs done, their median coverage (the share of the frames the method was given with a pose: an ATE over 31 poses
+    is not one over 150), the median of each summary metric that has values, and up to MAX_VALUES values of the
+    dataset's main metric (e_align where the runs have it, else ATE RMSE) for the live box plot, with its log axis's
+    ticks. As every other view: the runs on ordinary views only (perturbed ones are the report's Robustness
+    section), copies of a run (a method's equal figures on one sequence and direction) once, a method's name with
+    its marks (low coverage, diverged) and what they mean in `notes`."""
     out: dict[str, dict] = {}
     by_dataset: dict[str, list[dict]] = {}
     for r in done:
-        by_dataset.setdefault(r.get("dataset") or "", []).append(r)
+        if (r.get("perturbation") or NONE) == NONE:
+            by_dataset.setdefault(r.get("dataset") or "", []).append(r)
     for dataset, rows in sorted(by_dataset.items()):
         metrics = [m for m in ("coverage", *SUMMARY_METRICS) if any(_finite(r.get(m)) for r in rows)]
         main = next((m for m in MAIN_METRICS if m in metrics), None)
-        methods = []
-        values = {}
+        found = flags({**r, "method": r["label"], "done": True} for r in rows)
+        methods, values = [], {}
         for label in sorted({r["label"] for r in rows}):
             mine = [r for r in rows if r["label"] == label]
-            row = {"method": label, "done": len(mine)}
+            row = {"method": marked(label, found), "done": len(mine)}
             for m in metrics:
-                finite = [r[m] for r in mine if _finite(r.get(m))]
+                finite = _distinct(mine, m)
                 row[m] = statistics.median(finite) if finite else None
             methods.append(row)
             if main:
-                vs = [r[main] for r in mine if _finite(r.get(main))]
-                values[label] = _spread(vs, MAX_VALUES)
+                values[label] = _spread(_distinct(mine, main), MAX_VALUES)
         ticks = log_ticks(v for vs in values.values() for v in vs)  # the box plot's log axis
-        out[dataset] = {"metrics": metrics, "main": main, "methods": methods, "values": values, "ticks": ticks}
+        out[dataset] = {
+            "metrics": metrics,
+            "main": main,
+            "methods": methods,
+            "values": values,
+            "ticks": ticks,
+            "notes": notes(found),
+        }
+    return out
+
+
+def _distinct(rows: list[dict], metric: str) -> list[float]:
+    """The finite values of `metric`, each of a sequence and direction once (copies count once, as in the
+    statistics: analysis.load.counted)."""
+    seen = set()
+    out = []
+    for r in rows:
+        v = r.get(metric)
+        key = (r.get("sequence"), r.get("direction"), v)
+        if _finite(v) and key not in seen:
+            seen.add(key)
+            out.append(v)
     return out
 
 

@@ -108,7 +108,8 @@ function medians(s) {
     const rows = d.methods.map((m) => [m.method, m.done, ...d.metrics.map((k) => num(m[k]))]);
     const plot = $("div", { class: "box", id: `box-${dataset}` });
     out.push($("h3", { text: `${dataset || "(no dataset)"}: medians over the done runs so far` }),
-      $("div", { class: "scroll" }, table(["method", "done", ...d.metrics.map((k) => s.labels[k] || k)], rows)), plot);
+      $("div", { class: "scroll" }, table(["method", "done", ...d.metrics.map((k) => s.labels[k] || k)], rows)),
+      ...(d.notes || []).map((n) => $("p", { class: "muted", text: n })), plot);
     if (d.main && window.Plotly) {
       // each method in its colour for the whole campaign (the report's figures use the same)
       const traces = Object.entries(d.values).map(([method, vs]) => ({ type: "box", x: vs, name: method, orientation: "h", boxpoints: vs.length < 60 ? "all" : "outliers", marker: { color: s.colours[method] }, line: { color: s.colours[method] } }));
