@@ -82,7 +82,8 @@ def run_commits(df: pd.DataFrame) -> str:
     if df.empty:
         return "no finished run"
     commits = df["slamrun_commit"] if "slamrun_commit" in df.columns else pd.Series(None, index=df.index)
-    counts = commits.fillna("not recorded (run before slamrun kept it)").astype(str).value_counts()
+    named = [c if isinstance(c, str) and c else "not recorded (run before slamrun kept it)" for c in commits]
+    counts = pd.Series(named, dtype=object).value_counts()
     text = "; ".join(f"{c}: {n} run(s)" for c, n in counts.items())
     known = [c for c in counts.index if not c.startswith("not recorded")]
     if len(counts) > 1:
