@@ -67,7 +67,9 @@ def test_statistics_and_tables_show_coverage(campaign):
     out = json.loads(subprocess.run([*base, "--json"], capture_output=True, text=True, check=True).stdout)
     assert out["datasets"]["open"]["coverage"] == {"every": 1.0, "fifth": 0.2}
     text = subprocess.run(base, capture_output=True, text=True, check=True).stdout
-    assert "median coverage (share of the frames each method was given with a pose) of the runs tested: every 1, fifth 0.2" in text
+    said = "median coverage (share of the frames each method was given with a pose) of the runs tested: every 1, "
+    said += "fifth 0.2"
+    assert said in text
     write_report(res.results)
     table = pd.read_csv(res.results / "report" / "datasets" / "open" / "tables" / "trajectory_metrics.csv")
     assert table.set_index("method").loc["fifth", "coverage"] == pytest.approx(0.2)

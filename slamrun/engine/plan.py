@@ -99,8 +99,8 @@ def trial_seed(campaign_seed: int, trial: int) -> int:
 
 
 def seed_warnings(spec: CampaignSpec) -> list[str]:
-    """A method whose trials will be copies (deterministic, its seed fixed by the spec or none to take), named with
-    what that means: its trials are counted once."""
+    """Each method whose trials will be copies (deterministic: with the seed the spec fixes, or with no seed that
+    changes its result), named with what that means: its trials are counted once."""
     out = []
     for m in spec.methods:
         cls = slamrun.methods.get(m.name)
@@ -108,12 +108,13 @@ def seed_warnings(spec: CampaignSpec) -> list[str]:
         params = cls.Params.model_validate(m.params).model_dump(mode="json")
         if trials < 2 or not cls.deterministic or derives_seed(cls, params):
             continue
-        why = f"its seed fixed at {params[cls.seed_param]} by the spec" if cls.seed_param else "it takes no seed"
+        if cls.seed_param:
+            seed = cls.seed_param
+            why = f"its seed fixed at {params[seed]} by the spec; drop params.{seed} for a seed per trial"
+        else:
+            why = "no seed changes its result"
         out.append(
-            f"{m.run_label}: its {trials} trials will be identical (deterministic, {why}); trials are counted once, "
-            f"so the statistics are those of 1 trial (drop params.{cls.seed_param} for a seed per trial)"
-            if cls.seed_param
-            else f"{m.run_label}: its {trials} trials will be identical (deterministic, {why}); trials are counted once"
+            f"{m.run_label}: its {trials} trials will be identical (deterministic, {why}); trials are counted once"
         )
     return out
 
