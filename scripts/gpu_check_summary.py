@@ -22,6 +22,8 @@ COLUMNS = (  # results.csv column, heading, format
     ("status", "status", "{}"),
     ("failure", "failure", "{}"),
     ("n_poses", "poses", "{:.0f}"),
+    ("coverage", "cov given", "{:.2f}"),
+    ("coverage_of_sequence", "cov seq", "{:.2f}"),
     ("wall_s", "wall s", "{:.1f}"),
     ("fps", "fps", "{:.1f}"),
     ("gpu_mem_peak_mb", "GPU MB", "{:.0f}"),
@@ -104,6 +106,13 @@ def summary(out: Path, seconds: float) -> str:
     for log in sorted((out / "runs").glob("*/log.txt")):
         found = OWN_LINE.findall(log.read_text(errors="replace"))
         lines.append(f"{log.parent.name}: {found[-1] if found else f'(no {name} summary line)'}")
+    seeds = []  # each trial's seed (engine.plan.trial_seed), from run.json
+    for record in sorted((out / "runs").glob("*/run.json")):
+        try:
+            seeds.append(f"{record.parent.name}: seed {json.loads(record.read_text()).get('seed')}")
+        except (OSError, ValueError):
+            continue
+    lines += ["", "the trials' seeds:", *seeds] if seeds else []
     return "\n".join(lines) + "\n"
 
 
