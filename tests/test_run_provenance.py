@@ -75,9 +75,12 @@ def test_each_run_records_the_code_that_ran_it_and_the_report_names_the_runs_com
 
     _, res = campaign
     df = pd.read_csv(res.results_csv)
+    from slamrun.backends.machine import source_commit
+
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    head = subprocess.run(["git", "-C", root, "rev-parse", "HEAD"], capture_output=True, text=True).stdout.strip()
-    assert head and df.slamrun_commit.str.startswith(head).all(), df.slamrun_commit.tolist()
+    head = source_commit().split(" ")[0]  # this process's code (HEAD when it first looked; a commit since is not it)
+    known = subprocess.run(["git", "-C", root, "cat-file", "-t", head], capture_output=True, text=True).stdout.strip()
+    assert known == "commit" and df.slamrun_commit.str.startswith(head).all(), df.slamrun_commit.tolist()
     for run_dir in df.run_dir:
         assert json.loads((res.results / run_dir / "run.json").read_text())["slamrun_commit"].startswith(head)
     p = provenance(res.results, df)
