@@ -48,9 +48,10 @@ def _xyz(points: np.ndarray) -> dict[str, list]:
     }
 
 
-def view_figure(paths: SequencePaths, title: str) -> dict:
+def view_figure(paths: SequencePaths, title: str, names: dict[str, str] | None = None) -> dict:
     """The plotly figure (data, layout) of one sequence: the ground truth, its start and end, and each method's best,
-    median and worst run (a colour per method, a dash per pick), grouped by method in the legend."""
+    median and worst run (a colour per method, a dash per pick), grouped by method in the legend (`names`: a method's
+    name as shown, with its marks)."""
     data = []
     if paths.full is not None:
         line = {"color": "#cccccc", "width": 7}
@@ -79,7 +80,7 @@ def view_figure(paths: SequencePaths, title: str) -> dict:
                 "mode": "lines",
                 "name": f"{run.which} ({paths.metric} {run.value:.4g}; {run.direction} trial {run.trial})",
                 "legendgroup": run.method,
-                "legendgrouptitle": {"text": run.method},
+                "legendgrouptitle": {"text": (names or {}).get(run.method, run.method)},
                 "line": {"color": colour, "width": 4 if run.which == "best" else 3, "dash": DASH[run.which]},
                 **_xyz(run.positions),
             }
@@ -105,9 +106,9 @@ def camera(paths: SequencePaths) -> dict:
     return {"eye": dict(zip("xyz", eye, strict=True)), "up": dict(zip("xyz", vertical, strict=True))}
 
 
-def write_view(paths: SequencePaths, path: Path, element: str, title: str) -> Path:
+def write_view(paths: SequencePaths, path: Path, element: str, title: str, names: dict[str, str] | None = None) -> Path:
     """The script that draws one sequence's view into the page's element `element`."""
-    figure = json.dumps(view_figure(paths, title), separators=(",", ":"), allow_nan=False)
+    figure = json.dumps(view_figure(paths, title, names), separators=(",", ":"), allow_nan=False)
     config = {"responsive": True, "displaylogo": False}
     path.parent.mkdir(parents=True, exist_ok=True)
     call = f"Plotly.newPlot({json.dumps(element)}, f.data, f.layout, {json.dumps(config)});"

@@ -570,7 +570,7 @@ def _trajectories(
             html += page.figure(png, root, (f"{dataset}: " if dataset else "") + f"{sequence}, top view")
         element = "view-" + re.sub(r"[^A-Za-z0-9_-]", "_", f"{out.relative_to(root).as_posix()}-{file}")
         script = interactive.write_view(
-            paths, out / "views" / f"{file}.js", element, f"{sequence}: {paths.aligned_by()}"
+            paths, out / "views" / f"{file}.js", element, f"{sequence}: {paths.aligned_by()}", names
         )
         html += page.view(script, root, element, sequence, paths, open_=not opened)
         opened = True
@@ -582,7 +582,8 @@ def _trajectories(
         "metric aligns them. The views are interactive: drag to rotate, scroll to zoom, click a legend entry to "
         "hide or show a run (double-click to show it alone)."
     )
-    return Section("Trajectories", f"<p>{page.esc(note)}</p>", parts)
+    marks = page.note_lines(page.mark_notes(section_flags(df), df.method.astype(str).unique()))
+    return Section("Trajectories", f"<p>{page.esc(note)}</p>{marks}", parts)
 
 
 def _folders(groups: dict) -> dict[str, str]:
