@@ -13,7 +13,7 @@ from slamrun.analysis.load import evaluated
 from slamrun.analysis.stats import study_statistics
 from slamrun.analysis.tables import medians_with_letters
 from slamrun.results.summary import tally
-from slamrun.results.vocabulary import NONE
+from slamrun.results.vocabulary import NONE, level_text
 
 BREAKDOWN_PCT = 50.0  # the success rate under which a method is said to break down at a level
 
@@ -51,7 +51,7 @@ def series(df: pd.DataFrame, kind: str) -> list[tuple[str, pd.DataFrame]]:
     out = [(NONE, baseline(df))]
     part = df[df["perturbation"] == kind]
     for level in levels(df, kind):
-        out.append((f"{level:g}", part[np.isclose(part["level"].astype(float), level)]))
+        out.append((level_text(level), part[part["level"].astype(float) == level]))
     return out
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slamrun.results.vocabulary import NONE, played  # noqa: F401 - part of this module's names
+from slamrun.results.vocabulary import NONE, level_text, played  # noqa: F401 - part of this module's names
 
 
 @dataclass(frozen=True)
@@ -130,10 +130,11 @@ class Perturbation:
 
     @property
     def label(self) -> str:
-        """A name for folders and run keys: `gaussian_noise-5`, `exposure-0.5`; `-s7` with a seed other than 0."""
+        """A name for folders and run keys: `gaussian_noise-5`, `exposure-0.5` (every digit where six would make two
+        levels one name: results.vocabulary.level_text); `-s7` with a seed other than 0."""
         if self.is_none:
             return NONE
-        return f"{self.kind}-{self.level:g}" + (f"-s{self.seed}" if self.seed else "")
+        return f"{self.kind}-{level_text(self.level)}" + (f"-s{self.seed}" if self.seed else "")
 
     @property
     def changes_pixels(self) -> bool:
@@ -219,4 +220,4 @@ def describe(p: Perturbation) -> str:
     if p.is_none:
         return "none (the baseline)"
     kind = KINDS[p.kind]
-    return f"{p.kind.replace('_', ' ')}, {kind.parameter} {p.level:g}"
+    return f"{p.kind.replace('_', ' ')}, {kind.parameter} {level_text(p.level)}"

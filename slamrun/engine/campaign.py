@@ -27,7 +27,7 @@ from slamrun.engine.folders import (
 )
 from slamrun.engine.importer import reimport_lost
 from slamrun.engine.ledger import Ledger, ResultsLock
-from slamrun.engine.plan import PlannedRun, plan, seed_warnings
+from slamrun.engine.plan import PlannedRun, perturbations, plan, seed_warnings
 from slamrun.engine.preparer import ViewPreparer
 from slamrun.engine.recovery import collect_leftovers, import_finished, recover
 from slamrun.engine.reevaluate import reevaluate
@@ -108,6 +108,7 @@ def check_sequences(spec: CampaignSpec, skip_ungenerated: bool = False) -> list[
                 continue
             try:
                 sequence = open_sequence(folder, ds.layout)
+                warnings += _drops_nothing(spec, ds, seq, sequence.n_frames)
                 if spec.evaluate:
                     if sequence.groundtruth_path is None:
                         warnings.append(
@@ -122,6 +123,17 @@ def check_sequences(spec: CampaignSpec, skip_ungenerated: bool = False) -> list[
     if problems:
         raise DatasetError(f"{len(problems)} sequence(s) cannot be used:\n" + "\n".join(problems))
     return warnings
+
+
+def _drops_nothing(spec: CampaignSpec, ds, name: str, n_frames: int) -> list[str]:
+    """A frame_drop level that drops no frame of a sequence (every N-th of fewer than N frames): its view is the
+    baseline's, said rather than run as a perturbation."""
+    return [
+        f"{ds.path / name}: frame_drop every {p.level:g} drops no frame of {name} ({n_frames} frames): its runs are "
+        "the baseline's; choose a level under the frame count"
+        for p in perturbations(spec, ds)
+        if p.kind == "frame_drop" and p.level is not None and n_frames < p.level
+    ]
 
 
 def load_groundtruths(runs: list[PlannedRun]) -> dict:

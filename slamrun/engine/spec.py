@@ -90,7 +90,12 @@ class PerturbationSpec(Strict):
     @field_validator("sigma", "length_px", "gain", "every", "scale", "quality", mode="before")
     @classmethod
     def _one_level_is_a_list(cls, v: Any) -> Any:
-        return [v] if isinstance(v, (int, float)) and not isinstance(v, bool) else v
+        if v is None:
+            return v
+        levels = [v] if not isinstance(v, list) else v
+        if not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in levels):
+            raise ValueError(f"a level is a number, e.g. [2, 5]; got {str(v)[:80]}")
+        return levels
 
     @model_validator(mode="after")
     def _its_own_levels(self):
@@ -263,6 +268,11 @@ class MethodSpec(Strict):
 
 
 JOB_START_S = 60  # a worker job's own start-up, before it can take a run
+# A spec's bounds, checked from its counts before any run is planned: a ledger row, a run folder and a process per
+# run (200,000 runs at the runner's 60 runs/s of a no-op method are an hour of its own time); a view is a copy of a
+# sequence's frames on disk
+MAX_RUNS = 200_000
+MAX_VIEWS = 10_000
 
 
 class CampaignSpec(Strict):
@@ -331,6 +341,28 @@ class CampaignSpec(Strict):
         if len(set(v)) != len(v):
             raise ValueError("directions repeat")
         return v
+
+    @model_validator(mode="after")
+    def _within_bounds(self) -> CampaignSpec:
+        levels = {
+            id(ds): sum(len(p.levels) for p in (self.perturbations if ds.perturbations is None else ds.perturbations))
+            for ds in self.datasets
+        }
+        played = sum(len(ds.sequences) * (1 + levels[id(ds)]) for ds in self.datasets)
+        runs = sum((m.trials or self.trials) * len(m.directions or self.directions) * played for m in self.methods)
+        directions = {d for m in self.methods for d in (m.directions or self.directions)}
+        views = played * len(directions)
+        if runs > MAX_RUNS:
+            raise ValueError(
+                f"the spec plans {runs:,} runs; slamrun takes at most {MAX_RUNS:,} in one spec (a ledger row, a run "
+                "folder and a process each): split it into several specs, or give fewer levels, trials or sequences"
+            )
+        if views > MAX_VIEWS:
+            raise ValueError(
+                f"the spec needs {views:,} views (each a copy of a sequence's frames on disk); slamrun prepares at "
+                f"most {MAX_VIEWS:,} for one spec: give fewer levels or sequences"
+            )
+        return self
 
     @model_validator(mode="after")
     def _exclusive_needs_one_machine(self) -> CampaignSpec:

@@ -146,8 +146,15 @@ LABELS = {
 NONE = "none"  # the baseline perturbation: the ordinary view (slamrun.datasets.perturb)
 
 
+def level_text(level: float) -> str:
+    """A level as names and keys write it: `5`, `0.5` (six significant digits), or every digit where those would
+    make two levels one name (4.000001 and 4.000002 are not both `4`)."""
+    short = f"{float(level):g}"
+    return short if float(short) == float(level) else repr(float(level))
+
+
 def played(direction: str, kind: str | None, level: float | None) -> str:
     """How a run's sequence was played, as status and the report name it: `forward`, `forward+gaussian_noise-5`."""
     if not kind or kind == NONE or level is None:
         return direction
-    return f"{direction}+{kind}-{float(level):g}"
+    return f"{direction}+{kind}-{level_text(level)}"
