@@ -152,3 +152,23 @@ def test_success_rates_breakdown_and_statistics_per_level():
     table, full = level_statistics(df, ["ate_rmse"])
     assert set(table.level) == {"2"}  # only level 2 has two methods with evaluated runs
     assert set(full) == {"gaussian_noise-2"}
+
+
+def test_the_live_pages_medians_are_the_baselines_and_the_perturbed_runs_are_said_apart(campaign):
+    """serve's page mixed the perturbed runs into the baseline's medians and box plot (issue 63): a method good on the
+    baseline and lost on noisy views showed their median. Now its figures are the baseline's, as the report's and
+    `stats`' are, and a line says how many runs on perturbed views the Robustness section has."""
+    from slamrun.serve.snapshot import snapshot
+
+    _, results = campaign
+    df = pd.read_csv(results / "results.csv")
+    base = baseline(df[df.status == "done"])
+    live = snapshot(results, "robust")["medians"]["synth"]
+    for row in live["methods"]:
+        name = row["method"].split(" ")[0]
+        mine = base[base.method == name]
+        assert row["done"] == len(mine), name
+        assert row["e_align"] == pytest.approx(mine.e_align.drop_duplicates().median()), name
+        assert len(live["values"][name]) <= len(mine)
+    perturbed = int((df.status == "done").sum() - len(base))
+    assert any(f"{perturbed} done run(s) on perturbed views" in n for n in live["notes"]), live["notes"]

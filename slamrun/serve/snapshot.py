@@ -161,9 +161,13 @@ def medians(done: list[dict]) -> dict:
     its marks (low coverage, diverged) and what they mean in `notes`."""
     out: dict[str, dict] = {}
     by_dataset: dict[str, list[dict]] = {}
+    perturbed: dict[str, int] = {}
     for r in done:
+        dataset = r.get("dataset") or ""
         if (r.get("perturbation") or NONE) == NONE:
-            by_dataset.setdefault(r.get("dataset") or "", []).append(r)
+            by_dataset.setdefault(dataset, []).append(r)
+        else:
+            perturbed[dataset] = perturbed.get(dataset, 0) + 1
     for dataset, rows in sorted(by_dataset.items()):
         metrics = [m for m in ("coverage", *SUMMARY_METRICS) if any(_finite(r.get(m)) for r in rows)]
         main = next((m for m in MAIN_METRICS if m in metrics), None)
@@ -185,9 +189,16 @@ def medians(done: list[dict]) -> dict:
             "methods": methods,
             "values": values,
             "ticks": ticks,
-            "notes": notes(found),
+            "notes": notes(found) + _perturbed_note(perturbed.get(dataset, 0)),
         }
     return out
+
+
+def _perturbed_note(n: int) -> list[str]:
+    """Where the runs on perturbed views are, when there are any (never in the baseline's figures)."""
+    if not n:
+        return []
+    return [f"{n} done run(s) on perturbed views are not in these figures: the report's Robustness section has them"]
 
 
 def _distinct(rows: list[dict], metric: str) -> list[float]:
