@@ -7,12 +7,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
 from slamrun.core import jsonio
 from slamrun.core.formats import FORMATS
-from slamrun.core.inputs import regular_file_problem
+from slamrun.core.inputs import read_bounded
 from slamrun.errors import SlamRunError
 from slamrun.results.vocabulary import METRIC_NAMES
 
@@ -73,7 +74,8 @@ def add_commands(sub) -> None:
     e.add_argument(
         "--any-sequence",
         action="store_true",
-        help="evaluate a run's trajectory even where its run.json names another sequence than --gt's folder",
+        help="evaluate a run's trajectory even where its run.json records other data than --gt's folder holds (its "
+        "data digest; an older run.json without one: its sequence's name)",
     )
     e.add_argument("--json", action="store_true", help="one JSON object per line")
     e.add_argument("traj", type=Path, nargs="+", help="trajectory files")
@@ -87,7 +89,7 @@ def _jobs(text: str) -> int:
     except ValueError:
         n = 0
     if n < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number of processes, at least 1")
+        raise argparse.ArgumentTypeError(f"{_quoted(text)}: expected a whole number of processes, at least 1")
     return n
 
 
@@ -97,21 +99,21 @@ def _finite(text: str) -> float:
     except ValueError:
         v = math.nan
     if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a finite number")
+        raise argparse.ArgumentTypeError(f"{_quoted(text)}: expected a finite number")
     return v
 
 
 def _tolerance(text: str) -> float:
     v = _finite(text)
     if v < 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected seconds, 0 or more")
+        raise argparse.ArgumentTypeError(f"{_quoted(text)}: expected seconds, 0 or more")
     return v
 
 
 def _positive_float(text: str) -> float:
     v = _finite(text)
     if v <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a number above 0")
+        raise argparse.ArgumentTypeError(f"{_quoted(text)}: expected a number above 0")
     return v
 
 
@@ -147,20 +149,79 @@ def cmd_evaluate(args) -> int:
 
 
 def _same_sequence(folder: Path, trajectories: list[Path]) -> None:
-    """Refuse a campaign run's trajectory (run.json beside it) whose run names another sequence than `folder`."""
+    """Refuse a campaign run's trajectory (run.json beside it) made on other data than `folder`'s: by the data
+    digest its run.json records (the run key's `<sequence>@<data>`), or by its sequence's name where it records
+    none (an older run). What was not checked, or passed on another name, is said in a note."""
+    name = folder.resolve().name
+    digest = None  # the folder's (computed once, when a run records one: its small files, its frames' list)
     for traj in trajectories:
         record = Path(traj).parent / "run.json"
-        try:
-            if regular_file_problem(record, "a run's record") or record.stat().st_size > 2**20:
+        run = _run_record(record, traj, folder)
+        if run is None:
+            continue  # not a run's folder: evaluated as any file
+        sequence = run.get("sequence") if isinstance(run.get("sequence"), str) else None
+        data = run.get("data")
+        other_name = sequence is not None and sequence != name
+        named = f"is of sequence {_quoted(sequence)}, not of {folder} ({_quoted(name)})" if other_name else ""
+        if isinstance(data, str):
+            from slamrun.datasets.layouts import sequence_identity
+
+            digest = digest or sequence_identity(folder)
+            if data == digest:
+                if other_name:
+                    _note(f"{traj}: its run ({record}) {named}: the same data (digest {digest!r}), evaluated")
                 continue
-            sequence = json.loads(record.read_text()).get("sequence")
-        except (OSError, ValueError, AttributeError):
-            continue  # not a run's folder, or not readable: evaluated as any file
-        if isinstance(sequence, str) and sequence != folder.resolve().name:
+            what = f"{named}: other data" if other_name else f"is of other data than {folder}, of the same name"
             raise SlamRunError(
-                f"{traj}: its run ({record}) is of sequence {sequence!r}, not of {folder} ({folder.resolve().name!r}); "
-                "give that sequence's folder with --gt, or --any-sequence to evaluate it against this one anyway"
+                f"{traj}: its run ({record}) {what} (the run's data digest {_quoted(data)}, the folder's "
+                f"{digest!r}); give the folder of the run's sequence with --gt, or --any-sequence to evaluate it "
+                "against this one anyway"
             )
+        if other_name:
+            raise SlamRunError(
+                f"{traj}: its run ({record}) {named}; give that sequence's folder with --gt, or --any-sequence to "
+                "evaluate it against this one anyway"
+            )
+        checked = "by its sequence's name only" if sequence is not None else "not checked (nor its sequence's name)"
+        _note(f"{traj}: its run ({record}) records no data digest (an older run?): its sequence {checked}")
+
+
+MAX_RUN_JSON = 2**20  # bytes: a run's record is a few KiB
+
+
+def _run_record(record: Path, traj: Path, folder: Path) -> dict | None:
+    """The run.json beside a trajectory as a dict; None where there is none, or (said in a note) where it is no
+    run's record: not a readable regular file of at most 1 MiB, not JSON, not a JSON object."""
+    if not os.path.lexists(record):
+        return None
+    unchecked = f"{traj} evaluated, its sequence not checked against {folder}"
+    try:
+        run = json.loads(read_bounded(record, MAX_RUN_JSON, "a run's record").decode())
+    except SlamRunError as exc:
+        _note(f"{exc}: {unchecked}")
+        return None
+    except (ValueError, RecursionError):  # undecodable or not JSON (or nested beyond the parser)
+        _note(f"{record}: not JSON, not a run's record: {unchecked}")
+        return None
+    if not isinstance(run, dict):
+        _note(f"{record}: not a JSON object, not a run's record: {unchecked}")
+        return None
+    return run
+
+
+QUOTE_MAX = 80  # characters of a value read from a file that a message quotes (then its start, said cut)
+
+
+def _quoted(value: str) -> str:
+    """`value` quoted as Python does (repr), its start only where it is long: at most about 120 characters."""
+    text = repr(value)
+    if len(text) <= QUOTE_MAX + 2:
+        return text
+    return f"{text[: QUOTE_MAX + 1]}... (cut: {len(value):,} characters)"
+
+
+def _note(text: str) -> None:
+    print(f"slamrun: note: {text}", file=sys.stderr)
 
 
 def _folder_form_only(args) -> None:
