@@ -206,3 +206,22 @@ def test_a_method_tracking_under_the_coverage_mark_is_marked_in_every_view(kitti
     copies = next(m for m in live["methods"] if m["method"] == "copies")
     assert len(live["values"]["copies"]) == 2  # its 4 runs are 2 distinct ones
     assert copies["ate_rmse"] == pytest.approx(df[df.method == "copies"].ate_rmse.median())
+
+
+@pytest.mark.parametrize("power", [155, 80])
+def test_poses_that_explode_are_a_tracking_failure_never_a_success(tmp_path, power):
+    """Poses good for the first half, then growing to 1e155 were `done` without a figure ('degenerate alignment'),
+    100 % success; to 1e80 they were evaluated, e_align 2.5e80 (issue 63). Output no metric can use is the method's
+    failure, `diverged`, with a message saying so; no run without figures counts as a success."""
+    data = tmp_path / "data"
+    generate(data / "seq_a", frames=60, seed=1, size=(160, 120))
+    methods = [fake_method(label="exploding", extra=["--blow-up", str(power)]), fake_method(label="steady")]
+    spec = write_spec(tmp_path, data, methods, datasets=[{"name": "s", "path": str(data), "sequences": ["seq_a"]}])
+    assert main(["campaign", str(spec)]) == 0
+    df = pd.read_csv(tmp_path / "results" / "results.csv")
+    bad = df[df.method == "exploding"]
+    assert (bad.status == "failed").all() and (bad.failure == "diverged").all(), bad[["status", "failure", "message"]]
+    assert bad.message.str.contains("poses explode").all(), bad.message.tolist()
+    assert bad.e_align.isna().all()
+    st = json.loads(cli("stats", tmp_path / "results", "--json"))["pooled"]["methods"]
+    assert st["exploding"]["success_pct"] == 0 and st["steady"]["success_pct"] == 100

@@ -29,6 +29,9 @@ from slamrun.results.vocabulary import (
 # ate_rel and its flags.
 EVALUATION_VERSION = 2
 LOW_COVERAGE = 0.5  # default coverage_mark: runs with poses for fewer of the frames they were given are marked
+# A path whose farthest pose from its first lies this many times beyond its poses' count times their median step
+# (the farthest a path of such steps could go) has exploded: numbers, not motion (a method's diverged optimisation)
+EXPLODED = 1e6
 
 
 @dataclass(frozen=True)
@@ -84,7 +87,9 @@ def evaluate_trajectory(
         "eval_settings": settings.text(),
     }
     detail = ""
-    if groundtruth is not None:
+    if (why := exploded(traj)) is not None:
+        values["exploded"] = why  # no metric can use it: no figure is computed (settle makes it the method's failure)
+    elif groundtruth is not None:
         figures, detail = campaign_figures(
             groundtruth, traj, settings.metrics, settings.alignment, settings.rpe, frames.view
         )
@@ -101,9 +106,14 @@ def settle(values: dict, failure: str | None, message: str | None, detail: str, 
     method's own, or None) and its figures: too few poses to evaluate (lost), a loss it recovered from, too little
     coverage of its frames (lost, under min_coverage), a path beyond max_ate_rel (diverged)."""
     message = message or detail or None
+    if failure is None and values.get("exploded"):
+        failure, message = DIVERGED, values["exploded"]
     if failure is None and values.get("eval_status") == EvalStatus.incomplete.value:
         failure = "lost"  # too few poses in a segment to evaluate: the method did not track the sequence
         message = f"too few poses to evaluate ({message})"
+    if failure is None and values.get("eval_status") == EvalStatus.nan.value:
+        failure = "lost"  # poses that give no figure (all of a segment at one point): no success without figures
+        message = f"its poses give no figure ({message})"
     if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
         failure = None if values.get("eval_status") == EvalStatus.ok.value else "lost"
     share = values.get("coverage")
@@ -118,6 +128,28 @@ def settle(values: dict, failure: str | None, message: str | None, detail: str, 
             f"{settings.max_ate_rel:g}"
         )
     values.update(failure=failure, message=message)
+
+
+def exploded(traj: Trajectory) -> str | None:
+    """Why a trajectory's numbers exploded (its farthest pose from its first beyond EXPLODED times its poses' count
+    times their median step, or not finite in arithmetic), or None. Steps are measured per coordinate (no squares:
+    1e155 does not overflow here)."""
+    p = traj.positions
+    if len(p) < 3:
+        return None
+    with np.errstate(all="ignore"):
+        steps = np.abs(np.diff(p, axis=0)).max(axis=1)
+        farthest = float(np.abs(p - p[0]).max())
+    moving = steps[steps > 0]
+    if not len(moving):
+        return None
+    median = float(np.median(moving))
+    if np.isfinite(farthest) and farthest <= EXPLODED * median * len(p):
+        return None
+    return (
+        f"its poses explode: {farthest:.3g} from its first pose, over {EXPLODED:g} times what {len(p)} steps of its "
+        f"median step ({median:.3g}) could reach: numbers, not motion; no figure is computed"
+    )
 
 
 def _finite(v) -> bool:
