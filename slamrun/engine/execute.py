@@ -190,7 +190,7 @@ def finish_attempt(
             figures, detail = evaluate_trajectory(traj, groundtruth, run_frames_of(run, method, view), run.evaluation)
             values.update(figures)
         settle(values, failure, message, detail, run.evaluation)
-        values["cpu_wait_own_pct"] = own_wait_pct(method, extra.get("cpus"))
+        values["cpu_wait_own_pct"] = own_wait_pct(method, extra.get("cpus"), values)
         _not_contended(run, stage, values, contention_pct, values["cpu_wait_own_pct"])
         if traj is not None and traj.report.n_nonfinite_dropped and not values["message"]:
             values["message"] = f"{traj.report.n_nonfinite_dropped} NaN or infinite row(s) of the output dropped"
@@ -250,12 +250,20 @@ def run_frames_of(run: PlannedRun, method: Method, view: PreparedView) -> Frames
     return run_frames(sequence_times, run.perturbation, run.key.direction, given)
 
 
-def own_wait_pct(method: Method, cpus: list[int] | None) -> float:
+def own_wait_pct(method: Method, cpus: list[int] | None, values: dict | None = None) -> float:
     """The CPU wait a run causes itself: a method with more busy threads than its lane has CPUs keeps its own threads
     waiting whatever else runs, OWN_WAIT_PER_THREAD_PCT per thread in excess (measured: ORB-SLAM3's 3 threads on 2
     CPUs waited 32.5-58.4 % of their wall time on an idle machine). 0 for a method that fits its lane or takes its
-    lane's CPUs."""
-    busy = method.busy_threads()
+    lane's CPUs; 0 also where busy_threads() raises or gives no thread count (a plug-in's bug, found after its run:
+    the run stands as it ended), said in the run's message (`values`)."""
+    from slamrun.methods.base import busy_threads_of
+
+    busy, why = busy_threads_of(method)
+    if why is not None:
+        if values is not None:
+            note = f"{why}; own-wait allowance taken as 0"
+            values["message"] = "; ".join(filter(None, [values.get("message"), note]))
+        return 0.0
     n = len(cpus) if cpus else len(os.sched_getaffinity(0))
     return OWN_WAIT_PER_THREAD_PCT * max(0, (busy or 0) - n)
 

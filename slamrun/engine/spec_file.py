@@ -161,19 +161,18 @@ def cpu_fit(spec: CampaignSpec, cpus: int | None = None) -> tuple[list[str], lis
     """(problems, warnings): each method's busy threads (its declaration, with its parameters) against the CPUs a lane
     of this campaign gets here (`cpus`: those this process may use). More threads than CPUs make its threads wait
     for one, so its FPS and CPU figures are taken under contention: refused under `measurement: exclusive` (taken
-    for timing), a warning otherwise."""
+    for timing), a warning otherwise. A method that gives no thread count (busy_threads() raised, or returned no int
+    >= 1 nor None) is a problem, named in one line."""
     cpus = cpus or len(os.sched_getaffinity(0))
     exclusive = spec.measurement == "exclusive"
     lanes = 1 if exclusive else spec.lanes
     per_lane = cpus if exclusive else (spec.cpus_per_lane or max(1, cpus // lanes))
     problems, warnings = [], []
     for i, m in enumerate(spec.methods):
-        cls = slamrun.methods.REGISTRY.get(m.name)
-        try:
-            threads = cls(m.params).busy_threads() if cls is not None else None
-        except Exception:  # noqa: BLE001 - parameters the schema's step names, or a plug-in's own error: no figure
-            threads = None
-        if not isinstance(threads, int) or threads <= per_lane:
+        threads, why = _busy_threads(m)
+        if why is not None:
+            problems.append(f"methods[{i}]: {why}")
+        if threads is None or threads <= per_lane:
             continue
         if exclusive:
             problems.append(
@@ -189,6 +188,20 @@ def cpu_fit(spec: CampaignSpec, cpus: int | None = None) -> tuple[list[str], lis
                 f"says how long){f'; lanes: {fit} gives each of its runs {threads}' if fit * threads <= cpus else ''}"
             )
     return problems, warnings
+
+
+def _busy_threads(m) -> tuple[int | None, str | None]:
+    """(the threads method `m` of a spec keeps busy with its parameters, None), or (None, why it gives no thread
+    count, in one line naming it). (None, None) when the method cannot be made here: the schema's step names its
+    parameters; a plug-in's own error in __init__ is its runs'."""
+    from slamrun.methods.base import busy_threads_of
+
+    cls = slamrun.methods.REGISTRY.get(m.name)
+    try:
+        method = cls(m.params) if cls is not None else None
+    except Exception:  # noqa: BLE001 - see above
+        method = None
+    return busy_threads_of(method) if method is not None else (None, None)
 
 
 def cpu_warnings(spec: CampaignSpec) -> list[str]:

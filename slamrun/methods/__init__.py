@@ -6,10 +6,12 @@ layout needs comes from `slamrun.datasets`. Everything else under slamrun/ may m
 
 The spec validator, the CLI's method list, the image build targets and the tests all read REGISTRY. Methods from
 other Python packages join it through the entry-point group `slamrun.methods` (`name = "package.module:Class"`, a
-subclass of slamrun.methods.Method with the same contract as the built-in ones); a plug-in that cannot be loaded,
-or a name two installed packages register, is named with its reason when a spec asks for it (PLUGIN_ERRORS), and
-never breaks the others. A registered plug-in's calls are guarded (slamrun.methods.base.guarded): whatever it raises
-is its own failure, never slamrun's; its distribution and version (PLUGINS) key its runs and are recorded in run.json.
+subclass of slamrun.methods.Method with the same contract as the built-in ones); a plug-in that cannot be loaded
+(its import raises, or does not return within SLAMRUN_PLUGIN_IMPORT_S seconds; its `threads` is no int >= 1 nor
+None), a name two installed packages register, or a folder here that declares no Method class, is named with its
+reason by list-methods and when a spec asks for it (PLUGIN_ERRORS), and never breaks the others. A registered
+plug-in's calls are guarded (slamrun.methods.base.guarded): whatever it raises, or a value slamrun cannot use, is its
+own failure, never slamrun's; its distribution and version (PLUGINS) key its runs and are recorded in run.json.
 """
 
 from __future__ import annotations
@@ -20,6 +22,7 @@ from pathlib import Path
 
 from slamrun.core.suggest import did_you_mean
 from slamrun.datasets.view import Direction, PreparedView, Profile
+from slamrun.errors import one_line
 from slamrun.methods.base import (
     Method,
     NoParams,
@@ -28,6 +31,7 @@ from slamrun.methods.base import (
     guarded,
     read_tum_output,
     require_poses,
+    threads_problem,
 )
 from slamrun.plugins import Provider, discover
 
@@ -55,30 +59,46 @@ STUDY_METHODS = ("orb_slam2", "df_orb_slam", "lsd_slam", "dso", "svo", "ldso", "
 HERE = Path(__file__).parent
 
 
-def _built_in() -> dict[str, type[Method]]:
+def _built_in() -> tuple[dict[str, type[Method]], dict[str, str]]:
     """The built-in methods: each folder of slamrun/methods/ with an __init__.py is one, named by the folder, and
-    declares its class there (the study's ten first, in the study's order, then the others by name)."""
-    found = {}
+    declares its class there (the study's ten first, in the study's order, then the others by name); and the folders
+    that are none (no Method class named by the folder, or an __init__.py that raises), each with why: named, never
+    in the way of the others."""
+    found, errors = {}, {}
     for folder in sorted(p.parent for p in HERE.glob("*/__init__.py")):
-        module = importlib.import_module(f"{__name__}.{folder.name}")
-        classes = [
-            c
-            for c in vars(module).values()
-            if isinstance(c, type) and issubclass(c, Method) and c.__module__ == module.__name__
-            and getattr(c, "name", None) == folder.name
-        ]  # fmt: skip
-        if len(classes) != 1:
-            raise ImportError(f"{folder}: declares {len(classes)} Method classes named {folder.name!r}, not one")
-        found[folder.name] = classes[0]
+        got = _folder_method(folder)
+        if isinstance(got, str):
+            errors[folder.name] = f"slamrun/methods/{folder.name}/: {got}; not a method"
+        else:
+            found[folder.name] = got
     order = [n for n in STUDY_METHODS if n in found] + sorted(set(found) - set(STUDY_METHODS))
-    return {n: found[n] for n in order}
+    return {n: found[n] for n in order}, errors
 
 
-REGISTRY: dict[str, type[Method]] = _built_in()
+def _folder_method(folder: Path) -> type[Method] | str:
+    """The one Method class a built-in folder's __init__.py declares, named by the folder; or why not."""
+    try:
+        module = importlib.import_module(f"{__name__}.{folder.name}")
+    except Exception as exc:  # noqa: BLE001 - a half-written folder is named, the other methods stay
+        return f"its __init__.py cannot be imported: {one_line(exc)}"
+    classes = [
+        c
+        for c in vars(module).values()
+        if isinstance(c, type) and issubclass(c, Method) and c.__module__ == module.__name__
+        and getattr(c, "name", None) == folder.name
+    ]  # fmt: skip
+    if len(classes) != 1:
+        return f"its __init__.py declares {len(classes)} Method classes named {folder.name!r}, not one"
+    return classes[0]
+
+
+REGISTRY: dict[str, type[Method]]
+# method name -> why it could not be registered: a plug-in's entry point, or a folder of slamrun/methods/
+PLUGIN_ERRORS: dict[str, str]
+REGISTRY, PLUGIN_ERRORS = _built_in()
 
 
 PLUGIN_GROUP = "slamrun.methods"
-PLUGIN_ERRORS: dict[str, str] = {}  # entry-point name -> why it could not be registered
 PLUGINS: dict[str, Provider] = {}  # method name -> the installed distribution that provides it
 
 
@@ -91,18 +111,26 @@ def _accept(name: str, cls, provider: Provider, where: str) -> type[Method] | st
         return f"plug-in {where}: its class's name is {getattr(cls, 'name', None)!r}, not {name!r}"
     if missing := sorted(getattr(cls, "__abstractmethods__", ())):
         return f"plug-in {where}: {cls.__name__} does not implement {', '.join(missing)}"
+    if why := threads_problem(getattr(cls, "threads", None)):
+        return f"plug-in {where}: method {name!r} declares threads = {why}"
     return guarded(cls, f"plug-in {name} ({provider})")
 
 
 def _load_plugins() -> None:
-    """Register the group's entry points (slamrun/plugins.py: one guard for a broken plug-in of any kind)."""
-    found = discover(PLUGIN_GROUP, REGISTRY, "method", _accept)
+    """Register the group's entry points (slamrun/plugins.py: one guard for a broken plug-in of any kind). Their
+    imports run in a thread of their own, bounded in time, while this module is still being imported: it is marked
+    as imported for them (its plug-in API above is whole), or their `from slamrun.methods import Method` would wait
+    for this import to end, which waits for them."""
+    spec = __spec__
+    initializing = getattr(spec, "_initializing", False)
+    spec._initializing = False
+    try:
+        found = discover(PLUGIN_GROUP, REGISTRY, "method", _accept)
+    finally:
+        spec._initializing = initializing
     REGISTRY.update(found.loaded)
     PLUGIN_ERRORS.update(found.errors)
     PLUGINS.update(found.providers)
-
-
-_load_plugins()
 
 
 def get(name: str) -> type[Method]:
@@ -135,3 +163,6 @@ def _slamrun() -> Provider:
         return Provider("slamrun", version("slamrun"))
     except PackageNotFoundError:
         return Provider("slamrun", "?")
+
+
+_load_plugins()  # last: a plug-in's import sees this module whole

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import numbers
 import os
 import re
 import shutil
@@ -71,7 +72,8 @@ class Method(ABC):
     # once by the statistics; validate, plan and the dry run say so)
     deterministic: ClassVar[bool] = False
     # Threads it keeps busy at once (tracking, mapping, ...): a lane with fewer CPUs makes its threads wait for one;
-    # None: it uses as many as its lane has (COLMAP's thread count follows the CPUs it is pinned to)
+    # None: it uses as many as its lane has (COLMAP's thread count follows the CPUs it is pinned to). An int >= 1 or
+    # None (threads_problem): a plug-in's other value is not registered, busy_threads()' is its own failure
     threads: ClassVar[int | None] = 1
 
     def __init__(self, params: BaseModel | dict | None = None):
@@ -222,13 +224,15 @@ GUARDED_CALLS = (
     "problems",
     "launch_problems",
     "executable_problems",
+    "busy_threads",
 )
 
 
 def guarded(cls: type[Method], who: str) -> type[Method]:
     """`cls` (someone else's method class) whose calls never raise anything but MethodFailure (and
     TrajectoryFormatError from read_trajectory): any other exception, sys.exit() included (not Ctrl-C), becomes
-    MethodFailure('crashed') with one line naming `who`, the call and the exception. A plug-in's bug is then its own
+    MethodFailure('crashed') with one line naming `who`, the call and the exception; so does a value slamrun cannot
+    use (RETURN_CHECKS: read_trajectory's trajectory, busy_threads' thread count). A plug-in's bug is then its own
     failure, recorded as a result, never an infrastructure fault retried at every start nor a stopped slamrun."""
 
     def wrap(attr: str):
@@ -242,15 +246,37 @@ def guarded(cls: type[Method], who: str) -> type[Method]:
                 raise
             except BaseException as exc:  # noqa: BLE001 - whatever a plug-in raises is its own failure
                 raise MethodFailure("crashed", f"{who}: {cls.__name__}.{attr}() raised {one_line(exc)}") from None
-            if attr == "read_trajectory" and (why := not_a_trajectory(value)):
-                raise MethodFailure("crashed", f"{who}: {cls.__name__}.read_trajectory() returned {why}")
-            return value
+            if (check := RETURN_CHECKS.get(attr)) and (why := check(value)):
+                raise MethodFailure("crashed", f"{who}: {cls.__name__}.{attr}() returned {why}")
+            return int(value) if attr == "busy_threads" and value is not None else value
 
         return call
 
     namespace = {attr: wrap(attr) for attr in GUARDED_CALLS}
     namespace.update(__module__=cls.__module__, __qualname__=cls.__qualname__, __doc__=cls.__doc__)
     return type(cls.__name__, (cls,), namespace)
+
+
+def threads_problem(value) -> str | None:
+    """What `value` is when it is no thread count (`threads`, busy_threads()): an int >= 1, or None (as many as its
+    lane has CPUs); else None."""
+    if value is None or (isinstance(value, numbers.Integral) and not isinstance(value, bool) and value >= 1):
+        return None
+    return f"{value!r}; expected an int >= 1, or None (as many threads as its lane has CPUs)"
+
+
+def busy_threads_of(method: Method) -> tuple[int | None, str | None]:
+    """(the threads `method` keeps busy with its parameters, None), or (None, why it gives no thread count, in one
+    line: a plug-in's busy_threads() is guarded, so its error names it and its package; a built-in's names it)."""
+    try:
+        busy = method.busy_threads()
+    except MethodFailure as exc:
+        return None, str(exc)
+    except Exception as exc:  # noqa: BLE001 - a built-in's bug, said in one line
+        return None, f"{method.name}: busy_threads() raised {one_line(exc)}"
+    if why := threads_problem(busy):
+        return None, f"{method.name}: busy_threads() returned {why}"
+    return busy, None
 
 
 def not_a_trajectory(value) -> str | None:
@@ -266,6 +292,9 @@ def not_a_trajectory(value) -> str | None:
         if not np.issubdtype(np.asarray(getattr(value, name)).dtype, np.number):
             return f"a Trajectory whose {name} are not numbers"
     return None
+
+
+RETURN_CHECKS = {"read_trajectory": not_a_trajectory, "busy_threads": threads_problem}  # guarded: what a call returns
 
 
 class PythonProcess:
