@@ -73,7 +73,8 @@ class Method(ABC):
     deterministic: ClassVar[bool] = False
     # Threads it keeps busy at once (tracking, mapping, ...): a lane with fewer CPUs makes its threads wait for one;
     # None: it uses as many as its lane has (COLMAP's thread count follows the CPUs it is pinned to). An int >= 1 or
-    # None (threads_problem): a plug-in's other value is not registered, busy_threads()' is its own failure
+    # None (threads_problem): a plug-in declaring another value is not registered; its busy_threads() returning one
+    # is its own failure (guarded)
     threads: ClassVar[int | None] = 1
 
     def __init__(self, params: BaseModel | dict | None = None):
