@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import threading
 from pathlib import Path
 
 from slamrun.core.suggest import did_you_mean
@@ -92,14 +93,49 @@ def _folder_method(folder: Path) -> type[Method] | str:
     return classes[0]
 
 
-REGISTRY: dict[str, type[Method]]
+class _WithPlugins(dict):
+    """A dict of the registry that takes in the plug-ins on its first read (`_load_plugins`): their imports run once
+    this module is whole, so a plug-in's `from slamrun.methods import Method` never waits for it."""
+
+    def _loaded(self):
+        _load_plugins()
+        return self
+
+    def __getitem__(self, key):
+        return dict.__getitem__(self._loaded(), key)
+
+    def __contains__(self, key) -> bool:
+        return dict.__contains__(self._loaded(), key)
+
+    def __iter__(self):
+        return dict.__iter__(self._loaded())
+
+    def __len__(self) -> int:
+        return dict.__len__(self._loaded())
+
+    def get(self, key, default=None):
+        return dict.get(self._loaded(), key, default)
+
+    def keys(self):
+        return dict.keys(self._loaded())
+
+    def values(self):
+        return dict.values(self._loaded())
+
+    def items(self):
+        return dict.items(self._loaded())
+
+
+_found, _errors = _built_in()
+REGISTRY: dict[str, type[Method]] = _WithPlugins(_found)
 # method name -> why it could not be registered: a plug-in's entry point, or a folder of slamrun/methods/
-PLUGIN_ERRORS: dict[str, str]
-REGISTRY, PLUGIN_ERRORS = _built_in()
+PLUGIN_ERRORS: dict[str, str] = _WithPlugins(_errors)
 
 
 PLUGIN_GROUP = "slamrun.methods"
-PLUGINS: dict[str, Provider] = {}  # method name -> the installed distribution that provides it
+PLUGINS: dict[str, Provider] = _WithPlugins()  # method name -> the installed distribution that provides it
+_PLUGINS_LOCK = threading.RLock()  # another thread's first read waits for the whole load
+_PLUGINS_STATE = {"done": False, "loading": False}
 
 
 def _accept(name: str, cls, provider: Provider, where: str) -> type[Method] | str:
@@ -117,20 +153,21 @@ def _accept(name: str, cls, provider: Provider, where: str) -> type[Method] | st
 
 
 def _load_plugins() -> None:
-    """Register the group's entry points (slamrun/plugins.py: one guard for a broken plug-in of any kind). Their
-    imports run in a thread of their own, bounded in time, while this module is still being imported: it is marked
-    as imported for them (its plug-in API above is whole), or their `from slamrun.methods import Method` would wait
-    for this import to end, which waits for them."""
-    spec = __spec__
-    initializing = getattr(spec, "_initializing", False)
-    spec._initializing = False
-    try:
-        found = discover(PLUGIN_GROUP, REGISTRY, "method", _accept)
-    finally:
-        spec._initializing = initializing
-    REGISTRY.update(found.loaded)
-    PLUGIN_ERRORS.update(found.errors)
-    PLUGINS.update(found.providers)
+    """Register the group's entry points once, on the registry's first read (slamrun/plugins.py: one guard for a
+    broken plug-in of any kind; each import bounded in time)."""
+    if _PLUGINS_STATE["done"]:
+        return
+    with _PLUGINS_LOCK:
+        if _PLUGINS_STATE["done"] or _PLUGINS_STATE["loading"]:
+            return  # loaded, or a read of this thread's own during the load (_accept's)
+        _PLUGINS_STATE["loading"] = True
+        try:
+            found = discover(PLUGIN_GROUP, dict(dict.items(REGISTRY)), "method", _accept)
+            dict.update(REGISTRY, found.loaded)
+            dict.update(PLUGIN_ERRORS, found.errors)
+            dict.update(PLUGINS, found.providers)
+        finally:
+            _PLUGINS_STATE.update(done=True, loading=False)
 
 
 def get(name: str) -> type[Method]:
@@ -164,5 +201,3 @@ def _slamrun() -> Provider:
     except PackageNotFoundError:
         return Provider("slamrun", "?")
 
-
-_load_plugins()  # last: a plug-in's import sees this module whole
