@@ -52,7 +52,7 @@ def make_lanes(n: int, cpus_per_lane: int | None = None, exclusive: bool = False
     available = sorted(os.sched_getaffinity(0))
     if exclusive:
         return [Lane(0, tuple(available))]
-    per = cpus_per_lane or max(1, len(available) // n)
+    per = min(len(available), cpus_per_lane or max(1, len(available) // n))  # a lane never lists a CPU twice
     return [Lane(i, tuple(available[(i * per + j) % len(available)] for j in range(per))) for i in range(n)]
 
 

@@ -299,7 +299,7 @@ class CampaignSpec(Strict):
     retries: int = Field(2, ge=0, description="Retries of infrastructure failures (never of method failures).")
     contention_pct: float | None = Field(
         None,
-        gt=0,
+        ge=5,  # a run that loses tracking by itself waits 0.7-4.1 % (README): under 5 % every loss would be contended
         description="A run lost or never initialised while its threads waited for a CPU longer than this share of "
         f"its wall time (cpu_wait_pct) is `contended`: retried, and counted apart as infrastructure failures are, "
         f"never in the method's rate ({CONTENTION_PCT:g} measured to separate them on a shared machine; README). "

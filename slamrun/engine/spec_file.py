@@ -166,8 +166,8 @@ def cpu_fit(spec: CampaignSpec, cpus: int | None = None) -> tuple[list[str], lis
     cpus = cpus or len(os.sched_getaffinity(0))
     exclusive = spec.measurement == "exclusive"
     lanes = 1 if exclusive else spec.lanes
-    per_lane = cpus if exclusive else (spec.cpus_per_lane or max(1, cpus // lanes))
-    problems, warnings = [], []
+    per_lane = cpus if exclusive else min(cpus, spec.cpus_per_lane or max(1, cpus // lanes))
+    problems, warnings = lane_fit(spec, cpus)
     for i, m in enumerate(spec.methods):
         threads, why = _busy_threads(m)
         if why is not None:
@@ -187,6 +187,36 @@ def cpu_fit(spec: CampaignSpec, cpus: int | None = None) -> tuple[list[str], lis
                 f"{cpus} CPU(s) this process may use: its threads will wait for a CPU (cpu_wait_pct in results.csv "
                 f"says how long){f'; lanes: {fit} gives each of its runs {threads}' if fit * threads <= cpus else ''}"
             )
+    return problems, warnings
+
+
+def lane_fit(spec: CampaignSpec, cpus: int) -> tuple[list[str], list[str]]:
+    """(problems, warnings) of the lanes against the `cpus` this process may use: a lane of more CPUs than there are
+    (refused), lanes that share CPUs (their runs share them: warned), exclusive measurement with more lanes than
+    CPUs (refused: it runs one run at a time)."""
+    problems, warnings = [], []
+    if spec.cpus_per_lane is not None and spec.cpus_per_lane > cpus:
+        problems.append(
+            f"cpus_per_lane {spec.cpus_per_lane}: this process may use {cpus} CPU(s); give at most {cpus} (or none: "
+            "the CPUs split between the lanes)"
+        )
+    if spec.measurement == "exclusive":
+        if spec.lanes > cpus:
+            problems.append(
+                f"measurement: exclusive runs one run at a time on every CPU; lanes: {spec.lanes} asks for more runs "
+                f"at once than this process's {cpus} CPU(s): set lanes: 1"
+            )
+        return problems, warnings
+    per = min(cpus, spec.cpus_per_lane or max(1, cpus // spec.lanes))
+    if spec.lanes * per > cpus:
+        crowd = f"; {spec.lanes} lanes on {cpus} CPU(s): about {spec.lanes / cpus:.0f} runs at a time on each" * (
+            spec.lanes > cpus
+        )
+        warnings.append(
+            f"lanes share CPUs: {spec.lanes} lanes of {per} CPU(s) need {spec.lanes * per}, this process may use "
+            f"{cpus}{crowd}: runs on the same CPUs wait for each other (their FPS and CPU figures taken under "
+            f"contention); lanes: {max(1, cpus // per)} keeps them apart"
+        )
     return problems, warnings
 
 
