@@ -9,7 +9,6 @@ import sys
 import time
 
 import pytest
-import yaml
 
 from slamrun.datasets.make_synthetic import generate
 from slamrun.datasets.perturb import Perturbation

@@ -10,9 +10,10 @@ import pandas as pd
 
 from slamrun.analysis.left_out import reasons, section_flags
 from slamrun.analysis.load import by_dataset, evaluated, metrics_for, one_dataset
-from slamrun.analysis.stats import StudyStats, study_statistics
+from slamrun.analysis.stats import StudyStats, screen, study_statistics
 from slamrun.analysis.summary import pooled_summary, ranked_by
 from slamrun.errors import SlamRunError
+from slamrun.results.vocabulary import MAIN_METRICS
 
 POOLED_NOTE = (
     "pooled over the datasets: counts and success rates of every run, and each method's rank within each sequence "
@@ -54,28 +55,38 @@ def per_dataset_statistics(
     alpha: float = 0.05,
 ) -> dict[str, StudyStats]:
     """The study's procedure (outliers, normality, variance, Kruskal-Wallis, pairwise tests, letters) on each
-    dataset's evaluated runs alone, by dataset name."""
+    dataset's evaluated runs alone, by dataset name. A figure that is no measurement (stats.screen: infinite, a
+    negative error, beyond stats.LIMIT) is left out of its metric's tests and named (`StudyStats.excluded`), also
+    where it was its run's only figure."""
     groups = by_dataset(df)
     out = {}
     for name, part in groups.items():
         chosen = dataset_metrics(part, name, metrics, source)
+        part, excluded = screen(part, chosen)
         st = study_statistics(evaluated(part, chosen), chosen, level=level, adjust=adjust, alpha=alpha)
+        st.excluded = excluded  # also the runs whose every figure was no measurement (`evaluated` drops them)
         out[name] = with_left_out(st, part)
     return out
 
 
 def with_left_out(st: StudyStats, section: pd.DataFrame) -> StudyStats:
-    """`st` with, per metric, each method of the dataset's runs (`section`) its tests leave out and why, and each
-    method's marks (low coverage, diverged)."""
+    """`st` with, per metric, each method of the dataset's runs (`section`) its tests leave out and why (a method
+    whose every figure was no measurement, stats.screen, says how many were left out), and each method's marks (low
+    coverage, diverged)."""
+    section = screen(section, list(st.metrics))[0]
     st.left_out = {m: reasons(section, set(s.medians), [m]) for m, s in st.metrics.items()}
+    for metric, gone in st.left_out.items():
+        for method in gone:
+            if n := sum(e["metric"] == metric and str(e.get("method")) == method for e in st.excluded):
+                gone[method] += f"; {n} figure(s) left out as no measurement"
     st.marks = section_flags(section)
     return st
 
 
 def pooled_json(df: pd.DataFrame) -> dict:
     """The pooled view of a table as JSON: which datasets, what was pooled, and per method its counts, rates and
-    mean rank within sequences."""
-    summary = pooled_summary(df)
+    mean rank within sequences (a figure that is no measurement, stats.screen, ranks no method)."""
+    summary = pooled_summary(screen(df, [m for m in MAIN_METRICS if m in df.columns])[0])
     methods = {
         str(r["method"]): {k: r[k] for k in summary.columns if k != "method"} for r in summary.to_dict("records")
     }

@@ -30,7 +30,7 @@ from slamrun.analysis.robustness import (
     perturbed,
     success_rates,
 )
-from slamrun.analysis.stats import study_statistics
+from slamrun.analysis.stats import screen, study_statistics
 from slamrun.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
 from slamrun.core import jsonio
 from slamrun.engine.folders import REPORT, claim_output_folder
@@ -235,6 +235,7 @@ def dataset_report(
     fig_dir, tab_dir = out / "figures", out / "tables"
     where = f" ({dataset})" if dataset else ""
     metrics = metrics_for(df)
+    df, excluded = screen(df, metrics)  # figures that are no measurement: left out of every view, named
     ok = evaluated(df, metrics)
     sections = []
     marks = section_flags(df)  # low coverage, diverged: marked in every table and figure below
@@ -248,7 +249,9 @@ def dataset_report(
 
     st = None
     if ok.method.nunique() >= 2:
-        st = with_left_out(study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha), df)
+        st = study_statistics(ok, metrics, level=level, adjust=adjust, alpha=alpha)
+        st.excluded = excluded
+        st = with_left_out(st, df)
         out.mkdir(parents=True, exist_ok=True)
         (out / "statistics.json").write_text(jsonio.dumps(st.to_json(), indent=1))
         sections.append(_statistics(st, df, metrics, out, root, where, level, adjust, alpha))
@@ -442,7 +445,8 @@ def _statistics(st, df, metrics, out, root, where, level, adjust, alpha) -> Sect
     )
     tested = {m: set(s.medians) for m, s in st.metrics.items()}
     marks = section_flags(df)
-    html = f"<p>{page.esc(note)}</p>" + page.links({"statistics (JSON)": out / "statistics.json"}, root)
+    html = f"<p>{page.esc(note)}</p>" + page.note_lines(st.excluded_lines())
+    html += page.links({"statistics (JSON)": out / "statistics.json"}, root)
     parts = []
     what = (
         "Per method: the runs counted (outliers removed, copies once), their median coverage (share of the frames "

@@ -4,7 +4,8 @@ Wilcoxon rank-sum tests with p-value adjustment, and compact letter displays. Pu
 Two guards keep a test from saying more than its data can: runs whose figures are copies of another run of the same
 method, sequence and direction (a deterministic method's trials) count once (`distinct_runs`), and a test whose
 input cannot support it (no spread within any group to rounding, every value tied, fewer runs than metrics) gives
-no figure but a reason (`MetricStats.notes`, `StudyStats.outlier_note`)."""
+no figure but a reason (`MetricStats.notes`, `StudyStats.outlier_note`). A figure that is no measurement (infinite,
+a negative error, a magnitude above LIMIT) is named and left out of its metric's tests (`screen`)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,15 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from slamrun.results.vocabulary import ATE_COLUMNS, KITTI_COLUMNS, RPE_COLUMNS, TUM_MONO_METRICS
+
 ROUNDING = 1e-9  # a spread at most this, relative to the values' magnitude, is rounding: no spread
+# A figure whose magnitude is above LIMIT is no measurement but a numerical blow-up: in metres 7 astronomical units,
+# in %, degrees or a scale factor nothing a trajectory gives; below it every sum of squares the tests form stays
+# finite (1e24 a square) however many runs a table has.
+LIMIT = 1e12
+# the figures that are errors or spreads, so never below 0 (e_s, e_s' are scale factors: positive)
+NON_NEGATIVE = frozenset((*TUM_MONO_METRICS, "e_s_sym", *ATE_COLUMNS, *RPE_COLUMNS, *KITTI_COLUMNS))
 
 
 def _no_spread(values: np.ndarray, scale: float) -> bool:
@@ -28,6 +37,63 @@ def _scale(groups) -> float:
     """The magnitude of the values of `groups` (1 where all are 0)."""
     peak = max((float(np.max(np.abs(v))) for v in groups if len(v)), default=0.0)
     return peak if peak > 0 else 1.0
+
+
+# ---------------------------------------------------------------- figures that are no measurement
+
+
+def why_not_a_figure(metric: str, value: float) -> str:
+    """Why `value` of `metric` is no measurement (empty where it is one, or a NaN: no figure)."""
+    if value != value:
+        return ""
+    if math.isinf(value):
+        return "not finite"
+    if abs(value) > LIMIT:
+        return f"magnitude above {LIMIT:g}: a numerical blow-up, no measurement"
+    if value < 0 and metric in NON_NEGATIVE:
+        return "negative: an error is never below 0"
+    return ""
+
+
+def run_name(row: dict) -> str:
+    """A run as a line names it: method, sequence, direction and trial (the columns the table has)."""
+    parts = [str(row[c]) for c in ("method", "sequence", "direction") if c in row]
+    trial = row.get("trial")
+    if isinstance(trial, float) and trial.is_integer():  # a column with a blank reads as floats
+        trial = int(trial)
+    return " ".join(parts + ([f"trial {trial}"] if "trial" in row else []))
+
+
+def screen(df: pd.DataFrame, metrics: list[str]) -> tuple[pd.DataFrame, list[dict]]:
+    """`df` with every figure of `metrics` that is no measurement (`why_not_a_figure`) made NaN (no figure: the run
+    stays in the other metrics' tests), and each named: run, metric, value (as text: JSON has no infinity), reason.
+    Only done runs are screened (the others are in no test)."""
+    present = [m for m in metrics if m in df.columns]
+    done = df["status"].eq("done").to_numpy() if "status" in df.columns else np.ones(len(df), bool)
+    out, found = df, []
+    for m in present:
+        values = pd.to_numeric(df[m], errors="coerce").to_numpy(float)
+        suspect = np.flatnonzero(done & (~(np.abs(values) <= LIMIT) | (values < 0)))
+        bad = [(i, m, float(values[i]), why) for i in suspect if (why := why_not_a_figure(m, float(values[i])))]
+        if bad:
+            out = out.copy() if out is df else out
+            out[m] = np.where(np.isin(np.arange(len(df)), [b[0] for b in bad]), math.nan, values)
+            found += bad
+    found.sort(key=lambda f: (f[0], present.index(f[1])))
+    return out, [_named(df.iloc[i].to_dict(), m, value, why) for i, m, value, why in found]
+
+
+def _named(row: dict, metric: str, value: float, why: str) -> dict:
+    """One left-out figure as `StudyStats.excluded` lists it."""
+    keys = {c: _plain(row[c]) for c in ("method", "sequence", "direction", "trial", "key") if c in row}
+    return {"run": run_name(row), **keys, "metric": metric, "value": repr(value), "reason": why}
+
+
+def _plain(v):
+    """A cell as JSON writes it: numpy scalars plain, a missing cell None."""
+    if v is None or (not isinstance(v, str) and bool(pd.isna(v))):
+        return None
+    return v.item() if isinstance(v, np.generic) else v
 
 
 # ---------------------------------------------------------------- copies
@@ -63,10 +129,22 @@ def distinct_runs(
 
 
 def mahalanobis_sq(x: np.ndarray) -> np.ndarray:
-    """Squared Mahalanobis distance of every row to the mean (pooled rows, sample covariance)."""
+    """Squared Mahalanobis distance of every row to the mean (pooled rows, sample covariance). The distance is the
+    same in any unit, so each column is first brought to magnitude 1 by a power of two (exact): no square overflows
+    however large the figures. A covariance that is still not finite (a non-finite figure) or an SVD that does not
+    converge gives no distance (NaN): LAPACK's SVD can loop forever on an infinite matrix, so it never sees one."""
+    x = np.asarray(x, float)
+    peak = np.max(np.abs(x), axis=0, initial=0.0)
+    x = np.ldexp(x, -np.frexp(np.where(np.isfinite(peak), peak, 1.0))[1])
     centred = x - x.mean(axis=0)
     cov = np.atleast_2d(np.cov(x, rowvar=False, ddof=1))  # one metric: np.cov gives a scalar
-    return np.einsum("ij,ij->i", centred @ np.linalg.pinv(cov), centred)
+    if not np.isfinite(cov).all():
+        return np.full(len(x), np.nan)
+    try:
+        inverse = np.linalg.pinv(cov)
+    except np.linalg.LinAlgError:
+        return np.full(len(x), np.nan)
+    return np.einsum("ij,ij->i", centred @ inverse, centred)
 
 
 def chi2_cutoff(level: float, df: int) -> float:
@@ -287,6 +365,7 @@ class StudyStats:
     outlier_tests: list[dict] = field(default_factory=list)  # per set of metrics the runs had: outlier_tests
     left_out: dict[str, dict[str, str]] = field(default_factory=dict)  # per metric: method -> why it has no figure
     marks: dict = field(default_factory=dict)  # per method: its done runs' flags (results.marks.Flags)
+    excluded: list[dict] = field(default_factory=list)  # each figure that is no measurement: `screen`
 
     @property
     def deterministic(self) -> list[str]:
@@ -327,6 +406,13 @@ class StudyStats:
             + ", ".join(parts)
         )
 
+    def excluded_lines(self) -> list[str]:
+        """Each figure left out of its metric's tests as no measurement, one line each (`screen`)."""
+        return [
+            f"left out of {e['metric']}'s tests: {e['run']}: {e['metric']} = {e['value']} ({e['reason']})"
+            for e in self.excluded
+        ]
+
     def to_json(self) -> dict:
         out = {
             "mahalanobis": self.mahalanobis,
@@ -344,6 +430,8 @@ class StudyStats:
             },
             "metrics": {},
         }
+        if self.excluded:  # the figures left out as no measurement (`screen`); absent where there is none
+            out["excluded"] = self.excluded
         for name, m in self.metrics.items():
             out["metrics"][name] = {
                 "medians": m.medians,
@@ -401,7 +489,9 @@ def study_statistics(
     (`distinct_runs`). Each metric's tests take every run with a figure for that metric: a run without one metric
     (KITTI's segments on a track under 100 m) stays in the others' (the outlier test takes each run on the metrics it
     has: `outlier_tests`). No metric or no run gives no figure (empty medians and tests), not an error, and a test
-    its data cannot support gives none, with the reason."""
+    its data cannot support gives none, with the reason. A figure that is no measurement (`screen`: infinite, a
+    negative error, a magnitude above LIMIT) is left out of its metric's tests and named (`StudyStats.excluded`)."""
+    df, excluded = screen(df, metrics)
     have = np.isfinite(df[metrics].to_numpy(float)).any(axis=1) if metrics else np.zeros(len(df), bool)
     data, counted = distinct_runs(df[have], metrics, group)
     data = data.reset_index(drop=True)
@@ -421,7 +511,7 @@ def study_statistics(
         coverage = {str(g): float(v) for g, v in kept.groupby(group, sort=True)["coverage"].median().items() if v == v}
     cutoff = chi2_cutoff(level, len(metrics)) if metrics else math.nan
     st = StudyStats(d2_list, cutoff, int(outlier.sum()), out, kept, counted, outlier_note, coverage)
-    st.outlier_tests = tests
+    st.outlier_tests, st.excluded = tests, excluded
     return st
 
 

@@ -259,6 +259,7 @@ def stats_lines(dataset: str, st: StudyStats, adjust: str, alpha: float) -> list
     Kruskal-Wallis, pairwise Wilcoxon rank-sum tests adjusted and not), with the medians and letters."""
     n = len(st.kept) + st.n_outliers
     lines = [f"dataset {dataset}: {n} evaluated runs (copies once), {len(st.kept)} kept; {st.outlier_text()}"]
+    lines += [f"  {line}" for line in st.excluded_lines()]
     if note := st.counting_note():
         lines.append(f"  {note}")
     if st.coverage:
