@@ -1,7 +1,10 @@
-"""The server's connections, bounded: at most MAX_CONNECTIONS open at once (one more is closed as it arrives), and a
-connection that is not answering a request is closed IDLE_S after it opened or after its last answer (a client that
-never finishes its headers, sends them a byte at a time, or keeps an idle connection open). One line per kind of
-refusal on stderr, at most every LOG_EVERY_S, with the count since the last.
+"""The server's connections, bounded: at most max_connections() open at once. A connection that arrives at the cap
+makes room by closing the oldest connection that is not answering a request (of the client holding the most), so a
+client holding slow connections never keeps another out; only when every connection is answering one is the
+newcomer closed. A connection that is not answering a
+request is closed IDLE_S after it opened or after its last answer (a client that never finishes its headers, sends
+them a byte at a time, or keeps an idle connection open). One line per kind of refusal on stderr, at most every
+LOG_EVERY_S, with the count since the last.
 
 aiohttp has no header timeout, keeps idle connections for an hour and accepts until the process runs out of file
 descriptors (1,100 slow connections: nothing answered for 45 s, 116 MB of EMFILE tracebacks); this wraps its
@@ -53,6 +56,25 @@ class Watch:
         self.open: dict[object, _Guarded] = {}  # the aiohttp handler -> its guarded protocol
         self.refusals = Refusals()
 
+    def room_for(self, client: str) -> bool:
+        """Whether a connection may be admitted: under the cap, or after the oldest connection answering no request
+        of the client holding the most was closed to make room (one client's slow connections never keep another
+        out). A client is its address: every local viewer is 127.0.0.1, so the cap is shared and no client has a
+        smaller bound of its own (64 streaming tabs of one browser are legitimate)."""
+        if len(self.open) < self.limit:
+            return True
+        counts: dict[str, int] = {}
+        for c in self.open.values():
+            counts[c.client] = counts.get(c.client, 0) + 1
+        idle = [c for c in self.open.values() if c.busy == 0]
+        if not idle:
+            self.refusals.note(f"refused connections over the cap of {self.limit} open at once, all answering")
+            return False
+        oldest = min(idle, key=lambda c: (-counts[c.client], c.opened))  # the crowding client's oldest first
+        self.refusals.note(f"closed the oldest idle connections at the cap of {self.limit} open, to make room")
+        oldest.abort()
+        return True
+
     def factory(self, make: Callable[[], asyncio.Protocol]) -> Callable[[], asyncio.Protocol]:
         return lambda: _Guarded(make(), self)
 
@@ -87,11 +109,13 @@ class _Guarded(asyncio.Protocol):
         self.inner, self.watch = inner, watch
         self.transport: asyncio.Transport | None = None
         self.busy, self.since, self.admitted = 0, time.monotonic(), False
+        self.opened, self.client = self.since, ""
 
     def connection_made(self, transport) -> None:
         self.transport = transport
-        if len(self.watch.open) >= self.watch.limit:
-            self.watch.refusals.note(f"refused connections over the cap of {self.watch.limit} open at once")
+        peer = transport.get_extra_info("peername")
+        self.client = str(peer[0]) if isinstance(peer, tuple) and peer else str(peer)
+        if not self.watch.room_for(self.client):
             transport.abort()
             return
         self.admitted = True
@@ -101,6 +125,12 @@ class _Guarded(asyncio.Protocol):
     def close(self) -> None:
         if self.transport is not None:
             self.transport.close()
+
+    def abort(self) -> None:
+        """Closed at once to make room (it answers no request): gone from the open ones now, not at its loss."""
+        self.watch.open.pop(self.inner, None)
+        if self.transport is not None:
+            self.transport.abort()
 
     def data_received(self, data: bytes) -> None:
         if self.admitted:
