@@ -13,7 +13,7 @@ import psutil
 
 from slamrun.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise
 from slamrun.backends.logcap import CappedLog
-from slamrun.backends.monitor import Gpu, ProcessTreeMonitor
+from slamrun.backends.monitor import Gpu, ProcessTreeMonitor, exited
 from slamrun.errors import InfraError
 
 KILL_GRACE_S = 3.0
@@ -67,15 +67,13 @@ class LocalBackend(Defaults):
             on_start(proc.pid, psutil.Process(proc.pid).create_time())
 
         def step(remaining: float) -> bool:
-            try:
-                proc.wait(timeout=min(0.05, remaining))
-                return True
-            except subprocess.TimeoutExpired:
-                return False
+            return exited(proc.pid, min(0.05, remaining))  # not reaped yet: its last figures stay readable
 
         timed_out, cancelled, exceeded = supervise(step, t0, req.timeout_s, cancel, OutputWatch.of(req))
         if timed_out or cancelled or exceeded:
             kill_tree(proc, monitor.descendants() + processes_with_token(token))
+        exited(proc.pid)
+        monitor.sample()  # the exited process's last figures (its wait up to its end), read before it is reaped
         exit_code = proc.wait()
         wall_s = time.monotonic() - t0
         # every process of the run ends with it: children left by a finished parent, in its group or not

@@ -283,6 +283,23 @@ class ProcessTreeMonitor:
         self.series.samples.append(Sample(now - self._t0, cpu_pct, rss / 2**20, procs, gmem, gutil))
 
 
+def exited(pid: int, timeout_s: float | None = None) -> bool:
+    """Whether child process `pid` has exited, waiting up to `timeout_s` (None: until it has) without reaping it: as
+    a zombie its /proc entries still hold its last figures (its threads' run delay up to its exit), which a final
+    sample then reads before the caller reaps it. A sample taken only after the reaping missed the run's last
+    stretch, a whole second or more when the sampler itself waited for a CPU."""
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    while True:
+        try:
+            if os.waitid(os.P_PID, pid, os.WEXITED | os.WNOHANG | os.WNOWAIT) is not None:
+                return True
+        except ChildProcessError:  # reaped already (or not ours): nothing left to wait for
+            return True
+        if deadline is not None and time.monotonic() >= deadline:
+            return False
+        time.sleep(0.005 if timeout_s is not None and timeout_s < 0.05 else 0.01)
+
+
 def _same(p: psutil.Process) -> bool:
     """The process is still the one first seen (its PID not yet reused by another)."""
     try:
