@@ -152,6 +152,33 @@ def test_a_real_time_method_starved_by_a_hog_is_contended_and_retried(tmp_path: 
     assert Ledger(res.results / "ledger.sqlite").reset_infra_failures() == 1  # the next start runs it again
 
 
+def test_a_loss_while_its_own_processes_kept_its_cpu_busy_is_charged_and_named(tmp_path: Path, tiny_dataset):
+    """`external` declared with 1 thread forks 4 busy workers on its lane's one CPU, then loses tracking: its threads
+    waited 355 % of the wall time, and the loss was called contended and re-run at every start (issue 63). The wait
+    its own tree causes is not contention: its lane's CPU was busy with its own work all along (CPU time plus wait:
+    about 4 runnable threads), so the loss is the method's, `lost`, said with its wait; results.csv names the runnable
+    threads beyond its declaration."""
+    from slamrun.engine.campaign import run_campaign
+    from slamrun.engine.spec_file import load_spec
+
+    forking = fake_method("lost", sleep=2.0, label="forking", lost_pattern=r"^LOST", extra=["--busy-workers", "4"])
+    spec = write_spec(
+        tmp_path, tiny_dataset, [forking], datasets=one_sequence(tiny_dataset), directions=["forward"], lanes=1,
+        cpus_per_lane=1, evaluate=False, contention_pct=15,
+    )  # fmt: skip
+    res = run_campaign(load_spec(spec), on_event=None)
+    df = pd.read_csv(res.results_csv)
+    row = df.iloc[0]
+    assert (row.status, row.failure) == ("failed", "lost"), (row.failure, row.message)
+    assert row.cpu_wait_pct > 150 and not row.contended_attempts > 0  # it waited, on its own workers
+    assert row.runnable_threads > 3, row.runnable_threads  # 4 workers and itself, on 1 CPU
+    assert row.cpu_wait_own_pct >= row.cpu_wait_pct - 15 and row.busy_threads == 1
+    from slamrun.analysis.report import write_report
+
+    html = write_report(res.results).read_text()
+    assert "forking kept" in html and "threads runnable on average, declared 1" in html
+
+
 def test_a_method_that_loses_tracking_by_itself_is_charged(tmp_path: Path, tiny_dataset):
     """The same loss with its threads hardly waiting (it sleeps, then says LOST) is the method's own: `lost`."""
     from slamrun.engine.campaign import run_campaign

@@ -378,7 +378,9 @@ def _resources(
                 "wait they cause themselves (cpu_wait_own_pct: a method with more busy threads than its CPUs) had "
                 "their FPS and CPU figures taken under contention: counted per method."
             )
-        sections.append(Section(title, page.table(res, tab_dir, root, "table2_resources", title + where, caption)))
+        extra = tuple(tables.more_threads_than_declared(finished))
+        html = page.table(res, tab_dir, root, "table2_resources", title + where, caption, notes=extra)
+        sections.append(Section(title, html))
     contended = tables.contended_runs_table(df)
     if not contended.empty:
         title = "Runs with a contended attempt"

@@ -97,6 +97,8 @@ def resources_table(df: pd.DataFrame, contention_pct: float | None = None) -> pd
         "fps": "FPS",
         "cpu_wait_pct": "CPU wait %",
         "host_cpu_pressure_pct": "machine CPU pressure %",
+        "runnable_threads": "runnable threads",
+        "busy_threads": "declared threads",
     }
     present = [c for c in cols if c in df.columns]
     out = df.groupby("method")[present].mean().reset_index().rename(columns=cols)
@@ -193,3 +195,21 @@ def per_sequence_table(df: pd.DataFrame, metric: str = "e_align") -> pd.DataFram
     if d.empty:
         return pd.DataFrame()
     return d.pivot_table(index="method", columns="sequence", values=metric, aggfunc="median").reset_index()
+
+
+def more_threads_than_declared(df: pd.DataFrame, slack: float = 0.5) -> list[str]:
+    """One line per method whose runs kept more threads runnable on average than it declares it keeps busy (by more
+    than `slack`): its lanes were sized by the declaration, and its own wait beyond its CPUs counted as its own."""
+    if "runnable_threads" not in df.columns or "busy_threads" not in df.columns:
+        return []
+    out = []
+    for method, g in df.groupby("method", sort=True):
+        runnable = pd.to_numeric(g["runnable_threads"], errors="coerce").median()
+        declared = pd.to_numeric(g["busy_threads"], errors="coerce").median()
+        if np.isfinite(runnable) and np.isfinite(declared) and runnable > declared + slack:
+            out.append(
+                f"{method} kept {runnable:.1f} threads runnable on average, declared {declared:g}: its lanes were "
+                "sized for fewer, and the wait of its own threads beyond its CPUs is counted as its own, never as "
+                "the machine's load"
+            )
+    return out

@@ -390,6 +390,7 @@ class ContainerMonitor:
     def stop(self) -> ResourceSeries:
         self._stop.set()
         self._thread.join(timeout=10)
+        self.series.cpu_s = self._last[1] / 1e9 if self._last is not None else None  # the cgroup's CPU time
         return self.wait.close(self.series)
 
     def _sample_wait(self) -> None:

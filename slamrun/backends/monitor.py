@@ -37,6 +37,7 @@ class ResourceSeries:
     samples: list[Sample] = field(default_factory=list)
     waited_s: float | None = None  # the run's threads' time runnable but not running, summed (RunQueueWait)
     host_pressure_s: float | None = None  # the time some task on the machine waited for a CPU, over the run
+    cpu_s: float | None = None  # the run's CPU time, its tree's or container's, at its last sample
 
     def summary(self, wall_s: float, n_frames: int | None) -> dict:
         cpu = [s.cpu_pct for s in self.samples[1:]] or [s.cpu_pct for s in self.samples]
@@ -53,6 +54,10 @@ class ResourceSeries:
             "n_frames": n_frames,
             "cpu_wait_pct": _per_wall(self.waited_s, wall_s),
             "host_cpu_pressure_pct": _per_wall(self.host_pressure_s, wall_s),
+            # its threads runnable on average: running (its CPU time) or waiting for a CPU, over its wall time
+            "runnable_threads": (self.cpu_s + self.waited_s) / wall_s
+            if self.cpu_s is not None and self.waited_s is not None and wall_s > 0
+            else None,
         }
 
     def write_csv(self, path: Path) -> None:
@@ -244,6 +249,7 @@ class ProcessTreeMonitor:
     def stop(self) -> ResourceSeries:
         self._stop.set()
         self._thread.join()
+        self.series.cpu_s = self._last_cpu
         return self.wait.close(self.series)
 
     def descendants(self) -> list[psutil.Process]:

@@ -251,21 +251,36 @@ def run_frames_of(run: PlannedRun, method: Method, view: PreparedView) -> Frames
 
 
 def own_wait_pct(method: Method, cpus: list[int] | None, values: dict | None = None) -> float:
-    """The CPU wait a run causes itself: a method with more busy threads than its lane has CPUs keeps its own threads
-    waiting whatever else runs, OWN_WAIT_PER_THREAD_PCT per thread in excess (measured: ORB-SLAM3's 3 threads on 2
-    CPUs waited 32.5-58.4 % of their wall time on an idle machine). 0 for a method that fits its lane or takes its
-    lane's CPUs; 0 also where busy_threads() raises or gives no thread count (a plug-in's bug, found after its run:
-    the run stands as it ended), said in the run's message (`values`)."""
+    """The CPU wait a run causes itself, the larger of two: a method with more busy threads than its lane has CPUs
+    keeps its own threads waiting whatever else runs, OWN_WAIT_PER_THREAD_PCT per declared thread in excess
+    (measured: ORB-SLAM3's 3 threads on 2 CPUs waited 32.5-58.4 % of their wall time on an idle machine, its threads
+    busy in bursts); and what its tree measurably kept runnable beyond its CPUs (`tree_excess_pct`: a method that
+    forks more busy workers than it declares). Where busy_threads() raises or gives no thread count (a plug-in's bug,
+    found after its run: the run stands as it ended) the measured part alone, said in the run's message."""
     from slamrun.methods.base import busy_threads_of
 
+    n = len(cpus) if cpus else len(os.sched_getaffinity(0))
+    measured = tree_excess_pct(values or {}, n)
     busy, why = busy_threads_of(method)
     if why is not None:
         if values is not None:
-            note = f"{why}; own-wait allowance taken as 0"
+            note = f"{why}; own-wait allowance taken as its measured excess alone"
             values["message"] = "; ".join(filter(None, [values.get("message"), note]))
+        return measured
+    if values is not None:
+        values["busy_threads"] = busy
+    return max(OWN_WAIT_PER_THREAD_PCT * max(0, (busy or 0) - n), measured)
+
+
+def tree_excess_pct(values: dict, cpus: int) -> float:
+    """The wait a run's own process tree made certain: its threads runnable on average (`runnable_threads`, the
+    monitor's: its CPU time and its wait, over its wall time) beyond the `cpus` of its lane cannot all run at once,
+    whatever else the machine runs; that excess, in % of the wall time, is its own (its CPUs were busy with its own
+    work), never the machine's load."""
+    runnable = values.get("runnable_threads")
+    if runnable is None:
         return 0.0
-    n = len(cpus) if cpus else len(os.sched_getaffinity(0))
-    return OWN_WAIT_PER_THREAD_PCT * max(0, (busy or 0) - n)
+    return max(0.0, 100.0 * (runnable - cpus))
 
 
 def _not_contended(

@@ -200,4 +200,3 @@ def _slamrun() -> Provider:
         return Provider("slamrun", version("slamrun"))
     except PackageNotFoundError:
         return Provider("slamrun", "?")
-

@@ -100,7 +100,9 @@ RESOURCE_COLUMNS = (
     "n_frames",
     "cpu_wait_pct",  # the run's threads' time runnable but waiting for a CPU, % of wall time (100 % = one thread)
     "host_cpu_pressure_pct",  # the share of the run's wall time in which some task on the machine waited for a CPU
-    "cpu_wait_own_pct",  # of cpu_wait_pct, the run's own: OWN_WAIT_PER_THREAD_PCT per thread beyond its CPUs
+    "cpu_wait_own_pct",  # of cpu_wait_pct, the run's own: per declared thread beyond its CPUs, or measured excess
+    "runnable_threads",  # its threads runnable on average: (CPU time + CPU wait) / wall time
+    "busy_threads",  # the threads its method declares it keeps busy, with its parameters
 )
 
 # `slamrun evaluate --metric tum-mono`: the fields of each file's result
