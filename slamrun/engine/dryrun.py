@@ -24,6 +24,11 @@ from slamrun.engine.spec import CampaignSpec
 from slamrun.errors import DatasetError
 from slamrun.results.vocabulary import IMPORTED, is_infra
 
+# A grey frame written as PNG at level 1, per pixel: the synthetic rooms' and drives' views measured 0.59-0.62, the
+# issue-63 probe's 0.53-0.77 (the estimate at 0.5 was 0.65-0.95 of the real size, always low): 0.8 errs on the side
+# of the disk a campaign needs
+PNG_BYTES_PER_PIXEL = 0.8
+
 
 @dataclass
 class DryRun:
@@ -165,10 +170,10 @@ def _view_bytes_if_missing(
         return 1  # its frames are links to the other direction's: a few small files
     frames = len(kept_frames(seq.n_frames, perturbation))
     pixels = seq.camera.out_width * seq.camera.out_height * perturbation.scale**2
-    if perturbation.kind == "gaussian_noise":  # noise does not compress: PNG keeps about every byte
-        return int(frames * pixels * (1.0 if spec.frame_format == "pgm" or profile is Profile.native else 0.9))
+    if perturbation.kind == "gaussian_noise":  # noise does not compress: PNG keeps every byte, and its framing
+        return int(frames * pixels * 1.02)
     if profile is Profile.rectified or not seq.fov or perturbation.changes_pixels:  # written as PNG (or PGM)
-        per_pixel = 1.0 if spec.frame_format == "pgm" and profile is Profile.rectified else 0.5  # PNG level 1
+        per_pixel = 1.0 if spec.frame_format == "pgm" and profile is Profile.rectified else PNG_BYTES_PER_PIXEL
         return int(frames * pixels * per_pixel)
     share = frames / max(1, seq.n_frames)  # frame_drop keeps the rest of the original files
     if seq.zip_path is not None:
