@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import resource
+import statistics
 import subprocess
 import sys
 import time
@@ -56,3 +58,39 @@ def bench_metrics(tmp: Path) -> None:
     report(f"slamrun evaluate --metric ate, then rpe ({files} files)", f"{ours:.1f} s", "-")
     report(f"evo_ape + evo_rpe -as, {sample} files, scaled to {files}", f"{evo_all:.1f} s", "-")
     report("  ratio", f"{evo_all / ours:.1f}x", ">= 10x")
+    bench_large_file(tmp, evo_bin)
+
+
+def bench_large_file(tmp: Path, evo_bin: Path) -> None:
+    """One 100,000-pose estimate (200 Hz, 500 s) against its ground truth: ATE and RPE in one `slamrun evaluate`
+    process (its defaults for a TUM file: Sim(3), RPE over 1 s) against evo_ape + evo_rpe -as (every consecutive
+    pair: as many pairs), in CPU time (user + system of each process), the median of three side by side."""
+    from scipy.spatial.transform import Rotation
+
+    n = 100_000
+    t = 1403715524.0 + np.arange(n) / 200.0
+    phase = np.linspace(0, 40 * np.pi, n)
+    pos = np.column_stack([2 * np.cos(phase), np.sin(phase), 1 + 0.2 * np.sin(3 * phase)])
+    quat = Rotation.from_euler("zy", np.column_stack([phase, 0.1 * np.sin(phase)])).as_quat()
+    gt, est = tmp / "gt_100k.txt", tmp / "est_100k.txt"
+    np.savetxt(gt, np.column_stack([t, pos, quat]), fmt="%.9f")
+    noisy = 0.7 * pos + np.random.default_rng(1).normal(scale=0.01, size=pos.shape)
+    np.savetxt(est, np.column_stack([t, noisy, quat]), fmt="%.9f")
+    ours, evo = [], []
+    for _ in range(3):
+        ours.append(cpu_seconds([sys.executable, "-m", "slamrun.cli", "evaluate", "--gt", str(gt), str(est)]))
+        evo.append(
+            sum(cpu_seconds([str(evo_bin / tool), "tum", str(gt), str(est), "-as"]) for tool in ("evo_ape", "evo_rpe"))
+        )
+    print(f"ATE + RPE of one {n:,}-pose estimate, CPU time of whole processes (median of 3)")
+    report("slamrun evaluate (ATE and RPE, one process)", f"{statistics.median(ours):.2f} s CPU", "-")
+    report("evo_ape + evo_rpe -as", f"{statistics.median(evo):.2f} s CPU", "-")
+    report("  ratio", f"{statistics.median(evo) / statistics.median(ours):.1f}x", ">= 10x")
+
+
+def cpu_seconds(cmd: list[str]) -> float:
+    """The user + system CPU seconds of `cmd` and its children, run to its end."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)

@@ -350,3 +350,26 @@ def test_pairs_equal_the_pose_by_pose_reference(evo_data, unit, delta, every):
     for got, want in ((res.translation, t_err), (res.rotation_deg, r_err)):
         for stat, of in stats.items():
             assert getattr(got, stat) == pytest.approx(of(want), abs=1e-9), stat
+
+
+def test_the_batched_slerp_and_inverse_equal_scipys_and_numpys():
+    """RPE's own rotation interpolation (no SciPy at evaluate's start) and rigid inverse give SciPy's slerp and numpy's
+    inverse, angles from 0 to just under pi included."""
+    from scipy.spatial.transform import Rotation
+
+    from slamrun.core.metrics import _inverse, _rotation_part
+
+    rng = np.random.default_rng(3)
+    n = 2000
+    axes = rng.normal(size=(n, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([[0.0, 1e-12, 1e-6, np.pi - 1e-9], rng.uniform(0, np.pi, n - 4)])
+    rel = Rotation.from_rotvec(axes * angles[:, None])
+    w = rng.uniform(0, 1, n)
+    expected = Rotation.from_rotvec(rel.as_rotvec() * w[:, None]).as_matrix()
+    assert np.abs(_rotation_part(rel.as_matrix(), w) - expected).max() < 1e-9
+    poses = np.zeros((n, 4, 4))
+    poses[:, :3, :3] = Rotation.random(n, random_state=4).as_matrix()
+    poses[:, :3, 3] = rng.normal(scale=100, size=(n, 3))
+    poses[:, 3, 3] = 1.0
+    assert np.abs(_inverse(poses) - np.linalg.inv(poses)).max() < 1e-9

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from slamrun.core.alignment import Sim3, align_sim3
-from slamrun.core.trajectory import Trajectory
+from slamrun.core.trajectory import Trajectory, quat_to_rotmat, rotmat_to_quat
 from slamrun.errors import MetricError
 
 DEFAULT_TOLERANCE_S = 0.02  # TUM RGB-D's evaluate_ate.py, and evo's 0.01 doubled: frames at 30 Hz are 0.033 s apart
@@ -382,9 +382,9 @@ def rpe(
         q_j, p_j = q[j], p[j]
     if not len(i):
         raise NoPairs(f"no pose pair {interval} apart among {len(p)} poses paired with the ground truth")
-    q_rel = np.linalg.inv(q[i]) @ q_j
-    p_rel = np.linalg.inv(p[i]) @ p_j
-    err = np.linalg.inv(q_rel) @ p_rel
+    q_rel = _inverse(q[i]) @ q_j
+    p_rel = _inverse(p[i]) @ p_j
+    err = _inverse(q_rel) @ p_rel
     trans = np.linalg.norm(err[:, :3, 3], axis=1)
     rot = _angles_deg(err[:, :3, :3])
     return RpeResult(ErrorStats.of(trans), ErrorStats.of(rot), float(delta), unit, str(alignment), len(i))
@@ -435,17 +435,32 @@ def _pairs_by_axis(
 def _interpolated(poses: np.ndarray, a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The 4x4 poses at weight `w` between poses[a] and poses[b]: positions linearly, rotations by slerp
     (R_a exp(w log(R_a^T R_b))), batched; poses[a] itself where w is 0."""
-    from scipy.spatial.transform import Rotation
-
     out = poses[a].copy()
     move = w > 0
     if not move.any():
         return out
     ra, rb, wm = poses[a[move], :3, :3], poses[b[move], :3, :3], w[move]
-    rel = np.swapaxes(ra, 1, 2) @ rb
-    step = Rotation.from_rotvec(Rotation.from_matrix(rel).as_rotvec() * wm[:, None]).as_matrix()
-    out[move, :3, :3] = ra @ step
+    out[move, :3, :3] = ra @ _rotation_part(np.swapaxes(ra, 1, 2) @ rb, wm)
     out[move, :3, 3] = (1.0 - wm)[:, None] * poses[a[move], :3, 3] + wm[:, None] * poses[b[move], :3, 3]
+    return out
+
+
+def _rotation_part(rel: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """exp(w log(R)) of rotation matrices (N, 3, 3): the same axis, w times the angle (in [0, pi])."""
+    q = rotmat_to_quat(rel)  # qw >= 0: the half angle in [0, pi/2]
+    sin_half = np.linalg.norm(q[:, :3], axis=1)
+    half = w * np.arctan2(sin_half, q[:, 3])
+    axis = q[:, :3] / np.where(sin_half > 0, sin_half, 1.0)[:, None]
+    return quat_to_rotmat(np.column_stack([axis * np.sin(half)[:, None], np.cos(half)]))
+
+
+def _inverse(poses: np.ndarray) -> np.ndarray:
+    """The inverses of rigid 4x4 poses (rotation transposed, translation -R^T t): exact and 10x numpy's inv."""
+    out = np.empty_like(poses)
+    rt = np.swapaxes(poses[:, :3, :3], 1, 2)
+    out[:, :3, :3] = rt
+    out[:, :3, 3] = -np.einsum("nij,nj->ni", rt, poses[:, :3, 3])
+    out[:, 3] = (0.0, 0.0, 0.0, 1.0)
     return out
 
 
@@ -533,9 +548,9 @@ def kitti(
     if not firsts:
         raise NoPairs(f"the ground truth's path ({dist[-1]:.1f} m) is shorter than {min(lengths)} m: no segment")
     f, la, ln = np.array(firsts), np.array(lasts), np.array(lens, float)
-    delta_gt = np.linalg.inv(q[f]) @ q[la]
-    delta_est = np.linalg.inv(p[f]) @ p[la]
-    err = np.linalg.inv(delta_est) @ delta_gt
+    delta_gt = _inverse(q[f]) @ q[la]
+    delta_est = _inverse(p[f]) @ p[la]
+    err = _inverse(delta_est) @ delta_gt
     cos = np.clip(0.5 * (np.trace(err[:, :3, :3], axis1=1, axis2=2) - 1.0), -1.0, 1.0)
     r_err = np.arccos(cos) / ln
     t_err = np.linalg.norm(err[:, :3, 3], axis=1) / ln
