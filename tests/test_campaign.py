@@ -601,3 +601,15 @@ def test_concurrent_reports_of_one_campaign_are_written_one_after_the_other(tmp_
             assert code == 0 and "Traceback" not in err, err[-2000:]
         index = (results / "report" / "index.html").read_text()
         assert index.rstrip().endswith("</html>") and "Provenance" in index
+
+
+def test_a_results_folder_belongs_to_the_campaign_that_made_it(tmp_path: Path, tiny_dataset):
+    """A second spec with another name and the same results folder is refused before any run, naming both campaigns
+    and what to do; the first campaign's results are untouched."""
+    spec = write_spec(tmp_path, tiny_dataset, [fake_method("ok", label="a")], evaluate=False)
+    run_campaign(load_spec(spec), on_event=None)
+    before = (tmp_path / "results" / "results.csv").read_bytes()
+    other = write_spec(tmp_path, tiny_dataset, [fake_method("ok", label="a")], evaluate=False, name="other")
+    with pytest.raises(Exception, match=r"holds the results of campaign 't', and this spec is campaign 'other'"):
+        load_spec(other)
+    assert (tmp_path / "results" / "results.csv").read_bytes() == before

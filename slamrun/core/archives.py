@@ -9,7 +9,6 @@ from __future__ import annotations
 import io
 import zipfile
 import zlib
-from pathlib import Path
 from typing import BinaryIO
 
 from slamrun.errors import SlamRunError
@@ -19,14 +18,6 @@ CHUNK = MiB
 # what zipfile and zlib raise on a damaged archive or member (RuntimeError: encrypted; NotImplementedError: a
 # compression method this Python lacks)
 ZIP_ERRORS = (zipfile.BadZipFile, zlib.error, EOFError, OSError, RuntimeError, NotImplementedError, ValueError)
-
-
-def open_zip(path: Path, error: type[SlamRunError] = SlamRunError) -> zipfile.ZipFile:
-    """The zip at `path` (its listing read, nothing inflated), or `error` naming it."""
-    try:
-        return zipfile.ZipFile(path)
-    except ZIP_ERRORS as exc:
-        raise error(f"{path}: not a readable zip ({exc})") from None
 
 
 def files_of(zf: zipfile.ZipFile) -> list[zipfile.ZipInfo]:

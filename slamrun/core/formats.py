@@ -33,12 +33,3 @@ def read_trajectory(path: str | Path, fmt: str, times: np.ndarray | None = None)
             raise ValueError("KITTI poses are read at the frames' times: give them")
         return t.read_kitti(path, times)
     raise ValueError(f"unknown trajectory format {fmt!r}; known: {', '.join(FORMATS)}")
-
-
-def write_trajectory(path: str | Path, traj: Trajectory, fmt: str = "tum") -> None:
-    """A trajectory written as slamrun stores every run's: TUM (the only format slamrun writes)."""
-    from slamrun.core import trajectory as t
-
-    if fmt != "tum":
-        raise ValueError(f"slamrun writes TUM trajectories only, not {fmt!r}")
-    t.write_tum(path, traj)

@@ -31,7 +31,6 @@ FORMAT_NAMES = {  # the trajectory formats (core/formats.py), and TUM-Mono's gro
     **FORMATS,
     "kitti": "KITTI poses (12 numbers a row: the 3x4 pose, one row per frame of --times)",
 }
-FILE_FORMATS = tuple(FORMAT_NAMES)
 # the metrics a ground-truth file is evaluated with when --metric is not given: its dataset's layout's defaults
 # (TUM-Mono, TUM RGB-D, EuRoC, KITTI: tests/test_layout.py checks them), written here so that a file's evaluation
 # loads no layout

@@ -121,11 +121,6 @@ def plugin_errors() -> dict[str, str]:
     return dict(_plugins()[1])
 
 
-def all_layouts() -> tuple[Layout, ...]:
-    """Every layout: the built-in ones in recognition order, then the plug-ins by name."""
-    return BUILT_IN + tuple(_plugins()[0].values())
-
-
 def get(name: str) -> Layout:
     """The layout called `name`; DatasetError listing the known ones (or why a plug-in of that name is not)."""
     if name in _BY_NAME:

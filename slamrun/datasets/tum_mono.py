@@ -234,12 +234,6 @@ def _vignette_image(path: Path, size: tuple[int, int] | None = None) -> np.ndarr
     return frames.decode(data, str(path), size, frames.UNCHANGED, "camera.txt")
 
 
-def read_vignette(path: Path) -> np.ndarray:
-    """Vignette normalised to a maximum of 1."""
-    img = _vignette_image(path).astype(np.float32)
-    return img / img.max()
-
-
 def sequence_identity(root: str | Path) -> str:
     """A short digest of a sequence's content as methods see it, for run keys: new data makes new runs.
 

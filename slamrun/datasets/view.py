@@ -65,10 +65,6 @@ class PreparedView:
         """The same view seen at another mount point (e.g. /data inside a container)."""
         return PreparedView(**{**self.__dict__, "root": Path(root)})
 
-    def view_time(self, original: np.ndarray) -> np.ndarray:
-        """Original timestamps → the view's timestamps."""
-        return original if self.direction is Direction.forward else self.t_first + self.t_last - original
-
     def to_original(self, traj: Trajectory) -> Trajectory:
         """A trajectory in view time → the same poses at their original frame timestamps.
 

@@ -109,35 +109,9 @@ def claim_output_folder(folder: Path, kind: OutputFolder) -> None:
         marker.write_text(f"slamrun {kind.what}: slamrun writes here\n")
 
 
-def results_folder_problem(results: Path) -> str | None:
-    """Why slamrun may not write its results into `results`, or None (output_folder_problem for results)."""
-    return output_folder_problem(results, RESULTS)
-
-
 def claim_results_folder(results: Path) -> None:
     """Mark a results folder as slamrun's (after its lock is held)."""
     claim_output_folder(results, RESULTS)
-
-
-def campaign_owner_problem(results: Path, name: str) -> str | None:
-    """Why campaign `name` may not write into `results`, or None: a results folder belongs to the campaign that made
-    it (the name in its ledger); another spec with the same folder would take over its results.csv and report."""
-    ledger = results / "ledger.sqlite"
-    if not ledger.exists():
-        return None
-    from slamrun.engine.ledger import campaign_name
-
-    try:
-        owner = campaign_name(ledger)
-    except SlamRunError as exc:  # a damaged ledger: its own message says what to do
-        return str(exc)
-    if owner is None or owner == name:
-        return None
-    return (
-        f"{results} holds the results of campaign {owner!r}, and this spec is campaign {name!r}: a results folder "
-        f"belongs to one campaign. Give this spec a results folder of its own (`results:` or --results), or name it "
-        f"{owner!r} to go on with that campaign"
-    )
 
 
 def cache_overlap_problem(cache: Path, results: Path, datasets: list[Path]) -> str | None:

@@ -124,6 +124,25 @@ def campaign_name(path: Path) -> str | None:
     return name if isinstance(name, str) else None
 
 
+def campaign_owner_problem(results: Path, name: str) -> str | None:
+    """Why campaign `name` may not write into `results`, or None: a results folder belongs to the campaign that made
+    it (the name in its ledger); another spec with the same folder would take over its results.csv and report."""
+    ledger = results / "ledger.sqlite"
+    if not ledger.exists():
+        return None
+    try:
+        owner = campaign_name(ledger)
+    except SlamRunError as exc:  # a damaged ledger: its own message says what to do
+        return str(exc)
+    if owner is None or owner == name:
+        return None
+    return (
+        f"{results} holds the results of campaign {owner!r}, and this spec is campaign {name!r}: a results folder "
+        f"belongs to one campaign. Give this spec a results folder of its own (`results:` or --results), or name it "
+        f"{owner!r} to go on with that campaign"
+    )
+
+
 class ResultsLock:
     """An exclusive lock on a results directory, naming the holder's PID to whoever else asks."""
 
@@ -410,9 +429,6 @@ class Ledger:
     def get(self, key: str) -> dict | None:
         row = self._db.execute("SELECT * FROM runs WHERE key = ?", (key,)).fetchone()
         return dict(row) if row else None
-
-    def pending_rows(self) -> list[dict]:
-        return [dict(r) for r in self._db.execute("SELECT * FROM runs WHERE active = 1 AND state = 'pending'")]
 
     def pending_keys(self) -> list[str]:
         return [r[0] for r in self._db.execute("SELECT key FROM runs WHERE active = 1 AND state = 'pending'")]

@@ -22,9 +22,9 @@ from slamrun.engine.folders import (
     CACHE,
     RESULTS,
     cache_overlap_problem,
-    campaign_owner_problem,
     output_folder_problem,
 )
+from slamrun.engine.ledger import campaign_owner_problem
 from slamrun.engine.spec import (
     CampaignSpec,
     _name_problems,

@@ -57,8 +57,3 @@ def tally(states: Iterable[tuple[str, str | None, str | None]]) -> Tally:
         else:
             t.pending += 1
     return t
-
-
-def tally_rows(rows: Iterable[dict]) -> Tally:
-    """The tally of ledger rows (dicts with state, failure and eval_status)."""
-    return tally((r["state"], r.get("failure"), r.get("eval_status")) for r in rows)

@@ -50,11 +50,6 @@ def is_infra(state: str | None, failure: str | None) -> bool:
     return state == "failed" and failure in INFRA_FAILURES
 
 
-def is_method_failure(state: str | None, failure: str | None) -> bool:
-    """A run that failed by the method's own behaviour."""
-    return state == "failed" and failure not in INFRA_FAILURES
-
-
 class EvalStatus(StrEnum):
     """Why a finished trajectory has (ok) or lacks metrics."""
 
