@@ -15,7 +15,7 @@ from pydantic import Field
 from slamrun.datasets.view import PreparedView
 from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source
-from slamrun.methods.dso import Dso, DsoParams
+from slamrun.methods.dso_family import DsoFamily, DsoParams
 from slamrun.methods.libraries import MONODEPTH
 from slamrun.methods.upstream import GpuOptional, GpuOptionalParams
 
@@ -24,7 +24,7 @@ class CnnDsoParams(DsoParams, GpuOptionalParams):
     model: str = Field("/opt/CNN-DSO/model/model_city2kitti.pb", description="Frozen MonoDepth graph.")
 
 
-class CnnDso(GpuOptional, Dso):
+class CnnDso(GpuOptional, DsoFamily):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (

@@ -23,7 +23,7 @@ from slamrun.errors import MethodFailure, TrajectoryFormatError
 from slamrun.methods.base import folder_name, image_tag, read_tum_output
 from slamrun.methods.declare import Source
 from slamrun.methods.libraries import MONODEPTH
-from slamrun.methods.svo import Svo, SvoParams
+from slamrun.methods.svo_family import SvoFamily, SvoParams
 from slamrun.methods.upstream import GpuOptional, GpuOptionalParams, pinhole_of
 
 # the authors' rpg_svo/svo_ros/param/vo_kitti.yaml (the keys the params do not set)
@@ -56,7 +56,7 @@ class CnnSvoParams(SvoParams, GpuOptionalParams):
     frame_delay_ms: int = Field(50, ge=0, description="Sleep between frames (the ROS node sleeps 50 ms).")
 
 
-class CnnSvo(GpuOptional, Svo):
+class CnnSvo(GpuOptional, SvoFamily):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 2  # the frame handler and its depth-filter thread

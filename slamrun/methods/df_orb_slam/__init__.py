@@ -23,7 +23,7 @@ from pydantic import Field
 from slamrun.datasets.view import PreparedView
 from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, Vocabulary
-from slamrun.methods.orb_slam2 import OrbSlam2, OrbSlam2Params, orb_settings_yaml
+from slamrun.methods.orb_slam2_family import OrbSlam2Family, OrbSlam2Params, orb_settings_yaml
 
 
 class DfOrbSlamParams(OrbSlam2Params):
@@ -35,10 +35,9 @@ class DfOrbSlamParams(OrbSlam2Params):
     )
 
 
-class DfOrbSlam(OrbSlam2):
+class DfOrbSlam(OrbSlam2Family):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
-    threads = 3  # tracking, local mapping and loop closing (ORB-SLAM2's three threads)
     sources = (
         Source(
             "df_orb_slam",

@@ -16,7 +16,7 @@ from slamrun.datasets.view import PreparedView
 from slamrun.errors import MethodFailure
 from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, Vocabulary, Weights
-from slamrun.methods.orb_slam2 import OrbSlam2, OrbSlam2Params
+from slamrun.methods.orb_slam2_family import OrbSlam2Family, OrbSlam2Params
 
 
 class DynaSlamParams(OrbSlam2Params):
@@ -24,10 +24,9 @@ class DynaSlamParams(OrbSlam2Params):
     masks: bool = Field(True, description="Segment every frame with Mask R-CNN (off: plain ORB-SLAM2).")
 
 
-class DynaSlam(OrbSlam2):
+class DynaSlam(OrbSlam2Family):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
-    threads = 3  # tracking, local mapping and loop closing (ORB-SLAM2's three threads)
     sources = (
         Source(
             "dynaslam",

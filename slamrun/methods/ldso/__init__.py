@@ -16,14 +16,14 @@ from pydantic import Field
 from slamrun.datasets.view import PreparedView
 from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, Vocabulary
-from slamrun.methods.dso import Dso, DsoParams
+from slamrun.methods.dso_family import DsoFamily, DsoParams
 
 
 class LdsoParams(DsoParams):
     vocabulary: str = Field("/opt/LDSO/vocab/orbvoc.dbow3", description="DBoW3 vocabulary shipped with LDSO.")
 
 
-class Ldso(Dso):
+class Ldso(DsoFamily):
     name = folder_name(__name__)  # its folder's
     image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
