@@ -367,7 +367,7 @@ def test_native_build_refuses_a_cpu_pytorch_in_one_line(tmp_path):
 
 def test_native_build_without_weights_names_where_they_are_published(tmp_path):
     with pytest.raises(native.NativeBuildError.__mro__[1], match=r"dpvo needs dpvo.pth.*--standin-model.*models.zip"):
-        native.build_dpvo(native.NativeOptions(into=tmp_path / "b"), log=lambda m: None)
+        native.build("dpvo", native.NativeOptions(into=tmp_path / "b"), log=lambda m: None)
 
 
 def test_eigen_and_toolkit_lookups_say_what_is_missing(tmp_path, monkeypatch):
@@ -384,10 +384,10 @@ def test_eigen_and_toolkit_lookups_say_what_is_missing(tmp_path, monkeypatch):
 def test_unpack_only_checks_and_patches_the_pinned_archive(tmp_path):
     upstream = require_upstream(Path(os.environ.get("SLAMRUN_SHARED", ROOT.parent / "shared")) / "upstream")
     opts = native.NativeOptions(sources_dir=upstream, into=tmp_path / "tree")
-    tree = native.unpack_only(opts, log=lambda m: None)
+    tree = native.unpack_only(opts, "dpvo", log=lambda m: None)
     assert tree == tmp_path / "tree" / SOURCES["dpvo"].top and (tree / "dpvo" / "_scatter.py").is_file()
     with pytest.raises(native.NativeBuildError, match="is not empty"):
-        native.unpack_only(opts, log=lambda m: None)
+        native.unpack_only(opts, "dpvo", log=lambda m: None)
 
 
 def problems(build, weights):

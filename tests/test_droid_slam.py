@@ -39,7 +39,7 @@ def unpack(dest: Path) -> Path:
     require_upstream(UPSTREAM / SOURCES["droid_slam"].filename)
     require_upstream(UPSTREAM / SOURCES["lietorch"].filename)
     opts = native.NativeOptions(sources_dir=UPSTREAM, into=dest)
-    return native.unpack_only(opts, log=lambda m: None, name="droid_slam")
+    return native.unpack_only(opts, "droid_slam", log=lambda m: None)
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +71,7 @@ def test_unpack_only_places_lietorch_in_its_submodule_folder(tmp_path, patched):
     assert not list(patched.parent.glob("lietorch-*"))  # moved, not left beside
     with pytest.raises(native.NativeBuildError, match="is not empty"):
         native.unpack_only(
-            native.NativeOptions(sources_dir=UPSTREAM, into=patched.parent), lambda m: None, "droid_slam"
+            native.NativeOptions(sources_dir=UPSTREAM, into=patched.parent), "droid_slam", lambda m: None
         )
 
 
@@ -407,7 +407,7 @@ def test_every_declared_native_recipe_is_built_by_the_cli():
     assert set(native.NATIVE) == {"dpvo", "droid_slam"}  # the methods whose declarations have a native_build
     for name, m in native.NATIVE.items():
         assert slamrun.methods.get(name).native and m.patches.is_file() and m.standin.is_file()
-        assert m.default_build().name == name
+        assert slamrun.methods.get(name)().default_build().name == name  # a folder of its own, named by the method
 
 
 # ---------------------------------------------------------------- the process's own logic, DROID and PyTorch faked

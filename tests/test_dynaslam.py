@@ -200,9 +200,9 @@ def test_the_image_claims_no_gpu_and_says_which_network_it_holds():
 
 
 def test_its_verification_fits_in_half_an_hour_and_says_what_it_ran():
-    from slamrun.images.verify import SCOPES, VerifyRow, markdown_table
+    from slamrun.images.verify import VerifyRow, markdown_table, scope_of
 
-    scope = SCOPES["dynaslam"]
+    scope = scope_of("dynaslam")
     seconds_per_frame = 10  # Mask R-CNN on this machine's 2 cores, the slower end measured (the README's row)
     runs = len(scope.sequences) * 2 * scope.trials  # forward and backward
     assert runs >= 2 and runs * (scope.frames * seconds_per_frame + 60) <= 36 * 60

@@ -35,7 +35,7 @@ def test_glomap_is_a_native_method_with_typed_parameters(tmp_path):
         cls({"mapper": "incremental"})  # glomap is the global mapper; colmap is the incremental one
     view = make_view(tmp_path / "v", 1000.0 + np.arange(20) / 30.0, Profile.rectified)
     argv = cls({"stride": 2, "min_num_matches": 30}).command(view, tmp_path / "work")
-    assert argv[1:5] == ["-m", "slamrun.methods.colmap.process", "--mapper", "global"]
+    assert argv[1:5] == ["-m", "slamrun.methods.sfm_process", "--mapper", "global"]
     assert argv[argv.index("--stride") + 1] == "2" and argv[argv.index("--min-num-matches") + 1] == "30"
     assert argv[argv.index("--out") + 1] == str(tmp_path / "work" / "trajectory.txt")
 

@@ -55,3 +55,67 @@ def test_a_copied_method_folder_is_listed_buildable_and_verified(tmp_path):
     (row,) = json.loads((results / "verify.json").read_text())
     assert row["method"] == "my_vo" and row["runs_ok"] == row["runs"] == 4 and row["bound"] == 0.05, row
     assert row["passed"] and row["backend"] == "local", row
+
+
+def copied_tree(tmp_path: Path, original: str, copy: str) -> Path:
+    """slamrun's package with the folder of method `original` copied as `copy`: the one change."""
+    tree = tmp_path / "tree"
+    shutil.copytree(ROOT / "slamrun", tree / "slamrun", ignore=shutil.ignore_patterns("__pycache__"))
+    methods = tree / "slamrun" / "methods"
+    shutil.copytree(methods / original, methods / copy, ignore=shutil.ignore_patterns("__pycache__"))
+    return tree
+
+
+def python_in(tree: Path, code: str, cwd: Path) -> str:
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env={**os.environ, "PYTHONPATH": str(tree)},
+        cwd=cwd,
+    )  # fmt: skip
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+def test_a_copied_method_runs_its_own_process(tmp_path):
+    """A copy of reference_vo runs its own folder's process (the copy's __main__.py and vo.py, changed here so that
+    it says so), never the original's."""
+    tree = copied_tree(tmp_path, "reference_vo", "my_vo")
+    main = tree / "slamrun" / "methods" / "my_vo" / "__main__.py"
+    main.write_text(main.read_text().replace("import cv2\n", "import cv2\n\nprint('MY_VO OWN PROCESS', flush=True)\n"))
+    data = tmp_path / "data"
+    assert slamrun(tree, "synth", "--frames", "20", data / "s", cwd=tmp_path).returncode == 0
+    spec = tmp_path / "own.yaml"
+    spec.write_text(
+        f"name: own\nbackend: local\nresults: {tmp_path / 'results'}\ncache: {tmp_path / 'cache'}\nreport: false\n"
+        f"methods:\n  - name: my_vo\ndatasets:\n  - name: d\n    path: {data}\n    sequences: [s]\n"
+        "directions: [forward]\n"
+    )
+    out = slamrun(tree, "campaign", spec, cwd=tmp_path)
+    assert out.returncode == 0, out.stdout + out.stderr
+    logs = [p for p in (tmp_path / "results").rglob("log.txt") if "MY_VO OWN PROCESS" in p.read_text(errors="replace")]
+    assert logs, "the copy's run log does not show its own process"
+
+
+def test_a_copied_gpu_method_has_its_own_process_build_folder_and_patches(tmp_path):
+    """A copy of dpvo runs its own process module, keeps its native build in a folder of its own (never over dpvo's)
+    and unpacks the real pinned archive with its own folder's patches (changed here to leave a mark)."""
+    from tests.conftest import require_upstream
+
+    tree = copied_tree(tmp_path, "dpvo", "my_dpvo")
+    code = (
+        "import slamrun.methods as m; from slamrun.methods.native_gpu import native_root\n"
+        "a, b = m.get('my_dpvo')(), m.get('dpvo')()\n"
+        "print(a.process); print(a.default_build().relative_to(native_root())); print(b.default_build() != "
+        "a.default_build())"
+    )
+    assert python_in(tree, code, tmp_path).split() == ["slamrun.methods.my_dpvo.process", "my_dpvo", "True"]
+    upstream = require_upstream()
+    patches = tree / "slamrun" / "methods" / "my_dpvo" / "image" / "patches.py"
+    patches.write_text(
+        patches.read_text().replace("    unused_imports(root)\n", "    unused_imports(root)\n"
+                                    "    open(os.path.join(root, 'MY_DPVO_PATCHES'), 'w').close()\n")
+    )  # fmt: skip
+    assert "import os" in patches.read_text()
+    out = slamrun(tree, "native-build", "my_dpvo", "--unpack-only", "--sources", upstream, "--into", tmp_path / "b",
+                  cwd=tmp_path)  # fmt: skip
+    assert out.returncode == 0, out.stdout + out.stderr
+    assert len(list((tmp_path / "b").glob("*/MY_DPVO_PATCHES"))) == 1

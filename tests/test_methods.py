@@ -343,7 +343,7 @@ def test_local_backend_needs_a_local_build(tiny_dataset, tmp_path):
 def test_every_module_is_registered_and_every_image_has_a_folder():
     classes = set()
     for mod in pkgutil.walk_packages(slamrun.methods.__path__, "slamrun.methods."):
-        if mod.name.endswith("__main__") or mod.name.endswith("colmap.process"):
+        if mod.name.endswith("__main__") or mod.name.endswith("sfm_process"):
             continue
         module = importlib.import_module(mod.name)
         for obj in vars(module).values():

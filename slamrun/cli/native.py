@@ -53,7 +53,7 @@ def cmd_native_build(args) -> int:
     if args.jobs:
         opts.jobs = args.jobs
     if args.unpack_only:
-        unpack_only(opts, log=lambda m: print(m, flush=True), name=args.method)
+        unpack_only(opts, args.method, log=lambda m: print(m, flush=True))
         return 0
     record = build(args.method, opts, log=lambda m: print(m, flush=True))
     console.print(f"{args.method}: {record['weights']}")

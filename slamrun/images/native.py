@@ -28,6 +28,7 @@ from slamrun.errors import SlamRunError
 from slamrun.images import sources as src
 from slamrun.images.build import ROOT, BuildOptions, _weights_file, model_choice
 from slamrun.methods.declare import NativeMethod, declared
+from slamrun.methods.native_gpu import native_build_folder
 
 DEFAULT_CUDA = "/usr/local/cuda"
 EIGEN_CANDIDATES = ("/usr/include/eigen3", "/usr/local/include/eigen3")
@@ -129,7 +130,7 @@ def build(name: str, opts: NativeOptions, log: Callable[[str], None] = print) ->
     """Compile method `name` natively into `opts.into` (default: slamrun's cache); returns its build record."""
     m = native_method(name)
     t0 = time.monotonic()
-    final = Path(opts.into or m.default_build())
+    final = Path(opts.into or native_build_folder(name))
     model, _ = model_choice(name, BuildOptions(weights=opts.weights, standin_model=opts.standin_model))
     info = torch_info(opts.python, m.label)
     env = build_environment(opts, log)
@@ -168,16 +169,11 @@ def build(name: str, opts: NativeOptions, log: Callable[[str], None] = print) ->
     return record
 
 
-def build_dpvo(opts: NativeOptions, log: Callable[[str], None] = print) -> dict:
-    """Compile DPVO natively (build("dpvo", ...))."""
-    return build("dpvo", opts, log)
-
-
-def unpack_only(opts: NativeOptions, log: Callable[[str], None] = print, name: str = "dpvo") -> Path:
+def unpack_only(opts: NativeOptions, name: str, log: Callable[[str], None] = print) -> Path:
     """The checked archives unpacked and patched into `opts.into` (or the cache's build folder), nothing compiled: to
     read or check the patched tree on a machine without the toolkit. Returns the tree."""
     m = native_method(name)
-    dest = Path(opts.into or m.default_build())
+    dest = Path(opts.into or native_build_folder(name))
     if dest.exists() and any(dest.iterdir()):
         raise NativeBuildError(f"{dest} is not empty: give an empty or new folder with --into")
     archives = obtain_archives(m, opts)

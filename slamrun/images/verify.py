@@ -31,7 +31,7 @@ from slamrun.core.trajectory import Trajectory, read_tum
 from slamrun.errors import MetricError, SlamRunError
 from slamrun.images.build import BuildOptions, build, buildable, last_record
 from slamrun.methods.base import Method
-from slamrun.methods.declare import declared
+from slamrun.methods.declare import VerifyScope, declared
 
 DEFAULT_RESULTS = Path(".cache") / "verify"  # under the current directory: where the user works
 SEQUENCES = ("room_a", "room_b")
@@ -40,37 +40,16 @@ TRIALS = 2
 DEFAULT_BOUND = Method.verify_bound  # e_align / scene extent a verified run must stay under (median over its runs)
 
 
+def scope_of(name: str) -> VerifyScope | None:
+    """What method `name`'s verification runs where its folder declares less than the default (verify_scope)."""
+    cls = slamrun.methods.REGISTRY.get(name)
+    return declared(cls, "verify_scope") if cls else None
+
+
 def bound_of(name: str) -> float:
     """The bound method `name` declares (verify_bound in its folder's declaration), else the default."""
     cls = slamrun.methods.REGISTRY.get(name)
     return declared(cls, "verify_bound", DEFAULT_BOUND) if cls else DEFAULT_BOUND
-
-
-@dataclass(frozen=True)
-class Scope:
-    """What a method's verification runs when the default (both rooms, forward and backward, TRIALS trials of
-    FRAMES frames) would take too long; stated in its row."""
-
-    sequences: tuple[str, ...]
-    trials: int
-    frames: int
-    why: str
-    timeout_s: float = 900.0  # one run's limit
-
-    def __str__(self) -> str:
-        trials = f"{self.trials} trial" + ("s" if self.trials > 1 else "")
-        return f"{', '.join(self.sequences)} only, {trials}, {self.frames} frames: {self.why}"
-
-
-SCOPES = {
-    # Mask R-CNN (ResNet-101 at 1024x1024) segments every frame on the CPU: 6-10 s a frame on this machine's 2
-    # cores alone (more when other work shares them), so the default 2,400 frames would take 4-7 hours; this takes
-    # 20-35 minutes. The whole loop in 100
-    # frames moves 3 times as far per frame: ORB-SLAM2 paced in real time loses some of those runs, at Mask R-CNN's
-    # pace (local mapping done between frames) it tracked them (checked with timestamps slowed 25 times)
-    # A run took 14 minutes while little else ran, and hit 900 s while image builds shared the cores: 2400 s.
-    "dynaslam": Scope(("room_a",), 1, 100, "Mask R-CNN on the CPU, ~10 s a frame", timeout_s=2400.0),
-}
 
 
 @dataclass
@@ -87,7 +66,7 @@ class VerifyRow:
     seg_last_rel: float | None = None  # ... and last (forward: start, end; backward: end, start)
     settled_rel_median: float | None = None  # Sim(3) RMSE after the first-processed 20 % of frames / extent
     settled_rel_max: float | None = None
-    scope: str = ""  # what ran, when not the default (SCOPES)
+    scope: str = ""  # what ran, when not the default (the method's verify_scope)
     bound: float = DEFAULT_BOUND
     fps: float | None = None
     ram_mb: float | None = None
@@ -170,7 +149,7 @@ def verify(
     from slamrun.backends.docker import DockerBackend
 
     results = Path(results or DEFAULT_RESULTS).resolve()
-    names = names or [n for n in buildable() if n != "reference_vo"]
+    names = names or [n for n in buildable() if slamrun.methods.REGISTRY[n].verified]
     client = DockerBackend().client.api
     rows = []
     for name in names:
@@ -192,7 +171,7 @@ def verify(
         record = last_record(name, opts.log_dir)
         if record is not None and record.tag == tag:
             row.build_min = round(record.seconds / 60, 1)
-        scope = SCOPES.get(name)
+        scope = scope_of(name)
         if scope is not None:
             row.scope = str(scope)
             _campaign(

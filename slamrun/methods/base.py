@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict
 from slamrun.core.trajectory import Trajectory, read_tum
 from slamrun.datasets.view import PreparedView, Profile
 from slamrun.errors import MethodFailure, TrajectoryFormatError, one_line
-from slamrun.methods.declare import NativeMethod, Source, Vocabulary, Weights
+from slamrun.methods.declare import NativeMethod, Source, VerifyScope, Vocabulary, Weights
 
 MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (MAX_ARG_STRLEN)
 
@@ -64,6 +64,8 @@ class Method(ABC):
     vocabulary: ClassVar[Vocabulary | None] = None  # the vocabulary its image needs
     network: ClassVar[Weights | None] = None  # the trained network its image needs (weights file)
     verify_bound: ClassVar[float] = 0.05  # `slamrun verify`: settled e_align / scene extent it must stay under
+    verify_scope: ClassVar[VerifyScope | None] = None  # `slamrun verify` runs less than its default (why, in it)
+    verified: ClassVar[bool] = True  # `slamrun verify` checks its image (slamrun's own reference method: its tests)
     native_build: ClassVar[NativeMethod | None] = None  # how `slamrun native-build` makes it
     # The parameter that seeds its randomness (None: it takes no seed). Unless the spec fixes it, each trial gets its
     # own seed, derived from the trial and the campaign's `seed` (engine.plan.trial_seed), recorded in run.json.

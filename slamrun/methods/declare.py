@@ -6,7 +6,6 @@ A declaration belongs to the class that writes it: `declared(cls, "vocabulary")`
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,7 +60,6 @@ class Weights:
 class NativeMethod:
     """How `slamrun native-build <name>` makes a method: its archives, patches, extensions and stand-in network."""
 
-    name: str
     label: str  # as messages name it
     source: str  # the main archive (a declared Source); its top folder is the tree
     parts: tuple[tuple[str, str], ...]  # (source, folder of the tree): archives unpacked into submodule folders
@@ -72,7 +70,6 @@ class NativeMethod:
     standin: Path
     standin_args: tuple[str, ...]  # after TREE OUT: the seed and the stand-in's scale
     standin_note: str  # what the stand-in is, {out} its script's last line (the gain it applied)
-    default_build: Callable[[], Path]
 
     @property
     def extensions(self) -> tuple[str, ...]:
@@ -82,6 +79,22 @@ class NativeMethod:
     def archives(self) -> tuple[str, ...]:
         """The sources it unpacks: the main one, then the parts."""
         return (self.source, *(s for s, _ in self.parts))
+
+
+@dataclass(frozen=True)
+class VerifyScope:
+    """What a method's verification (`slamrun verify`) runs where the default (both rooms, forward and backward, two
+    trials of 300 frames) would take too long; stated in its row."""
+
+    sequences: tuple[str, ...]
+    trials: int
+    frames: int
+    why: str
+    timeout_s: float = 900.0  # one run's limit
+
+    def __str__(self) -> str:
+        trials = f"{self.trials} trial" + ("s" if self.trials > 1 else "")
+        return f"{', '.join(self.sequences)} only, {trials}, {self.frames} frames: {self.why}"
 
 
 def declared(cls: type, attr: str, default=None):

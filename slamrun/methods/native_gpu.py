@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import os
 import sys
-from abc import abstractmethod
 from pathlib import Path
 
 from slamrun.datasets.view import PreparedView
@@ -18,6 +17,11 @@ def native_root() -> Path:
     """slamrun's cache of native builds ($XDG_CACHE_HOME/slamrun/native, default ~/.cache/slamrun/native)."""
     base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
     return Path(base) / "slamrun" / "native"
+
+
+def native_build_folder(name: str) -> Path:
+    """Where `slamrun native-build NAME` puts method NAME's build by default: its own folder of the cache."""
+    return native_root() / name
 
 
 def read_build_record(build: Path) -> dict | None:
@@ -75,9 +79,9 @@ class NativeGpuMethod(PythonProcess, Method):
     weights_name: str  # the network's file name (dpvo.pth, droid.pth)
     backend: str = "local"
 
-    @abstractmethod
     def default_build(self) -> Path:
-        """Where slamrun's cache holds this method's native build (each GPU method names its own)."""
+        """Where slamrun's cache holds this method's native build: a folder named by the method."""
+        return native_build_folder(self.name)
 
     def for_backend(self, backend: str) -> Method:
         method = super().for_backend(backend)

@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from slamrun.datasets.view import Profile
 from slamrun.methods.base import folder_name, image_tag, strided
 from slamrun.methods.declare import NativeMethod, Source, Weights
-from slamrun.methods.native_gpu import NativeGpuMethod, native_root
+from slamrun.methods.native_gpu import NativeGpuMethod
 
 IMAGE_WEIGHTS = (
     "/opt/dpvo/weights/dpvo.pth"  # where the image holds its network (slamrun/methods/dpvo/image/network.sh)
@@ -37,10 +37,6 @@ STANDIN_SEED = 0  # the same as image/network.sh's
 # so that its updates are a few pixels and the whole pipeline runs (patches, BA, keyframes, terminate).
 STANDIN_FLOW_GAIN = 16.0
 IMAGE = Path(__file__).resolve().parent / "image"  # its image's recipe; the native build's patches are the image's
-
-
-def default_build() -> Path:
-    return native_root() / "dpvo"
 
 
 class DpvoParams(BaseModel):
@@ -96,7 +92,6 @@ class Dpvo(NativeGpuMethod):
         arg="DPVO_MODEL",
     )
     native_build = NativeMethod(
-        name="dpvo",
         label="DPVO",
         source="dpvo",
         parts=(),
@@ -107,18 +102,14 @@ class Dpvo(NativeGpuMethod):
         standin=IMAGE / "standin_model.py",  # the stand-in network, the image's too
         standin_args=(str(STANDIN_SEED), str(STANDIN_FLOW_GAIN)),
         standin_note=f"random init, torch seed {STANDIN_SEED}, flow head x{STANDIN_FLOW_GAIN:g}",
-        default_build=lambda: default_build(),  # the module's function (the class's method has the same name)
     )
     profile = Profile.rectified
     Params = DpvoParams
     not_initialized_pattern = r"^NOT INITIALIZED"
-    process = "slamrun.methods.dpvo.process"  # run as `python -m`, given these params as one JSON object
+    process = f"{__name__}.process"  # its folder's process.py (`python -m`), given these params as one JSON object
     image_build = IMAGE_BUILD
     weights_name = WEIGHTS_NAME
 
     def frames_given(self, n: int):
         """Every `stride`-th frame of the view and its last (its process takes those): coverage is of them."""
         return strided(n, self.params.stride)
-
-    def default_build(self) -> Path:
-        return default_build()

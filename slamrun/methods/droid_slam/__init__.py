@@ -26,7 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from slamrun.datasets.view import Profile
 from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import NativeMethod, Source, Weights
-from slamrun.methods.native_gpu import NativeGpuMethod, native_root
+from slamrun.methods.native_gpu import NativeGpuMethod
 
 IMAGE_BUILD = "/opt/droid_slam"
 WEIGHTS_NAME = "droid.pth"
@@ -36,10 +36,6 @@ STANDIN_SEED = 0
 STANDIN_FLOW_PX = 8.0
 IMAGE = Path(__file__).resolve().parent / "image"  # its image's recipe; the native build's patches are the image's
 IMAGE_WEIGHTS = f"{IMAGE_BUILD}/weights/{WEIGHTS_NAME}"  # where the image holds its network (network.sh)
-
-
-def default_build() -> Path:
-    return native_root() / "droid_slam"
 
 
 class DroidSlamParams(BaseModel):
@@ -113,7 +109,6 @@ class DroidSlam(NativeGpuMethod):
         arg="DROID_MODEL",
     )
     native_build = NativeMethod(
-        name="droid_slam",
         label="DROID-SLAM",
         source="droid_slam",
         parts=(("lietorch", "thirdparty/lietorch"),),
@@ -124,14 +119,10 @@ class DroidSlam(NativeGpuMethod):
         standin=IMAGE / "standin_model.py",
         standin_args=(str(STANDIN_SEED), str(STANDIN_FLOW_PX)),
         standin_note=f"random init, torch seed {STANDIN_SEED}, {{out}} for a mean flow of {STANDIN_FLOW_PX:g} px",
-        default_build=lambda: default_build(),  # the module's function (the class's method has the same name)
     )
     profile = Profile.rectified
     Params = DroidSlamParams
     not_initialized_pattern = r"^NOT INITIALIZED"
-    process = "slamrun.methods.droid_slam.process"  # run as `python -m`, given these params as one JSON object
+    process = f"{__name__}.process"  # its folder's process.py (`python -m`), given these params as one JSON object
     image_build = IMAGE_BUILD
     weights_name = WEIGHTS_NAME
-
-    def default_build(self) -> Path:
-        return default_build()

@@ -15,7 +15,7 @@ from pydantic import Field
 from slamrun.datasets.view import PreparedView
 from slamrun.errors import MethodFailure
 from slamrun.methods.base import folder_name, image_tag
-from slamrun.methods.declare import Source, Vocabulary, Weights
+from slamrun.methods.declare import Source, VerifyScope, Vocabulary, Weights
 from slamrun.methods.orb_slam2_family import OrbSlam2Family, OrbSlam2Params
 
 
@@ -44,6 +44,12 @@ class DynaSlam(OrbSlam2Family):
         standin=True,
         arg="MASK_RCNN_MODEL",
     )
+    # Mask R-CNN (ResNet-101 at 1024x1024) segments every frame on the CPU: 6-10 s a frame on 2 cores alone (more
+    # when other work shares them), so the default 2,400 frames would take 4-7 hours; this takes 20-35 minutes. The
+    # whole loop in 100 frames moves 3 times as far per frame: ORB-SLAM2 paced in real time loses some of those runs,
+    # at Mask R-CNN's pace (local mapping done between frames) it tracked them (checked with timestamps slowed 25
+    # times). A run took 14 minutes while little else ran, and hit 900 s while image builds shared the cores: 2400 s.
+    verify_scope = VerifyScope(("room_a",), 1, 100, "Mask R-CNN on the CPU, ~10 s a frame", timeout_s=2400.0)
     binary = "/opt/DynaSLAM/dynaslam-run"
     Params = DynaSlamParams
     loop_closure_switch = "env ORB_SLAM2_NO_LOOP=1 (patch in slamrun/methods/dynaslam/image)"

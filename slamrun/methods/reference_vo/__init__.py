@@ -27,6 +27,7 @@ class ReferenceVO(PythonProcess, Method):
     name = folder_name(__name__)  # its folder's
     deterministic = True  # identical runs whatever the seed (its RANSACs seed themselves): trials are copies
     image = image_tag(name)  # built from image/Dockerfile in its folder
+    verified = False  # slamrun's own baseline: its tests check it against known answers, `slamrun verify` does not
     profile = Profile.rectified
     native = True
     modules = ("numpy", "scipy", "cv2")
@@ -36,7 +37,7 @@ class ReferenceVO(PythonProcess, Method):
 
     def command(self, view: PreparedView, workdir: Path) -> list[str]:
         return [
-            self.python, "-m", "slamrun.methods.reference_vo",
+            self.python, "-m", __name__,  # its own folder's __main__.py
             "--images", str(view.path(view.images_dir)),
             "--times", str(view.path(view.times)),
             "--camera", str(view.path(view.camera)),

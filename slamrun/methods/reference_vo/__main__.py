@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from slamrun.methods.reference_vo.vo import Settings, VisualOdometry, rotation_to_quaternion
+from .vo import Settings, VisualOdometry, rotation_to_quaternion  # its own folder's, whatever the folder is named
 
 
 def read_pinhole_camera(path: Path) -> tuple[np.ndarray, int, int]:

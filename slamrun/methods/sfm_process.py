@@ -1,4 +1,5 @@
-"""The COLMAP process: `python -m slamrun.methods.colmap.process --images ... --times ... --camera ... --out ...`.
+"""The structure-from-motion family's process (colmap, glomap):
+`python -m slamrun.methods.sfm_process --images ... --times ... --camera ... --out ...`.
 
 `--mapper incremental` (colmap) maps with COLMAP's incremental SfM, `--mapper global` (glomap) with GLOMAP's
 global SfM (`pycolmap.global_mapping`: rotation averaging, then global positioning, then bundle adjustment),
