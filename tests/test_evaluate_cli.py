@@ -534,3 +534,35 @@ def test_a_layouts_file_in_no_format_still_names_its_folder_without_a_metric(loo
         out = slamrun("evaluate", "--gt", poses, *metric, est)
         assert out.returncode == 1 and "Traceback" not in out.stderr and len(out.stderr.splitlines()) == 1
         assert "7 values, expected 8" in out.stderr and f"--gt {poses.parent}" in out.stderr, out.stderr
+
+
+def test_one_reader_choice_every_command_the_same_formats(shared_data, tmp_path):
+    """One function picks a trajectory's reader, from a format name or the file's first row (evo's file_interface
+    model): the real KITTI, EuRoC and TUM files of evo's test data are told apart, `evaluate --est-format auto` reads
+    each as its own format with the figures of the format named, and `evaluate` and `import` offer the same formats."""
+    import argparse
+
+    from slamrun.cli import _parser as build_parser
+    from slamrun.core.formats import FORMATS, RECOGNISED, recognise
+
+    evo = shared_data / "evo_test_data"
+    assert [recognise(evo / f) for f in ("KITTI_00_ORB.txt", "V102_groundtruth.csv", "fr2_desk_ORB.txt")] == [
+        "kitti", "euroc", "tum",
+    ]  # fmt: skip
+    cases = [  # ground truth, estimate, its format, what else the files need
+        ("KITTI_00_gt.txt", "KITTI_00_ORB.txt", "kitti", ["--times", evo / "KITTI_00_gt_times.txt"]),
+        ("V102_groundtruth.csv", "V102_groundtruth.csv", "euroc", []),
+        ("fr2_desk_groundtruth.txt", "fr2_desk_ORB.txt", "tum", []),
+    ]
+    for gt, est, fmt, extra in cases:
+        named = slamrun("evaluate", "--gt", evo / gt, "--est-format", fmt, *extra, "--json", evo / est)
+        told = slamrun("evaluate", "--gt", evo / gt, "--est-format", "auto", *extra, "--json", evo / est)
+        assert named.returncode == told.returncode == 0, (fmt, named.stderr, told.stderr)
+        assert json_rows(named) == json_rows(told) and json_rows(told)[0]["status"] == "ok", fmt
+    parser = build_parser()
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+
+    def offered(command: str, flag: str) -> list[str]:
+        return next(a for a in subs[command]._actions if flag in a.option_strings).choices
+
+    assert offered("evaluate", "--est-format") == offered("import", "--format") == [*FORMATS, RECOGNISED]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from slamrun.cli.console import console
 from slamrun.core import jsonio
-from slamrun.core.formats import FORMATS
+from slamrun.core.formats import FORMATS, RECOGNISED
 
 
 def add_commands(sub) -> None:
@@ -44,7 +44,12 @@ def add_commands(sub) -> None:
         help="regular expression with the named groups sequence, direction (fw|bw|forward|backward) and trial, "
         "searched in each file's path (default: the study's <code>_<fw|bw>/sequence_SS_R.txt)",
     )
-    im.add_argument("--format", default="tum", choices=list(FORMATS), help="the files' trajectory format")
+    im.add_argument(
+        "--format",
+        default="tum",
+        choices=[*FORMATS, RECOGNISED],
+        help="the files' trajectory format (auto: each file's first row tells)",
+    )
     im.set_defaults(func=cmd_import)
 
 

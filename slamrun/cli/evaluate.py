@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from slamrun.core import jsonio
-from slamrun.core.formats import FORMATS
+from slamrun.core.formats import FORMATS, RECOGNISED
 from slamrun.core.inputs import read_bounded
 from slamrun.errors import SlamRunError
 from slamrun.results.vocabulary import METRIC_NAMES
@@ -64,7 +64,13 @@ def add_commands(sub) -> None:
     e.add_argument(
         "--tolerance", type=_tolerance, help="association: largest time difference in s (default 0.02; a folder: 1 ms)"
     )
-    e.add_argument("--est-format", choices=("tum", "kitti"), default="tum", help="the estimates' format")
+    e.add_argument(
+        "--est-format",
+        choices=[*FORMATS, RECOGNISED],
+        default="tum",
+        help="the estimates' format (auto: each file's first row tells: commas an EuRoC csv, 12 numbers KITTI poses, "
+        "else TUM)",
+    )
     e.add_argument(
         "--times",
         type=Path,
@@ -248,7 +254,8 @@ def _options(args, gt, metrics: tuple[str, ...]):
     from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S
     from slamrun.core.metrics import DEFAULT_TOLERANCE_S
 
-    times = tuple(gt.frame_times) if args.est_format == "kitti" else None
+    kitti_possible = args.est_format in ("kitti", RECOGNISED) and gt.frame_times is not None
+    times = tuple(gt.frame_times) if kitti_possible else None
     frames = tuple(gt.frame_times) if gt.frame_times is not None else None
     if args.delta_unit == "frames" and frames is None:
         raise SlamRunError(

@@ -147,18 +147,18 @@ def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | Traje
     """Each file's trajectory or the error naming it; files that are not regular, or too large, unread."""
     refused = {i: p for i, path in enumerate(paths) if (p := file_problem(path, MAX_FILE_BYTES, "a trajectory file"))}
     readable = [path for i, path in enumerate(paths) if i not in refused]
-    if opts.est_format == "tum":
+    if opts.est_format == "tum":  # TUM files read in batches (the fast path), any other format one by one
         read = iter(read_tum_many(readable))
     else:
-        read = iter([_read_kitti(p, opts) for p in readable])
+        read = iter([_read_one(p, opts) for p in readable])
     return [TrajectoryFormatError(refused[i]) if i in refused else next(read) for i in range(len(paths))]
 
 
-def _read_kitti(path: str | Path, opts: Options) -> Trajectory | TrajectoryFormatError:
+def _read_one(path: str | Path, opts: Options) -> Trajectory | TrajectoryFormatError:
     try:
-        return read_trajectory(path, "kitti", np.asarray(opts.times))
-    except TrajectoryFormatError as exc:
-        return exc
+        return read_trajectory(path, opts.est_format, None if opts.times is None else np.asarray(opts.times))
+    except (TrajectoryFormatError, ValueError) as exc:
+        return exc if isinstance(exc, TrajectoryFormatError) else TrajectoryFormatError(f"{path}: {exc}")
 
 
 def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory, opts: Options = Options()) -> list[dict]:

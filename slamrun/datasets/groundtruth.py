@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from slamrun.core.batch_eval import MAX_FILE_BYTES, file_problem
-from slamrun.core.formats import FORMATS, read_trajectory
+from slamrun.core.formats import FORMATS, read_trajectory, recognise
 from slamrun.core.inputs import read_text_bounded
 from slamrun.core.metrics import RpeInterval
 from slamrun.core.trajectory import Trajectory, read_times
@@ -122,11 +122,9 @@ def sniff_format(path: Path, metrics: tuple[str, ...] | None) -> str:
     (TUM-Mono's groundtruthSync.txt when TUM-Mono's metric is asked for, or with no metric asked for when the file
     is named groundtruthSync.txt; a TUM file of TUM-Mono's shape under another name is told after it is read:
     `_tum_mono_by_shape`)."""
-    first = _first_row(path)
-    if "," in first:
-        return "euroc"
-    if len(first.split()) == 12:
-        return "kitti"
+    fmt = recognise(path)
+    if fmt != "tum":
+        return fmt
     if metrics:
         return "tum-mono" if "tum-mono" in metrics else "tum"
     return "tum-mono" if path.name == TUM_MONO_GT else "tum"
@@ -195,12 +193,6 @@ def read_frame_times(path: Path) -> np.ndarray:
     if len(back):
         raise DatasetError(f"{path}: frame time {back[0] + 2} is not after the one before; expected increasing times")
     return times
-
-
-def _first_row(path: Path) -> str:
-    with open(path, "rb") as f:  # a regular file (checked): its first 64 KiB hold the first row
-        head = f.read(65536).decode("utf-8", errors="replace")
-    return next((ln for ln in head.splitlines() if ln.strip() and not ln.lstrip().startswith("#")), "")
 
 
 def _read_file(path: Path, fmt: str, times: np.ndarray | None) -> Trajectory:
