@@ -32,6 +32,7 @@ from slamrun.datasets.sequence import (
     check_regular,
     finite_groundtruth,
     folder_sequence,
+    frame_list_problem,
     interpolate_poses,
     read_text,
     transform_poses,
@@ -131,13 +132,9 @@ def _read_frame_list(csv: Path, problems: list[str]) -> tuple[list[str], np.ndar
             return [], None
         stamps.append(int(cells[0]))
         names.append(cells[1])
-    if not names:
-        problems.append(f"{csv}: no frame listed")
-        return [], None
     ns = np.array(stamps, dtype=np.int64)
-    bad = np.flatnonzero(np.diff(ns) <= 0)
-    if len(bad):
-        problems.append(f"{csv}: timestamps not strictly increasing (row {int(bad[0]) + 2} of the frames)")
+    if problem := frame_list_problem(csv, ns, "timestamps"):
+        problems.append(problem)
         return [], None
     return names, ns
 

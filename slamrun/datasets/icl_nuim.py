@@ -31,11 +31,12 @@ from slamrun.datasets import file_notes, frames
 from slamrun.datasets.file_notes import ICL_NUIM_FPS
 from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import (
-    IMAGE_SUFFIXES,
     Sequence,
     check_regular,
     finite_groundtruth,
     folder_sequence,
+    frame_list_problem,
+    image_path_problem,
     read_text,
     time_problem,
 )
@@ -130,19 +131,14 @@ def _read_associations(path: Path, problems: list[str]) -> tuple[list[str], np.n
         if problem := time_problem(path, n, token[:60], stamps[-1]):
             problems.append(problem)
             return [], None
-        if not name.lower().endswith(IMAGE_SUFFIXES) or ".." in Path(name).parts or not name.isprintable():
-            problems.append(f"{path}:{n}: {name[:80]!r} is not an image path inside the sequence folder")
+        if problem := image_path_problem(path, n, name):
+            problems.append(problem)
             return [], None
         names.append(name)
-    if not names:
-        problems.append(f"{path}: no frame listed")
+    if problem := frame_list_problem(path, stamps, "frame numbers"):
+        problems.append(problem)
         return [], None
-    t = np.array(stamps)
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if len(bad):
-        problems.append(f"{path}: frame numbers not strictly increasing (row {int(bad[0]) + 2} of the frames)")
-        return [], None
-    return names, t
+    return names, np.array(stamps)
 
 
 # ---------------------------------------------------------------------------------------------------- the layout

@@ -221,6 +221,26 @@ def time_problem(path: Path, lineno: int, token: str, value: float) -> str | Non
     return None
 
 
+def image_path_problem(path: Path, lineno: int, name: str) -> str | None:
+    """Why `name` (listed on line `lineno` of `path`) is not a relative path to an image inside the sequence folder,
+    or None."""
+    inside = not Path(name).is_absolute() and ".." not in Path(name).parts
+    if name.lower().endswith(IMAGE_SUFFIXES) and inside and name.isprintable():
+        return None
+    return f"{path}:{lineno}: {name[:80]!r} is not an image path inside the sequence folder"
+
+
+def frame_list_problem(path: Path, stamps: list | np.ndarray, what: str) -> str | None:
+    """Why the frames listed in `path` (their `stamps`, in file order) are no sequence: none listed, or `what` (times,
+    frame numbers, timestamps) not strictly increasing, naming the first row that is not; or None."""
+    if len(stamps) == 0:
+        return f"{path}: no frame listed"
+    bad = np.flatnonzero(np.diff(np.asarray(stamps)) <= 0)
+    if len(bad):
+        return f"{path}: {what} not strictly increasing (row {int(bad[0]) + 2} of the frames)"
+    return None
+
+
 def camera_problem(calibration: Path, camera: CameraFile) -> str | None:
     """Why the calibration in `calibration` cannot give a method a usable view (slamrun.core.camera's
     rectification_problem), named with the file; None when it can."""

@@ -20,11 +20,12 @@ from slamrun.core.trajectory import Trajectory, read_tum
 from slamrun.datasets import frames
 from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import (
-    IMAGE_SUFFIXES,
     Sequence,
     check_regular,
     finite_groundtruth,
     folder_sequence,
+    frame_list_problem,
+    image_path_problem,
     read_text,
     time_problem,
 )
@@ -113,24 +114,14 @@ def _read_listing(path: Path, problems: list[str]) -> tuple[list[str], np.ndarra
             problems.append(problem)
             return [], None
         name = cells[1]
-        if (
-            not name.lower().endswith(IMAGE_SUFFIXES)
-            or ".." in Path(name).parts
-            or Path(name).is_absolute()
-            or not name.isprintable()
-        ):
-            problems.append(f"{path}:{n}: {name[:80]!r} is not an image path inside the sequence folder")
+        if problem := image_path_problem(path, n, name):
+            problems.append(problem)
             return [], None
         names.append(name)
-    if not names:
-        problems.append(f"{path}: no frame listed")
+    if problem := frame_list_problem(path, stamps, "times"):
+        problems.append(problem)
         return [], None
-    t = np.array(stamps)
-    bad = np.flatnonzero(np.diff(t) <= 0)
-    if len(bad):
-        problems.append(f"{path}: times not strictly increasing (frame {int(bad[0]) + 2})")
-        return [], None
-    return names, t
+    return names, np.array(stamps)
 
 
 # ---------------------------------------------------------------------------------------------------- the layout
