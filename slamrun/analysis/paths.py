@@ -108,10 +108,10 @@ def aligned(traj, gt, metric: str) -> np.ndarray | None:
     """A run's positions in the ground truth's frame: a Sim(3) over every associated pose (ATE), or over the start
     segment's (e_align); None under three associated poses."""
     from slamrun.core.alignment import align_sim3
-    from slamrun.core.evaluation import associate
+    from slamrun.core.evaluation import ground_truth_rows
 
     valid = np.isfinite(gt.positions).all(axis=1)
-    match = associate(gt.timestamps, traj.timestamps)
+    match = ground_truth_rows(gt.timestamps, traj.timestamps)
     use = (match >= 0) & valid[np.maximum(match, 0)]
     if metric == "e_align":
         use &= match < len(gt) // 2

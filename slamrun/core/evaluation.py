@@ -13,6 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 from slamrun.core.alignment import Sim3, align_sim3, rmse, rotation_angle_deg
+from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory
 from slamrun.results.vocabulary import TUM_MONO_METRICS, EvalStatus
 
@@ -74,32 +75,13 @@ def _rows_as_the_benchmark_reads(est: Trajectory) -> Trajectory:
     return Trajectory(rows.timestamps[order], rows.positions[order], rows.quaternions[order], report=est.report)
 
 
-def associate(gt_times: np.ndarray, est_times: np.ndarray, tol: float = ASSOCIATION_TOLERANCE_S) -> np.ndarray:
+def ground_truth_rows(gt_times: np.ndarray, est_times: np.ndarray, tol: float = ASSOCIATION_TOLERANCE_S) -> np.ndarray:
     """For each estimated timestamp the index of the nearest ground-truth row within `tol`, else -1.
 
     `gt_times` must be sorted increasingly.
     """
-    nearest, distance = _nearest(gt_times, est_times)
-    return np.where(distance <= tol, nearest, -1)
-
-
-def _nearest(gt_times: np.ndarray, est_times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Index of the nearest ground-truth time for each estimated time, and the distance to it (of two at the
-    same distance, the earlier). `gt_times` must be sorted increasingly."""
-    n = len(gt_times)
-    if n < 2 or not np.isfinite(est_times).all():
-        idx = np.searchsorted(gt_times, est_times)
-        hi = np.minimum(idx, n - 1)
-        lo = np.maximum(idx - 1, 0)
-    else:  # interp's search starts from the last answer: fast on sorted times. Its floor is the row at or
-        # before t, or (rounded) the one after, so the nearest row is lo or lo + 1 either way.
-        lo = np.interp(est_times, gt_times, np.arange(n, dtype=float)).astype(np.intp)
-        np.minimum(lo, n - 2, out=lo)
-        hi = lo + 1
-    d_hi = np.abs(gt_times[hi] - est_times)
-    d_lo = np.abs(gt_times[lo] - est_times)
-    take_lo = d_lo <= d_hi
-    return np.where(take_lo, lo, hi), np.where(take_lo, d_lo, d_hi)
+    row, distance = nearest(gt_times, est_times)
+    return np.where(distance <= tol, row, -1)
 
 
 def tum_mono(gt: Trajectory, est: Trajectory) -> TumMonoResult:
@@ -118,7 +100,7 @@ def tum_mono(gt: Trajectory, est: Trajectory) -> TumMonoResult:
         return _failed(EvalStatus.nan, n, "the estimate holds NaN or infinite values")
     gt_t = gt.timestamps
     t = est.timestamps
-    match, distance = _nearest(gt_t, t)
+    match, distance = nearest(gt_t, t)
     far = distance > ASSOCIATION_TOLERANCE_S
     if far.any():
         bad = t[np.flatnonzero(far)[0]]
@@ -260,7 +242,7 @@ def _usual_segments(gt: Trajectory, ests: list[Trajectory]) -> tuple | None:
     rows = np.fromiter((len(e) for e in ests), int, len(ests))
     starts = _first_rows(rows)
     t = np.concatenate([e.timestamps for e in ests])
-    match, distance = _nearest(gt_t, t)
+    match, distance = nearest(gt_t, t)
     # each file's segments as tum_mono slices its sorted times: [lo, hi) by the GT rows' times
     lo_s = np.add.reduceat(t < gt_t[0], starts)
     hi_s = np.add.reduceat(t <= gt_t[n_gt // 2 - 1], starts)

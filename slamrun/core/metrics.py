@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from slamrun.core.alignment import Sim3, align_sim3
+from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory, quat_to_rotmat, rotmat_to_quat
 from slamrun.errors import MetricError
 
@@ -127,12 +128,7 @@ def coverage(est: Trajectory, frame_times: np.ndarray, tolerance_s: float = 1e-3
         return math.nan
     if not len(est):
         return 0.0
-    t = np.sort(est.timestamps)
-    idx = np.clip(np.searchsorted(t, frame_times), 1, max(len(t) - 1, 1)) if len(t) > 1 else np.zeros(0, int)
-    if len(t) == 1:
-        near = np.abs(frame_times - t[0])
-    else:
-        near = np.minimum(np.abs(t[idx - 1] - frame_times), np.abs(t[idx] - frame_times))
+    near = nearest(np.sort(est.timestamps), frame_times)[1]
     return float(np.count_nonzero(near <= tolerance_s)) / len(frame_times)
 
 

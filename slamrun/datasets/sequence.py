@@ -14,6 +14,7 @@ import numpy as np
 
 from slamrun.core.camera import CameraFile, FovCamera, rectification_problem
 from slamrun.core.inputs import read_bounded, read_text_bounded, regular_file_problem
+from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory
 from slamrun.datasets.frames import GRAYSCALE, decode, read_frame, read_head, read_member
 from slamrun.errors import DatasetError, SlamRunError
@@ -368,12 +369,9 @@ def nearest_poses(gt: Trajectory, times: np.ndarray, tolerance_s: float) -> Traj
     quat = np.full((n, 4), np.nan)
     t = gt.timestamps
     if len(t):
-        j = np.clip(np.searchsorted(t, times), 1, max(len(t) - 1, 1))
-        lo = np.clip(j - 1, 0, len(t) - 1)
-        hi = np.clip(j, 0, len(t) - 1)
-        nearest = np.where(np.abs(t[lo] - times) <= np.abs(t[hi] - times), lo, hi)
-        ok = np.abs(t[nearest] - times) <= tolerance_s
-        pos[ok], quat[ok] = gt.positions[nearest[ok]], gt.quaternions[nearest[ok]]
+        row, distance = nearest(t, times)
+        ok = distance <= tolerance_s
+        pos[ok], quat[ok] = gt.positions[row[ok]], gt.quaternions[row[ok]]
     return Trajectory(np.asarray(times, float), pos, quat)
 
 

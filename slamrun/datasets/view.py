@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory
 
 
@@ -74,10 +75,8 @@ class PreparedView:
         t = traj.timestamps if self.direction is Direction.forward else self.t_first + self.t_last - traj.timestamps
         originals = self.original_timestamps()
         if len(originals) and len(t):
-            idx = np.clip(np.searchsorted(originals, t), 1, len(originals) - 1)
-            nearest = np.where(np.abs(originals[idx - 1] - t) <= np.abs(originals[idx] - t), idx - 1, idx)
-            close = np.abs(originals[nearest] - t) < 1e-4
-            t = np.where(close, originals[nearest], t)
+            row, distance = nearest(originals, t)
+            t = np.where(distance < 1e-4, originals[row], t)
         return traj.with_timestamps(t)
 
     def original_timestamps(self) -> np.ndarray:

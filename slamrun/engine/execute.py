@@ -23,6 +23,7 @@ from slamrun.backends.logcap import tail
 from slamrun.backends.machine import machine, package_versions, packages_text, source_commit
 from slamrun.core import jsonio
 from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S
+from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory, write_tum
 from slamrun.datasets.cache import verify_view
 from slamrun.datasets.view import PreparedView
@@ -447,8 +448,7 @@ def foreign_timestamps_of(traj: Trajectory, frames: np.ndarray, tol_s: float = A
     if not len(traj) or not len(frames):
         return None
     t = traj.timestamps
-    idx = np.clip(np.searchsorted(frames, t), 1, len(frames) - 1)
-    distance = np.minimum(np.abs(frames[idx - 1] - t), np.abs(frames[idx] - t))
+    distance = nearest(frames, t)[1]
     far = np.flatnonzero(distance > tol_s)
     if not len(far):
         return None
