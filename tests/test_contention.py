@@ -164,15 +164,18 @@ def test_a_loss_while_its_own_processes_kept_its_cpu_busy_is_charged_and_named(t
     forking = fake_method("lost", sleep=2.0, label="forking", lost_pattern=r"^LOST", extra=["--busy-workers", "4"])
     spec = write_spec(
         tmp_path, tiny_dataset, [forking], datasets=one_sequence(tiny_dataset), directions=["forward"], lanes=1,
-        cpus_per_lane=1, evaluate=False, contention_pct=15,
+        cpus_per_lane=1, evaluate=False, contention_pct=100,
     )  # fmt: skip
+    # contention_pct 100: what other processes take from the tree is the CPU it lost, at most 100 % of its wall time
+    # (a hog on its CPU takes some on a loaded machine, rightly counted as contention: 17-50 % seen under CI's hogs);
+    # its own workers kept it waiting 300-400 % (the old rule called all of it contention, so it failed here too)
     res = run_campaign(load_spec(spec), on_event=None)
     df = pd.read_csv(res.results_csv)
     row = df.iloc[0]
     assert (row.status, row.failure) == ("failed", "lost"), (row.failure, row.message)
     assert row.cpu_wait_pct > 150 and not row.contended_attempts > 0  # it waited, on its own workers
     assert row.runnable_threads > 3, row.runnable_threads  # 4 workers and itself, on 1 CPU
-    assert row.cpu_wait_own_pct >= row.cpu_wait_pct - 15 and row.busy_threads == 1
+    assert row.cpu_wait_own_pct > 200 and row.cpu_wait_pct - row.cpu_wait_own_pct <= 100 and row.busy_threads == 1
     from slamrun.analysis.report import write_report
 
     html = write_report(res.results).read_text()

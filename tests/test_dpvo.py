@@ -30,7 +30,7 @@ from tests.conftest import recipe, require_upstream, unpack_upstream
 
 ROOT = Path(__file__).resolve().parents[1]
 PATCHES = recipe("dpvo") / "patches.py"
-COMPAT = recipe("dpvo") / "torch_scatter_compat.py"
+COMPAT = recipe("torch_cuda") / "torch_scatter_compat.py"
 
 
 def patch_tree(dest: Path) -> Path:

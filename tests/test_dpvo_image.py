@@ -108,8 +108,9 @@ def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_pat
     # the native route's files, not copies: patches.py (with the torch_scatter stand-in) and the stand-in network
     recipe_ = native.NATIVE["dpvo"]
     assert recipe_.patches == RECIPE / "patches.py" and recipe_.standin == RECIPE / "standin_model.py"
-    assert "slamrun/methods/dpvo/image/patches.py slamrun/methods/dpvo/image/torch_scatter_compat.py" in build
-    assert "slamrun/methods/dpvo/image/standin_model.py" in build
+    assert "method/image/patches.py method/image/build-extensions.sh" in re.sub(r"\\\n\s*", "", build)
+    assert "COPY recipes/torch_cuda/torch_scatter_compat.py /opt/slamrun-build/docker/torch_cuda/" in build
+    assert "method/image/standin_model.py" in build
     script = (RECIPE / "network.sh").read_text()
     seed, gain = re.search(r"seed=(\d+) gain=(\d+)", script).groups()
     assert recipe_.standin_args == (seed, str(float(gain)))
@@ -141,11 +142,11 @@ def test_the_extension_build_script_compiles_with_the_wheels_toolkit_for_the_giv
     assert 'compile=$(dirname "$0")/../common/build-torch-extension.sh' in script  # copied beside the recipe's:
     copies = re.sub(r"\\\n", " ", DOCKERFILE.read_text())
     assert re.search(
-        r"COPY [^\n]*slamrun/methods/recipes/common/build-torch-extension.sh[^\n]* /opt/slamrun-build/docker/common/",
+        r"COPY [^\n]*recipes/common/build-torch-extension.sh[^\n]* /opt/slamrun-build/docker/common/",
         copies,
     )
     assert re.search(
-        r"COPY [^\n]*slamrun/methods/dpvo/image/build-extensions.sh[^\n]* /opt/slamrun-build/docker/dpvo/", copies
+        r"COPY [^\n]*method/image/build-extensions.sh[^\n]* /opt/slamrun-build/docker/dpvo/", copies
     )
     assert native.NATIVE["dpvo"].setups == ((".", ("cuda_corr", "cuda_ba", "lietorch_backends")),)
     res = subprocess.run(["bash", "-n", str(RECIPE / "build-extensions.sh")], capture_output=True, text=True)

@@ -77,14 +77,14 @@ def test_the_runtime_stage_holds_no_compiler_and_the_build_reuses_the_native_rec
     recipe = native.NATIVE["droid_slam"]
     assert recipe.patches == RECIPE / "patches.py" and recipe.standin == RECIPE / "standin_model.py"
     assert recipe.parts == (("lietorch", "thirdparty/lietorch"),)
-    assert "slamrun/methods/droid_slam/image/patches.py" in build
-    assert "slamrun/methods/dpvo/image/torch_scatter_compat.py" in build
+    assert "method/image/patches.py" in build
+    assert "COPY recipes/torch_cuda/torch_scatter_compat.py /opt/slamrun-build/docker/torch_cuda/" in build
     script = (RECIPE / "network.sh").read_text()
     seed, flow = re.search(r"seed=(\d+) flow_px=(\d+)", script).groups()
     assert recipe.standin_args == (seed, str(float(flow)))
-    # the process runs with its helpers from DPVO's process, both copied in
-    assert "COPY slamrun/methods/dpvo/process.py /opt/slamrun/slamrun/methods/dpvo/" in runtime
-    assert "COPY slamrun/methods/droid_slam/process.py /opt/slamrun/slamrun/methods/droid_slam/" in runtime
+    # the process runs with the GPU family's helpers, both copied in, the process in the folder named by the method
+    assert "COPY methods/gpu_process.py /opt/slamrun/slamrun/methods/" in runtime
+    assert "COPY method/process.py /opt/slamrun/slamrun/methods/${METHOD}/" in runtime
 
 
 def test_the_build_scripts_place_lietorch_as_the_native_build_does_and_parse():

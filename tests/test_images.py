@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -82,10 +83,13 @@ def test_a_patch_whose_anchor_is_missing_fails_the_build_naming_step_and_file(cl
     """The real DSO archive and patch script, with the anchor's line changed as an upstream edit would."""
     if not client.images(name="slamrun/reference_vo:latest"):
         build(["reference_vo"], log=lambda m: None)  # a small image with python3
-    dockerfile = tmp_path / "Dockerfile"
+    folder = tmp_path / "anchor_test" / "image"  # a method's folder: its image's recipe and DSO's real patches
+    folder.mkdir(parents=True)
+    shutil.copyfile(recipe("dso") / "patches.py", folder / "patches.py")
+    dockerfile = folder / "Dockerfile"
     dockerfile.write_text(
         "FROM slamrun/reference_vo:latest\nUSER root\n"
-        "COPY slamrun/methods/recipes/common /b/common\nCOPY slamrun/methods/dso/image /b/dso\n"
+        "COPY recipes/common /b/common\nCOPY method/image /b/dso\n"
         "COPY sources/dso.tar.gz /b/\n"
         "RUN /b/common/unpack.sh /b/dso.tar.gz /opt/dso "
         "&& sed -i 's|\"boost/thread.hpp\"|<boost/thread.hpp>|' /opt/dso/src/util/IndexThreadReduce.h "

@@ -43,7 +43,7 @@ def test_orb_slam3_patches_on_the_real_tree(tmp_path):
     assert not (root / "Vocabulary" / "ORBvoc.txt.tar.gz").exists()  # why the build trains one here
     trainer = tmp_path / "trainer"
     trainer.mkdir()
-    shutil.copy(recipe("orb_slam2") / "train_orb_vocabulary.cc", trainer)
+    shutil.copy(recipe("orb_vocabulary") / "train_orb_vocabulary.cc", trainer)
     res = run(recipe("orb_slam3") / "patches.py", root, trainer)
     assert res.returncode == 0, res.stderr
     mono = (root / "Examples/Monocular/mono_tum.cc").read_text()

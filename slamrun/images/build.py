@@ -1,7 +1,8 @@
 """Build the methods' Docker images: `slamrun images` / `make images [METHOD=name] [SOURCES=DIR]`.
 
-Each image is built from `slamrun/methods/<name>/image/Dockerfile` in a build context the runner assembles:
-slamrun's `slamrun/methods/` folder (every method's folder and the shared recipe parts, `recipes/`), the upstream
+Each image is built from `slamrun/methods/<name>/image/Dockerfile` in a build context the runner assembles: the
+method's own folder as `method/` (never another method's: a copy of a folder builds from its own recipe and patches),
+the shared recipe parts as `recipes/`, the modules families share (`slamrun/methods/*.py`) as `methods/`, the upstream
 sources the Dockerfile copies (`COPY sources/<source>.tar.gz ...`, checked archives from a folder or GitHub, see
 slamrun/images/sources.py) and the inputs a build needs (`inputs/`: a vocabulary, weights, frames to train a
 vocabulary on). Build arguments (MARCH, JOBS, VOCABULARY, any --build-arg) reach the Dockerfile. The image carries
@@ -33,6 +34,7 @@ DEFAULT_LOG_DIR = ROOT / ".cache" / "images"
 SOURCE_RE = re.compile(r"\bsources/([A-Za-z0-9_.+-]+)\.tar\.gz\b")
 PYPI_RE = re.compile(r"\bpypi/([A-Za-z0-9_.+-]+\.(?:whl|tar\.gz|zip))(?![A-Za-z0-9_.+-])")  # wheels and sdists
 LABEL = "slamrun"
+METHOD_ARG = re.compile(r"^ARG METHOD\s*$", re.MULTILINE)  # the build argument that gives a recipe its method's name
 ANSI = re.compile(r"\x1b\[[0-9;]*m")  # the builder colours a step's stderr
 
 
@@ -205,11 +207,21 @@ def vocabulary_choice(name: str, archives: dict[str, Path], opts: BuildOptions) 
     )
 
 
+def copy_code(dockerfile: Path, ctx: Path) -> None:
+    """The code a build context holds: the method's own folder as `method/` (no other method's), the shared recipe
+    parts as `recipes/`, the modules families share (a GPU process's helpers) as `methods/`."""
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
+    shutil.copytree(dockerfile.parent.parent, ctx / "method", ignore=ignore)
+    shutil.copytree(METHODS / "recipes", ctx / "recipes", ignore=ignore)
+    (ctx / "methods").mkdir()
+    for module in METHODS.glob("*.py"):
+        shutil.copyfile(module, ctx / "methods" / module.name)
+
+
 def assemble_context(name: str, dockerfile: Path, opts: BuildOptions, ctx: Path, log: Callable[[str], None]) -> dict:
     """Fill `ctx` with what the build of `name` reads; returns the labels describing it."""
     model, model_detail = model_choice(name, opts)  # a missing network is said before anything is fetched
-    ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    shutil.copytree(METHODS, ctx / "slamrun" / "methods", ignore=ignore)
+    copy_code(dockerfile, ctx)
     (ctx / "sources").mkdir()
     inputs = ctx / "inputs"
     inputs.mkdir()
@@ -364,6 +376,8 @@ def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions,
             labels = assemble_context(name, dockerfile, opts, ctx, note)
             (ctx / "Dockerfile.slamrun").write_text(recipe_text(dockerfile))
             args = {"MARCH": opts.march, "JOBS": str(opts.jobs), **json.loads(labels[f"{LABEL}.build-args"])}
+            if METHOD_ARG.search(recipe_text(dockerfile)):  # a recipe that places slamrun's process by the name
+                args["METHOD"] = name
             note(f"build arguments: {json.dumps(args)}")
             run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)
     except BaseException:

@@ -30,7 +30,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from slamrun.methods.dpvo.process import frames, intrinsics, settings_over, weights_note, write_tum
+from slamrun.methods.gpu_process import frames, intrinsics, settings_over, weights_note, write_tum
 
 # demo.py's options and defaults (the ones slamrun's parameters set; tests compare them with demo.py)
 DEMO = {

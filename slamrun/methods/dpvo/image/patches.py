@@ -22,6 +22,9 @@ import sys
 here = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(here, "..", "common"))
 sys.path.insert(1, os.path.join(here, "..", "..", "recipes", "common"))  # in slamrun's tree
+COMPAT = os.path.join(here, "..", "torch_cuda", "torch_scatter_compat.py")  # in the image (the recipe's copy)
+if not os.path.isfile(COMPAT):  # in slamrun's tree
+    COMPAT = os.path.join(here, "..", "..", "recipes", "torch_cuda", "torch_scatter_compat.py")
 from patchlib import patch, sub  # noqa: E402
 
 AUTOCAST = 'autocast = lambda **kw: torch.autocast("cuda", **kw)  # slamrun: torch.cuda.amp.autocast is deprecated\n'
@@ -55,7 +58,7 @@ def eigen(root):
 
 def scatter(root):
     """torch_scatter's two functions from dpvo/_scatter.py (PyTorch's own scatter ops)."""
-    shutil.copyfile(os.path.join(here, "torch_scatter_compat.py"), os.path.join(root, "dpvo", "_scatter.py"))
+    shutil.copyfile(COMPAT, os.path.join(root, "dpvo", "_scatter.py"))
     print("patch: dpvo/_scatter.py (scatter_sum, scatter_softmax on PyTorch's scatter ops)")
     patch(root, "dpvo/blocks.py", "replace", "import torch_scatter\n", "from . import _scatter as torch_scatter\n")
     patch(root, "dpvo/net.py", "replace", "import torch_scatter\nfrom torch_scatter import scatter_sum\n",

@@ -12,7 +12,7 @@ its (empty) submodule folder thirdparty/lietorch; pytorch_scatter's is not neede
   set it), else Debian's /usr/include/eigen3.
 - torch_scatter (a compiled package PyPI serves as source only) is used for scatter_mean (droid_net.py) and scatter_sum
   (geom/ba.py) alone, and both are pure Python in pytorch_scatter itself (torch_scatter/scatter.py, on PyTorch's
-  scatter_add_): they become droid_slam/_scatter.py (slamrun/methods/dpvo/image/torch_scatter_compat.py, DPVO's too). Compiling
+  scatter_add_): they become droid_slam/_scatter.py (slamrun/methods/recipes/torch_cuda/torch_scatter_compat.py, DPVO's too). Compiling
   pytorch_scatter's own CUDA kernels, which these two never call, would cost build time for nothing.
 - factor_graph.py imports matplotlib.pyplot and never uses it; data_readers/rgbd_utils.py (imported through
   geom/graph_utils.py by droid_net.py) imports scipy for one training-data helper: the first import goes, the second
@@ -29,9 +29,9 @@ sys.path.insert(0, os.path.join(here, "..", "common"))
 sys.path.insert(1, os.path.join(here, "..", "..", "recipes", "common"))  # in slamrun's tree
 from patchlib import patch, sub  # noqa: E402
 
-COMPAT = os.path.join(here, "..", "dpvo", "torch_scatter_compat.py")
-if not os.path.isfile(COMPAT):  # in slamrun's tree (the image has dpvo/ beside)
-    COMPAT = os.path.join(here, "..", "..", "dpvo", "image", "torch_scatter_compat.py")
+COMPAT = os.path.join(here, "..", "torch_cuda", "torch_scatter_compat.py")  # in the image (the recipe's copy)
+if not os.path.isfile(COMPAT):  # in slamrun's tree
+    COMPAT = os.path.join(here, "..", "..", "recipes", "torch_cuda", "torch_scatter_compat.py")
 LIETORCH = "thirdparty/lietorch"
 EIGEN = (
     "import os\n"

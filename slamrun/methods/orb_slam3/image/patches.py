@@ -104,7 +104,7 @@ LOOP_OFF = """    if(!mbActiveLC)
 # ---------------------------------------------------------------------------------------------- trainer
 
 def adapt_trainer(folder):
-    """ORB-SLAM2's vocabulary trainer (slamrun/methods/orb_slam2/image/train_orb_vocabulary.cc, copied into `folder`) for
+    """ORB-SLAM2's vocabulary trainer (slamrun/methods/recipes/orb_vocabulary/train_orb_vocabulary.cc, copied into `folder`) for
     ORB-SLAM3's tree: its namespace, and the extractor's lapping-area argument ({0, 1000}: Frame.cc's monocular
     value, the whole image)."""
     n = sub(folder, "train_orb_vocabulary.cc", r"\bORB_SLAM2::", "ORB_SLAM3::", min_count=6)

@@ -51,7 +51,7 @@ COPY \
      pypi/numpy-2.2.6-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl \
      pypi/opencv_python_headless-4.11.0.86-cp37-abi3-manylinux_2_17_x86_64.manylinux2014_x86_64.whl \
      /opt/slamrun-build/pypi/
-COPY slamrun/methods/recipes/torch_cuda/requirements.txt /opt/slamrun-build/
+COPY recipes/torch_cuda/requirements.txt /opt/slamrun-build/
 RUN python3 -m venv --without-pip /opt/venv \
  && cd /opt/slamrun-build/pypi \
  && /opt/venv/bin/python pip-26.3-py3-none-any.whl/pip install --no-index --no-cache-dir --no-deps \
@@ -69,7 +69,7 @@ COPY \
      pypi/nvidia_cuda_cccl-13.0.85-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl \
      pypi/ninja-1.13.0-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl \
      /opt/slamrun-build/pypi-build/
-COPY slamrun/methods/recipes/torch_cuda/requirements-build.txt /opt/slamrun-build/
+COPY recipes/torch_cuda/requirements-build.txt /opt/slamrun-build/
 RUN cd /opt/slamrun-build/pypi-build \
  && /opt/venv/bin/python -m pip install --no-index --no-cache-dir --find-links . \
       --require-hashes --no-deps -r /opt/slamrun-build/requirements-build.txt \
