@@ -145,9 +145,7 @@ def test_the_extension_build_script_compiles_with_the_wheels_toolkit_for_the_giv
         r"COPY [^\n]*recipes/common/build-torch-extension.sh[^\n]* /opt/slamrun-build/docker/common/",
         copies,
     )
-    assert re.search(
-        r"COPY [^\n]*method/image/build-extensions.sh[^\n]* /opt/slamrun-build/docker/dpvo/", copies
-    )
+    assert re.search(r"COPY [^\n]*method/image/build-extensions.sh[^\n]* /opt/slamrun-build/docker/dpvo/", copies)
     assert native.NATIVE["dpvo"].setups == ((".", ("cuda_corr", "cuda_ba", "lietorch_backends")),)
     res = subprocess.run(["bash", "-n", str(RECIPE / "build-extensions.sh")], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
