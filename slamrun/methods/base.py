@@ -23,6 +23,9 @@ from slamrun.methods.declare import NativeMethod, Source, VerifyScope, Vocabular
 MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (MAX_ARG_STRLEN)
 
 
+BUILT_IN = Path(__file__).resolve().parent  # slamrun/methods/: each folder with an __init__.py is a method
+
+
 def folder_name(module: str) -> str:
     """A built-in method's name: its folder's (`slamrun.methods.dso` -> `dso`), so a folder is a method."""
     return module.rsplit(".", 1)[-1]
@@ -78,6 +81,19 @@ class Method(ABC):
     # None (threads_problem): a plug-in declaring another value is not registered; its busy_threads() returning one
     # is its own failure (guarded)
     threads: ClassVar[int | None] = 1
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        """A built-in method's folder names it: the class declared in slamrun/methods/<folder>/__init__.py takes the
+        folder's name, and the tag of the image its image/Dockerfile builds, unless it declares its own; so a copy of
+        a folder is a method of its own, whatever its class body says."""
+        super().__init_subclass__(**kwargs)
+        path = Path(getattr(sys.modules.get(cls.__module__), "__file__", None) or "/").resolve()
+        if path.name != "__init__.py" or path.parent.parent != BUILT_IN:
+            return
+        if "name" not in vars(cls):
+            cls.name = path.parent.name
+        if "image" not in vars(cls) and (path.parent / "image" / "Dockerfile").is_file():
+            cls.image = image_tag(cls.name)
 
     def __init__(self, params: BaseModel | dict | None = None):
         self.params = params if isinstance(params, BaseModel) else self.Params.model_validate(params or {})

@@ -13,7 +13,6 @@ from pathlib import Path
 from pydantic import Field
 
 from slamrun.datasets.view import PreparedView
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source
 from slamrun.methods.dso_family import DsoFamily, DsoParams
 from slamrun.methods.libraries import MONODEPTH
@@ -25,8 +24,6 @@ class CnnDsoParams(DsoParams, GpuOptionalParams):
 
 
 class CnnDso(GpuOptional, DsoFamily):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "cnn_dso",

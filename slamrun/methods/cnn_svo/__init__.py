@@ -20,7 +20,7 @@ from pydantic import Field
 from slamrun.core.trajectory import Trajectory, read_timestamped_3x4
 from slamrun.datasets.view import PreparedView, Profile
 from slamrun.errors import MethodFailure, TrajectoryFormatError
-from slamrun.methods.base import folder_name, image_tag, read_tum_output
+from slamrun.methods.base import read_tum_output
 from slamrun.methods.declare import Source
 from slamrun.methods.libraries import MONODEPTH
 from slamrun.methods.svo_family import SvoFamily, SvoParams
@@ -57,8 +57,6 @@ class CnnSvoParams(SvoParams, GpuOptionalParams):
 
 
 class CnnSvo(GpuOptional, SvoFamily):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 2  # the frame handler and its depth-filter thread
     sources = (
         Source(

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from slamrun.methods.base import folder_name
 from slamrun.methods.sfm_family import SfmFamily, SfmParams
 
 
@@ -25,7 +24,6 @@ class ColmapParams(SfmParams):
 
 
 class Colmap(SfmFamily):
-    name = folder_name(__name__)  # its folder's
     Params = ColmapParams
     mapper = "incremental"
 

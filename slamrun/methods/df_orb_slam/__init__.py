@@ -21,7 +21,6 @@ from typing import Literal
 from pydantic import Field
 
 from slamrun.datasets.view import PreparedView
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, Vocabulary
 from slamrun.methods.orb_slam2_family import OrbSlam2Family, OrbSlam2Params, orb_settings_yaml
 
@@ -36,8 +35,6 @@ class DfOrbSlamParams(OrbSlam2Params):
 
 
 class DfOrbSlam(OrbSlam2Family):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "df_orb_slam",

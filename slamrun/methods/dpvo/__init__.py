@@ -22,7 +22,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import Profile
-from slamrun.methods.base import folder_name, image_tag, strided
+from slamrun.methods.base import strided
 from slamrun.methods.declare import NativeMethod, Source, Weights
 from slamrun.methods.native_gpu import NativeGpuMethod
 
@@ -71,9 +71,7 @@ class DpvoParams(BaseModel):
 
 
 class Dpvo(NativeGpuMethod):
-    name = folder_name(__name__)  # its folder's
     seed_param = "seed"
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 2  # the network's process and its frame reader (PREFETCH frames ahead), beside the GPU
     sources = (
         Source(

@@ -24,7 +24,6 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import Profile
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import NativeMethod, Source, Weights
 from slamrun.methods.native_gpu import NativeGpuMethod
 
@@ -71,9 +70,7 @@ class DroidSlamParams(BaseModel):
 
 
 class DroidSlam(NativeGpuMethod):
-    name = folder_name(__name__)  # its folder's
     seed_param = "seed"
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 2  # the network's process and its frame reader, beside the GPU
     # with its submodules at the commits it records: thirdparty/lietorch (Lie groups on PyTorch, compiled with it)
     # and thirdparty/pytorch_scatter, not compiled (its scatter_sum and scatter_mean, pure Python there, are

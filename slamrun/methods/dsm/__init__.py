@@ -13,7 +13,6 @@ from pathlib import Path
 from pydantic import Field
 
 from slamrun.datasets.view import PreparedView, Profile
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source
 from slamrun.methods.upstream import UpstreamMethod, UpstreamParams, pinhole_of
 
@@ -27,8 +26,6 @@ class DsmParams(UpstreamParams):
 
 
 class Dsm(UpstreamMethod):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "dsm",

@@ -8,14 +8,11 @@ frame 0). DSO exits 0 even when it loaded nothing, so an empty result.txt is a f
 
 from __future__ import annotations
 
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source
 from slamrun.methods.dso_family import DsoFamily
 
 
 class Dso(DsoFamily):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "dso",

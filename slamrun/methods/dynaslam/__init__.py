@@ -14,7 +14,6 @@ from pydantic import Field
 
 from slamrun.datasets.view import PreparedView
 from slamrun.errors import MethodFailure
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, VerifyScope, Vocabulary, Weights
 from slamrun.methods.orb_slam2_family import OrbSlam2Family, OrbSlam2Params
 
@@ -25,8 +24,6 @@ class DynaSlamParams(OrbSlam2Params):
 
 
 class DynaSlam(OrbSlam2Family):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "dynaslam",

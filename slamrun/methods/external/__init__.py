@@ -17,7 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from slamrun.core.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
 from slamrun.datasets.view import PreparedView, Profile
 from slamrun.errors import MethodFailure
-from slamrun.methods.base import MAX_ARG_BYTES, Method, executable_problem, folder_name, read_tum_output, require_poses
+from slamrun.methods.base import MAX_ARG_BYTES, Method, executable_problem, read_tum_output, require_poses
 
 
 class OutputFormat(StrEnum):
@@ -43,7 +43,6 @@ class ExternalParams(BaseModel):
 
 
 class External(Method):
-    name = folder_name(__name__)  # its folder's
     native = True
     Params = ExternalParams
 

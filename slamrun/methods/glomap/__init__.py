@@ -13,7 +13,6 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from slamrun.methods.base import folder_name
 from slamrun.methods.sfm_family import SfmFamily, SfmParams
 
 
@@ -29,7 +28,6 @@ class GlomapParams(SfmParams):
 
 
 class Glomap(SfmFamily):
-    name = folder_name(__name__)  # its folder's
     Params = GlomapParams
     mapper = "global"
 

@@ -14,7 +14,6 @@ from pathlib import Path
 from pydantic import Field
 
 from slamrun.datasets.view import PreparedView
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, Vocabulary
 from slamrun.methods.dso_family import DsoFamily, DsoParams
 
@@ -24,8 +23,6 @@ class LdsoParams(DsoParams):
 
 
 class Ldso(DsoFamily):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "ldso",

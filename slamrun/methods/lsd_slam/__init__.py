@@ -26,14 +26,11 @@ import numpy as np
 from slamrun.core.trajectory import Trajectory, from_arrays
 from slamrun.datasets.view import PreparedView, Profile
 from slamrun.errors import MethodFailure
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source
 from slamrun.methods.upstream import UpstreamMethod, UpstreamParams
 
 
 class LsdSlam(UpstreamMethod):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 2  # tracking and mapping (multiThreading); loop closure adds its search and optimisation threads
     sources = (
         Source(

@@ -7,14 +7,11 @@ variable ORB_SLAM2_NO_LOOP=1) and turns the viewer off.
 
 from __future__ import annotations
 
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, Vocabulary
 from slamrun.methods.orb_slam2_family import OrbSlam2Family
 
 
 class OrbSlam2(OrbSlam2Family):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "orb_slam2",

@@ -29,7 +29,6 @@ from slamrun.core.inputs import read_text_bounded
 from slamrun.core.trajectory import ReadReport, Trajectory, read_tum
 from slamrun.datasets.view import PreparedView, Profile
 from slamrun.errors import MethodFailure, SlamRunError, TrajectoryFormatError
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source, Vocabulary
 from slamrun.methods.upstream import UpstreamMethod, UpstreamParams, fps_of, pinhole_of
 
@@ -164,8 +163,6 @@ def evaluated_map(workdir: Path, refuse: bool) -> Trajectory:
 
 
 class OrbSlam3(UpstreamMethod):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     threads = 3  # tracking, local mapping and loop closing
     # after the study (shared/upstream README, "Methods after the study"): ORB-SLAM3 v1.0; the stored archive
     # lacks the vocabulary, Examples_old/ and the IMU data folders (one file a line in its .absent.txt)

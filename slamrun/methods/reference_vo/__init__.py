@@ -10,7 +10,7 @@ from pathlib import Path
 from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import PreparedView, Profile
-from slamrun.methods.base import Method, PythonProcess, folder_name, image_tag
+from slamrun.methods.base import Method, PythonProcess
 
 
 class ReferenceVOParams(BaseModel):
@@ -24,9 +24,7 @@ class ReferenceVOParams(BaseModel):
 
 
 class ReferenceVO(PythonProcess, Method):
-    name = folder_name(__name__)  # its folder's
     deterministic = True  # identical runs whatever the seed (its RANSACs seed themselves): trials are copies
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     verified = False  # slamrun's own baseline: its tests check it against known answers, `slamrun verify` does not
     profile = Profile.rectified
     native = True

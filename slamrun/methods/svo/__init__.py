@@ -21,14 +21,11 @@ tracked the sequence at 25 px, 4 of 12 at 30 px), while at 10 px (3-4 frames, 0.
 
 from __future__ import annotations
 
-from slamrun.methods.base import folder_name, image_tag
 from slamrun.methods.declare import Source
 from slamrun.methods.svo_family import SvoFamily
 
 
 class Svo(SvoFamily):
-    name = folder_name(__name__)  # its folder's
-    image = image_tag(name)  # built from image/Dockerfile in its folder
     sources = (
         Source(
             "svo",
