@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 
 from slamrun.errors import SlamRunError
+from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import MAIN_METRICS, STUDY_METRICS, TRAJECTORY_STATS_METRICS
 
 NO_DATASET = "all"  # the one dataset of a table without a dataset column (or the name of rows that have none)
@@ -17,12 +18,12 @@ def load_results(path: Path) -> pd.DataFrame:
     """results.csv or results.parquet, or a results directory: its ledger when it has one (the truth, also while
     a campaign runs and before its first export), else the table it holds."""
     path = Path(path)
-    ledger_path = path / "ledger.sqlite"
+    ledger_path = CampaignFiles(path).ledger
     if path.is_dir() and (ledger_path.exists() or ledger_path.is_symlink()):  # a folder or a FIFO: one line, below
         from slamrun.engine.export import results_frame
         from slamrun.engine.ledger import Ledger
 
-        ledger = Ledger(path / "ledger.sqlite", read_only=True)
+        ledger = Ledger(CampaignFiles(path).ledger, read_only=True)
         try:
             df = results_frame(ledger)
         finally:
@@ -31,7 +32,7 @@ def load_results(path: Path) -> pd.DataFrame:
             raise SlamRunError(f"{path}: no run in its ledger yet")
         return df
     if path.is_dir():
-        path = path / "results.parquet" if (path / "results.parquet").exists() else path / "results.csv"
+        path = CampaignFiles(path).table()
     if not path.exists():
         raise SlamRunError(f"{path}: no results; run `slamrun campaign` first")
     df = pd.read_parquet(path) if path.suffix == ".parquet" else read_csv(path)

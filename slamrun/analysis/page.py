@@ -16,6 +16,7 @@ from slamrun.analysis import table_files
 from slamrun.analysis.interactive import MAX_POINTS, PLOTLY_JS
 from slamrun.analysis.paths import SequencePaths
 from slamrun.analysis.provenance import Provenance
+from slamrun.results.files import CampaignFiles
 from slamrun.results.marks import marked
 from slamrun.results.marks import notes as notes_of
 
@@ -176,8 +177,8 @@ def provenance_html(p: Provenance, root: Path, results: Path) -> str:
         out += f"<details><summary>{esc(p.spec_note)}</summary><pre>{esc(p.spec_text)}</pre></details>"
     else:
         out += f"<p>{esc(p.spec_note)}</p>"
-    files = {"spec.resolved.yaml": results / "spec.resolved.yaml"}
-    files |= {"results.csv": results / "results.csv", "results.parquet": results / "results.parquet"}
+    where = CampaignFiles(results)
+    files = {p.name: p for p in (where.spec, where.results_csv, where.results_parquet)}
     return out + links(files, root)
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from slamrun.engine.paths import RunPaths
 from slamrun.errors import SlamRunError
 
 
@@ -85,12 +86,12 @@ def sequence_paths(df: pd.DataFrame, sequence: str, metric: str) -> SequencePath
             run_dir = Path(row.run_dir)
             try:
                 if gt is None:
-                    folder = Path(json.loads((run_dir / "run.json").read_text())["sequence_dir"])
+                    folder = Path(json.loads(RunPaths.run_json(run_dir).read_text())["sequence_dir"])
                     seq = open_sequence(folder)
                     gt, layout = seq.groundtruth(), seq.layout
                     full_path = folder / "groundtruth_full.txt"
                     full = read_tum(full_path).positions if full_path.is_file() else None
-                traj = read_tum(run_dir / "trajectory.txt")
+                traj = read_tum(RunPaths.trajectory(run_dir))
             except (OSError, KeyError, ValueError, TypeError, SlamRunError):
                 continue
             positions = aligned(traj, gt, metric)

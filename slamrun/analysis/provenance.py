@@ -18,8 +18,8 @@ from slamrun.backends.machine import cpu_model, source_commit
 from slamrun.core.inputs import load_yaml_file, read_text_bounded
 from slamrun.engine.session import measurement_conditions
 from slamrun.errors import SlamRunError
+from slamrun.results.files import SPEC, CampaignFiles
 
-SPEC_FILE = "spec.resolved.yaml"
 IMAGES_FILE = "images.json"
 MAX_BYTES = 4 << 20  # spec and images.json: a few kB in practice
 
@@ -95,7 +95,7 @@ def run_commits(df: pd.DataFrame) -> str:
 
 def _ledger_meta(results: Path) -> dict:
     """The ledger's campaign, spec and session records, and its runs' first start and last end; {} without one."""
-    path = results / "ledger.sqlite"
+    path = CampaignFiles(results).ledger
     if not path.is_file():
         return {}
     from slamrun.engine.ledger import Ledger
@@ -120,9 +120,9 @@ def _ledger_meta(results: Path) -> dict:
 
 def _spec(results: Path, recorded: dict | None) -> tuple[dict | None, str | None, str]:
     """The spec as run: its values (the ledger's record, else the file's), its text and where the text is from."""
-    path = results / SPEC_FILE
+    path = CampaignFiles(results).spec
     if not (path.exists() or path.is_symlink()):
-        return recorded, None, f"no {SPEC_FILE} in {results}"
+        return recorded, None, f"no {SPEC} in {results}"
     try:
         text = read_text_bounded(path, MAX_BYTES, "resolved spec")
     except SlamRunError as exc:
@@ -131,8 +131,8 @@ def _spec(results: Path, recorded: dict | None) -> tuple[dict | None, str | None
         try:
             recorded = load_yaml_file(path, "resolved spec")
         except SlamRunError as exc:
-            return None, text, f"{SPEC_FILE} (not a readable spec: {exc})"
-    return (recorded if isinstance(recorded, dict) else None), text, SPEC_FILE
+            return None, text, f"{SPEC} (not a readable spec: {exc})"
+    return (recorded if isinstance(recorded, dict) else None), text, SPEC
 
 
 def _images(results: Path) -> tuple[dict[str, dict[str, str]], str]:

@@ -8,6 +8,7 @@ from pathlib import Path
 from slamrun.cli.console import console
 from slamrun.core import jsonio
 from slamrun.core.formats import FORMATS, RECOGNISED
+from slamrun.results.files import CampaignFiles
 
 
 def add_commands(sub) -> None:
@@ -97,7 +98,7 @@ def cmd_import(args) -> int:
     check_campaign_folder(args.campaign)  # before the lock file: never write into a folder that is not a campaign's
     with ResultsLock(args.campaign):  # not while a campaign writes the same ledger
         report = import_trajectories(args.campaign, args.sources, args.label, args.pattern, args.format)
-        ledger = Ledger(args.campaign / "ledger.sqlite")
+        ledger = Ledger(CampaignFiles(args.campaign).ledger)
         try:
             export(ledger, args.campaign)
         finally:

@@ -10,6 +10,7 @@ from pathlib import Path
 from slamrun.cli.console import console
 from slamrun.core import jsonio
 from slamrun.errors import SlamRunError
+from slamrun.results.files import CampaignFiles
 
 
 def add_commands(sub) -> None:
@@ -200,7 +201,7 @@ def _print_summary(campaign: str, results: Path, csv: Path) -> None:
         console.print(
             pooled_table(pooled_summary(df), f"{campaign}: per method, all datasets (pooled)", section_flags(df))
         )
-    ledger = Ledger(results / "ledger.sqlite", read_only=True)
+    ledger = Ledger(CampaignFiles(results).ledger, read_only=True)
     try:
         failed, more = failed_runs_table(ledger.rows(), campaign)
     finally:

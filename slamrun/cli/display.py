@@ -16,6 +16,7 @@ from rich.progress_bar import ProgressBar
 from rich.table import Table
 from rich.text import Text
 
+from slamrun.engine.paths import RunPaths
 from slamrun.engine.progress import Figures, Tracker, duration, one_line
 from slamrun.engine.session import read_tracker
 from slamrun.results.marks import marked
@@ -195,7 +196,7 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
         t.add_column(c)
     for r in failed[:limit]:
         log = (
-            str(Path(r["run_dir"]) / "log.txt")
+            str(RunPaths.log(Path(r["run_dir"])))
             if r.get("run_dir") and r.get("failure") not in INFRA_FAILURES
             else (r.get("message") or "")[:80]
         )

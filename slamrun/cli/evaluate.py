@@ -15,6 +15,7 @@ from slamrun.core import jsonio
 from slamrun.core.formats import FORMATS, RECOGNISED
 from slamrun.core.inputs import read_bounded
 from slamrun.errors import SlamRunError
+from slamrun.results.files import RUN_RECORD
 from slamrun.results.vocabulary import METRIC_NAMES
 
 GT_FORMATS = ("tum-mono", *FORMATS)  # TUM-Mono's groundtruthSync.txt, and the trajectory formats
@@ -161,7 +162,7 @@ def _same_sequence(folder: Path, trajectories: list[Path]) -> None:
     name = folder.resolve().name
     digest = None  # the folder's (computed once, when a run records one: its small files, its frames' list)
     for traj in trajectories:
-        record = Path(traj).parent / "run.json"
+        record = Path(traj).parent / RUN_RECORD
         run = _run_record(record, traj, folder)
         if run is None:
             continue  # not a run's folder: evaluated as any file

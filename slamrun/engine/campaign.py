@@ -36,6 +36,7 @@ from slamrun.engine.session import session_record
 from slamrun.engine.spec import CampaignSpec
 from slamrun.engine.spec_file import cpu_warnings, output_problems
 from slamrun.errors import BackendUnreachable, DatasetError, LedgerLostError, StorageError, storage_problem
+from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import is_infra
 
 
@@ -233,12 +234,12 @@ def _open_ledger(spec: CampaignSpec) -> Ledger:
     results = spec.results
     claim_results_folder(results)
     claim_output_folder(spec.cache, CACHE)
-    ledger = Ledger(results / "ledger.sqlite")
+    ledger = Ledger(CampaignFiles(results).ledger)
     ledger.set_meta("campaign", spec.name)
     if not ledger.meta("results_id"):  # this results folder's identity, on its containers (moves with it)
         ledger.set_meta("results_id", uuid.uuid4().hex)
     ledger.set_meta("spec", spec.model_dump(mode="json"))
-    (results / "spec.resolved.yaml").write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
+    CampaignFiles(results).spec.write_text(yaml.safe_dump(json.loads(spec.model_dump_json()), sort_keys=False))
     return ledger
 
 

@@ -22,6 +22,7 @@ from slamrun.engine.progress import eta, overhead_per_run, run_group, wall_times
 from slamrun.engine.reevaluate import stale
 from slamrun.engine.spec import CampaignSpec
 from slamrun.errors import DatasetError
+from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import IMPORTED, is_infra
 
 # A grey frame written as PNG at level 1, per pixel: the synthetic rooms' and drives' views measured 0.59-0.62, the
@@ -55,7 +56,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
     runs = plan(spec)
     rows: dict[str, dict] = {}
     session: dict = {}
-    path = spec.results / "ledger.sqlite"
+    path = CampaignFiles(spec.results).ledger
     if path.exists() and path.stat().st_size:
         ledger = Ledger(path, read_only=True)
         try:

@@ -9,6 +9,7 @@ import pandas as pd
 
 from slamrun.datasets.perturb import NONE
 from slamrun.engine.ledger import Ledger
+from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, TEXT_METRIC_COLUMNS
 
 COLUMNS = (
@@ -58,11 +59,11 @@ def results_frame(ledger: Ledger) -> pd.DataFrame:
 def export(ledger: Ledger, results: Path) -> Path:
     """Write results.csv and results.parquet atomically; returns the CSV path."""
     df = results_frame(ledger)
-    csv_path = results / "results.csv"
+    csv_path = CampaignFiles(results).results_csv
     tmp = csv_path.with_suffix(".csv.tmp")
     df.to_csv(tmp, index=False)
     os.replace(tmp, csv_path)
-    pq = results / "results.parquet"
+    pq = CampaignFiles(results).results_parquet
     tmp = pq.with_suffix(".parquet.tmp")
     df.to_parquet(tmp, index=False)
     os.replace(tmp, pq)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from slamrun.errors import SlamRunError
+from slamrun.results import files
 
 
 class FolderRefused(SlamRunError):
@@ -35,8 +36,8 @@ class OutputFolder:
 
 RESULTS = OutputFolder(
     "results folder",
-    ".slamrun-results",
-    (".slamrun-results", "ledger.sqlite", "runner.lock"),
+    files.MARKER,
+    (files.MARKER, files.LEDGER, files.LOCK),
     "overwrite its results.csv, report/ and spec.resolved.yaml",
 )
 CACHE = OutputFolder(

@@ -56,6 +56,7 @@ from slamrun.engine.run_evaluation import evaluate_trajectory, run_frames, settl
 from slamrun.engine.spec import CampaignSpec
 from slamrun.engine.spec_file import load_spec
 from slamrun.errors import SlamRunError, TrajectoryFormatError
+from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import IMPORTED
 
 STUDY_PATTERN = r"(?:^|/)[a-z0-9-]+_(?P<direction>fw|bw)(?:__|/)sequence_(?P<sequence>\d+)_(?P<trial>\d+)\.txt$"
@@ -332,7 +333,7 @@ def import_trajectories(
         _check_sizes(entries)
         _check_one_file_per_run(entries)
         report = ImportReport(skipped=skipped)
-        ledger = Ledger(results / "ledger.sqlite")
+        ledger = Ledger(CampaignFiles(results).ledger)
         stack.callback(ledger.close)
         private = Path(tempfile.mkdtemp(prefix=".import-", dir=results))
         stack.callback(shutil.rmtree, private, True)
@@ -412,12 +413,12 @@ def _commit(results: Path, staged: list[tuple[Path, RunKey, dict]], ledger: Ledg
 
 def _campaign_spec(results: Path) -> CampaignSpec:
     check_campaign_folder(results)
-    return load_spec(results / "spec.resolved.yaml", check_gpu=False)  # importing runs needs no GPU here
+    return load_spec(CampaignFiles(results).spec, check_gpu=False)  # importing runs needs no GPU here
 
 
 def check_campaign_folder(results: Path) -> None:
     """A campaign's results folder (its ledger and resolved spec), or ImportRefused saying what to do."""
-    if not (results / "ledger.sqlite").is_file() or not (results / "spec.resolved.yaml").is_file():
+    if not CampaignFiles(results).ledger.is_file() or not CampaignFiles(results).spec.is_file():
         raise ImportRefused(
             f"{results}: not a campaign's results folder (no ledger.sqlite and spec.resolved.yaml); run "
             "`slamrun campaign SPEC` once (`--dry-run` writes nothing), then import into its results folder"
@@ -426,7 +427,7 @@ def check_campaign_folder(results: Path) -> None:
 
 def _recorded_sha(run_dir: Path) -> str | None:
     try:
-        return json.loads((run_dir / "run.json").read_text())["imported"]["sha256"]
+        return json.loads(RunPaths.run_json(run_dir).read_text())["imported"]["sha256"]
     except (OSError, ValueError, KeyError, TypeError):
         return None
 

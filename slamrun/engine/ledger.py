@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from slamrun.errors import LedgerLockedError, LedgerLostError, SlamRunError, StorageError
+from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import FLAG_COLUMNS, IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
 
 if TYPE_CHECKING:
@@ -127,7 +128,7 @@ def campaign_name(path: Path) -> str | None:
 def campaign_owner_problem(results: Path, name: str) -> str | None:
     """Why campaign `name` may not write into `results`, or None: a results folder belongs to the campaign that made
     it (the name in its ledger); another spec with the same folder would take over its results.csv and report."""
-    ledger = results / "ledger.sqlite"
+    ledger = CampaignFiles(results).ledger
     if not ledger.exists():
         return None
     try:
@@ -147,7 +148,7 @@ class ResultsLock:
     """An exclusive lock on a results directory, naming the holder's PID to whoever else asks."""
 
     def __init__(self, results: Path):
-        self.path = results / "runner.lock"
+        self.path = CampaignFiles(results).lock
         self._fh = None
 
     def acquire(self) -> None:

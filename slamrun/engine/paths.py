@@ -11,6 +11,7 @@ from pathlib import Path
 
 from slamrun.engine.plan import RunKey
 from slamrun.errors import SlamRunError
+from slamrun.results import files
 from slamrun.results.vocabulary import is_infra
 
 
@@ -43,11 +44,11 @@ class RunPaths:
 
     @staticmethod
     def trajectory(run_dir: Path) -> Path:
-        return run_dir / "trajectory.txt"
+        return run_dir / files.TRAJECTORY
 
     @staticmethod
     def log(run_dir: Path) -> Path:
-        return run_dir / "log.txt"
+        return run_dir / files.LOG
 
     @staticmethod
     def resources(run_dir: Path) -> Path:
@@ -55,7 +56,7 @@ class RunPaths:
 
     @staticmethod
     def run_json(run_dir: Path) -> Path:
-        return run_dir / "run.json"
+        return run_dir / files.RUN_RECORD
 
     def clear_staging(self, up_to: int | None = None) -> None:
         """Remove half-written attempts (a crash mid-run leaves them): those numbered 1 to `up_to`, checked one by
@@ -79,7 +80,7 @@ def finished_record(run_dir: Path, key: str) -> dict | None:
     """The run.json of a run that finished in `run_dir` (done, or failed by the method's own behaviour), or
     None when the folder holds no complete run of this key."""
     try:
-        rec = json.loads((run_dir / "run.json").read_text())
+        rec = json.loads(RunPaths.run_json(run_dir).read_text())
     except (OSError, ValueError):
         return None
     if not isinstance(rec, dict) or rec.get("key") != key or rec.get("state") not in ("done", "failed"):

@@ -21,6 +21,7 @@ from slamrun.engine.paths import RunPaths
 from slamrun.engine.run_evaluation import EvalSettings, evaluate_trajectory, run_frames, settle
 from slamrun.engine.spec import CampaignSpec
 from slamrun.errors import MethodFailure, SlamRunError, TrajectoryFormatError
+from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import DIVERGED, IMPORTED, INFRA_FAILURES, METRIC_COLUMNS, UNDER_MIN_COVERAGE
 
 LOST_BY_LOG = "the method reported it was lost"  # execute._classify's message of a loss it may recover from
@@ -154,7 +155,7 @@ def reevaluate_folder(results: Path, log=print) -> int:
     from slamrun.engine.spec_file import load_spec
     from slamrun.errors import LedgerLockedError
 
-    if not (results / "spec.resolved.yaml").is_file() or not (results / "ledger.sqlite").is_file():
+    if not CampaignFiles(results).spec.is_file() or not CampaignFiles(results).ledger.is_file():
         return 0
     lock = ResultsLock(results)
     try:
@@ -163,11 +164,11 @@ def reevaluate_folder(results: Path, log=print) -> int:
         return 0
     try:
         try:
-            spec = load_spec(results / "spec.resolved.yaml", check_files=False, check_gpu=False)
+            spec = load_spec(CampaignFiles(results).spec, check_files=False, check_gpu=False)
         except SlamRunError as exc:
             log(f"warning: {results}: its spec as run cannot be read, so no run was re-evaluated ({exc})")
             return 0
-        ledger = Ledger(results / "ledger.sqlite")
+        ledger = Ledger(CampaignFiles(results).ledger)
         try:
             n = reevaluate(ledger, spec, log=log)
             if n:

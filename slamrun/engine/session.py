@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.progress import Figures, Tracker
+from slamrun.results.files import CampaignFiles
 
 if TYPE_CHECKING:
     from slamrun.engine.spec import CampaignSpec
@@ -39,7 +40,7 @@ def session_alive(session: dict | None) -> bool:
 def read_tracker(results: Path) -> Tracker | None:
     """A Tracker over a results folder's ledger (rows, session, campaign name), read without writing or locking
     anything; None when the ledger does not exist yet. A session whose process is gone is shown as ended."""
-    path = Path(results) / "ledger.sqlite"
+    path = CampaignFiles(Path(results)).ledger
     if not path.exists():
         return None
     ledger = Ledger(path, read_only=True)

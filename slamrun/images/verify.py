@@ -28,10 +28,12 @@ import yaml
 import slamrun.methods
 from slamrun.core import jsonio, metrics
 from slamrun.core.trajectory import Trajectory, read_tum
+from slamrun.engine.paths import RunPaths
 from slamrun.errors import MetricError, SlamRunError
 from slamrun.images.build import BuildOptions, build, buildable, last_record
 from slamrun.methods.base import Method
 from slamrun.methods.declare import VerifyScope, declared
+from slamrun.results.files import CampaignFiles
 
 DEFAULT_RESULTS = Path(".cache") / "verify"  # under the current directory: where the user works
 SEQUENCES = ("room_a", "room_b")
@@ -283,7 +285,7 @@ def _campaign(
     path.write_text(yaml.safe_dump(spec, sort_keys=False))
     run_campaign(load_spec(path), log=log)
     extents = {seq: scene_extent(data / seq) for seq in sequences}
-    ledger = Ledger(results / name / "ledger.sqlite")
+    ledger = Ledger(CampaignFiles(results / name).ledger)
     try:
         done = [r for r in ledger.rows() if r["active"]]
     finally:
@@ -298,7 +300,8 @@ def _campaign(
     settled = [
         e / extents[r["sequence"]]
         for r in ok
-        if (e := settled_error(Path(r["run_dir"]) / "trajectory.txt", data / r["sequence"], r["direction"])) is not None
+        if (e := settled_error(RunPaths.trajectory(Path(r["run_dir"])), data / r["sequence"], r["direction"]))
+        is not None
     ]
     if settled:
         row.settled_rel_median, row.settled_rel_max = statistics.median(settled), max(settled)

@@ -33,7 +33,10 @@ from aiohttp import web
 
 from slamrun.analysis.page import INLINE_SCRIPTS
 from slamrun.core import jsonio
+from slamrun.engine.paths import RunPaths
 from slamrun.errors import SlamRunError
+from slamrun.results import files as campaign_files
+from slamrun.results.files import CampaignFiles
 from slamrun.serve import firstpaint, runview
 from slamrun.serve.connections import Watch
 from slamrun.serve.folders import campaigns, open_served
@@ -45,7 +48,13 @@ MAX_STREAMS = 64  # viewers streaming at once; one more is told to come back lat
 MAX_PATHS = 32  # path figures kept in memory
 MAX_RUNS_LISTED = 2000
 CHUNK_BYTES = 256 * 1024  # a served file is read and sent in pieces of this size
-SERVED_TOP = ("report", "runs", "results.csv", "results.parquet", "spec.resolved.yaml")
+SERVED_TOP = (
+    campaign_files.REPORT,
+    campaign_files.RUNS,
+    campaign_files.RESULTS_CSV,
+    campaign_files.RESULTS_PARQUET,
+    campaign_files.SPEC,
+)
 STATIC = {"page.js": "application/javascript", "page.css": "text/css"}
 _BAD_RAW = re.compile(r"%(2f|5c|00|2e)|\\|\x00", re.IGNORECASE)
 TOKEN_COOKIE = "slamrun_token"
@@ -113,7 +122,8 @@ class Hub:
     async def path(self, name: str, key: str) -> dict:
         folder = self.folder(name)
         run = runview.run_folder(folder, key)
-        stamp = (run / "trajectory.txt").stat().st_mtime_ns if run and (run / "trajectory.txt").is_file() else None
+        traj = RunPaths.trajectory(run) if run else None
+        stamp = traj.stat().st_mtime_ns if traj and traj.is_file() else None
         cache_key = (name, key, stamp)
         if cache_key in self.paths:
             self.paths.move_to_end(cache_key)
@@ -262,7 +272,7 @@ def _html(title: str, body_attrs: str, main: str = "<p>loading...</p>", data: st
 
 async def index(request: web.Request) -> web.Response:
     found = request.app["hub"].campaigns()
-    if len(found) == 1 and (request.app["hub"].root / "ledger.sqlite").is_file():
+    if len(found) == 1 and CampaignFiles(request.app["hub"].root).ledger.is_file():
         raise web.HTTPFound(f"/c/{next(iter(found))}/")
     return web.Response(text=_html("slamrun: campaigns", "data-view=campaigns"), content_type="text/html")
 
@@ -382,7 +392,7 @@ async def runs(request: web.Request) -> web.Response:
     cols = ("key", "label", "dataset", "sequence", "direction", "trial", "e_align", "ate_rmse")
 
     def read() -> list[dict]:
-        ledger = Ledger(folder / "ledger.sqlite", read_only=True)
+        ledger = Ledger(CampaignFiles(folder).ledger, read_only=True)
         try:
             rows = ledger.rows(state="done", columns=cols)
         finally:

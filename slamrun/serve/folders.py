@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import BinaryIO
 
 from slamrun.errors import SlamRunError
+from slamrun.results.files import LEDGER
 
-LEDGER = "ledger.sqlite"
 MAX_CAMPAIGNS = 500  # a folder listing more is refused: the server lists, it does not crawl
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
 

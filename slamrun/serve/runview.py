@@ -10,6 +10,7 @@ import stat
 from pathlib import Path
 
 from slamrun.engine.ledger import Ledger
+from slamrun.engine.paths import RunPaths
 from slamrun.errors import SlamRunError
 from slamrun.serve.folders import LEDGER
 
@@ -44,7 +45,7 @@ def log_tail(results: Path, key: str) -> str | None:
     folder = run_folder(results, key) if run_row(results, key) else None
     if folder is None:
         return None
-    log = folder / "log.txt"
+    log = RunPaths.log(folder)
     try:
         fd = os.open(log, os.O_RDONLY | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
@@ -75,14 +76,14 @@ def path_figure(results: Path, key: str) -> dict:
     folder = run_folder(results, key)
     if folder is None:
         raise SlamRunError(f"run {key}: its folder is not under this campaign's runs/ (moved or deleted)")
-    run_json = folder / "run.json"
+    run_json = RunPaths.run_json(folder)
     if not run_json.is_file() or run_json.stat().st_size > MAX_RUN_JSON:
         raise SlamRunError(f"run {key}: no readable run.json")
     sequence_dir = json.loads(run_json.read_text()).get("sequence_dir")
     seq = open_sequence(Path(sequence_dir))
     gt = seq.groundtruth()
     metric = "e_align" if row.get("e_align") is not None else "ate_rmse"
-    positions = aligned(read_tum(folder / "trajectory.txt"), gt, metric)
+    positions = aligned(read_tum(RunPaths.trajectory(folder)), gt, metric)
     if positions is None:
         raise SlamRunError(f"run {key}: under three of its poses meet the ground truth")
     full_path = Path(sequence_dir) / "groundtruth_full.txt"
