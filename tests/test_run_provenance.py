@@ -88,3 +88,27 @@ def test_each_run_records_the_code_that_ran_it_and_the_report_names_the_runs_com
     two = df.assign(slamrun_commit=[f"{head}", "0123abc"])
     said = run_commits(two)
     assert said.startswith("made by 2 versions of the code") and "0123abc: 1 run(s)" in said
+
+
+def test_the_stored_spec_is_read_back_through_the_spec_model():
+    """The spec as run is read as RecordedSpec (typed as CampaignSpec types it): keys of another version and methods
+    of a plug-in not installed here are no obstacle, a value of the wrong type or a spec that is no mapping gives
+    nothing rather than a wrong figure."""
+    from slamrun.engine.session import measurement_conditions
+    from slamrun.engine.spec import RecordedSpec
+
+    recorded = {
+        "name": "study", "backend": "docker", "lanes": 2, "cpus_per_lane": 1, "contention_pct": 15,
+        "methods": [{"name": "a_plugin_not_installed_here"}], "a_key_of_a_later_version": True,
+    }  # fmt: skip
+    spec = RecordedSpec.read(recorded)
+    assert (spec.name, spec.backend, spec.lanes, spec.cpus_per_lane, spec.contention_pct) == (
+        "study",
+        "docker",
+        2,
+        1,
+        15,
+    )
+    assert measurement_conditions(recorded) == "parallel: 2 lane(s) of 1 CPU(s) each side by side"
+    assert RecordedSpec.read({"lanes": "two"}) is None and RecordedSpec.read(["not", "a", "mapping"]) is None
+    assert measurement_conditions({"lanes": "two"}) == "" and measurement_conditions(None) == ""

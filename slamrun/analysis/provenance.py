@@ -17,6 +17,7 @@ import pandas as pd
 from slamrun.backends.machine import cpu_model, source_commit
 from slamrun.core.inputs import load_yaml_file, read_text_bounded
 from slamrun.engine.session import measurement_conditions
+from slamrun.engine.spec import RecordedSpec
 from slamrun.errors import SlamRunError
 from slamrun.results.files import SPEC, CampaignFiles
 
@@ -49,13 +50,14 @@ def provenance(results: Path, df: pd.DataFrame) -> Provenance:
     """The provenance of the results in folder `results` (its table `df`)."""
     results = Path(results)
     meta = _ledger_meta(results)
-    spec, spec_text, spec_note = _spec(results, meta.get("spec"))
+    recorded, spec_text, spec_note = _spec(results, meta.get("spec"))
+    spec = RecordedSpec.read(recorded)
     images, images_note = _images(results)
-    backend = str(spec.get("backend") or "local") if spec else "not recorded"
-    if spec and spec.get("distributed"):
-        backend += f", distributed ({_brief(spec['distributed'])})"
+    backend = spec.backend if spec else "not recorded"
+    if spec and spec.distributed:
+        backend += f", distributed ({_brief(spec.distributed)})"
     return Provenance(
-        campaign=str(meta.get("campaign") or (spec or {}).get("name") or results.name),
+        campaign=str(meta.get("campaign") or (spec and spec.name) or results.name),
         spec_text=spec_text,
         spec_note=spec_note,
         version=slamrun_version(),
@@ -68,8 +70,8 @@ def provenance(results: Path, df: pd.DataFrame) -> Provenance:
         packages=_packages(df),
         dates=_dates(meta),
         runs=_runs(df, meta.get("session")),
-        measurement=measurement_conditions(spec),
-        contention_pct=(spec or {}).get("contention_pct"),
+        measurement=measurement_conditions(recorded),
+        contention_pct=spec.contention_pct if spec else None,
         run_commits=run_commits(df),
     )
 
@@ -202,7 +204,7 @@ def _gpus() -> str:
     return "; ".join(host_gpus()) or "none found"
 
 
-def _runs_host(session: dict | None, spec: dict | None, df: pd.DataFrame | None = None) -> str:
+def _runs_host(session: dict | None, spec: RecordedSpec | None, df: pd.DataFrame | None = None) -> str:
     """Where the runs ran: the hosts each run recorded (run.json has their CPU, GPUs and Slurm node), else this
     machine when the campaign's own process writes the report and the runs ran on it (backend local, docker or
     podman, not distributed); otherwise what is known."""
@@ -211,10 +213,10 @@ def _runs_host(session: dict | None, spec: dict | None, df: pd.DataFrame | None 
         missing = int(df["host"].isna().sum())
         text = ", ".join(f"{host} ({n} run{'s' if n != 1 else ''})" for host, n in counts.items())
         return text + (f"; {missing} run(s) without a record (imported, or not started)" if missing else "")
-    local = spec is not None and not spec.get("distributed")
+    local = spec is not None and not spec.distributed
     if session and session.get("pid") == os.getpid() and local:
         return "this machine (the campaign's own process wrote this report)"
-    if spec is not None and spec.get("distributed"):
+    if spec is not None and spec.distributed:
         return "the distributed engine's workers (their hosts are not recorded)"
     return "not recorded in the results; this report was written later, on the machine below"
 

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.progress import Figures, Tracker
+from slamrun.engine.spec import RecordedSpec
 from slamrun.results.files import CampaignFiles
 
 if TYPE_CHECKING:
@@ -70,13 +71,15 @@ def read_figures(results: Path, now: float | None = None) -> Figures | None:
     return None if tracker is None else tracker.figures(now or time.time())
 
 
-def measurement_conditions(spec: dict | None) -> str:
-    """How the runs shared the machine, as the spec said: one at a time (exclusive), or N lanes side by side."""
-    if not spec:
+def measurement_conditions(recorded: object) -> str:
+    """How the runs shared the machine, as the recorded spec said: one at a time (exclusive), or N lanes side by
+    side."""
+    spec = RecordedSpec.read(recorded)
+    if spec is None:
         return ""
-    if spec.get("measurement") == "exclusive":
+    if spec.measurement == "exclusive":
         return "exclusive: one run at a time, every CPU of the runner"
-    lanes, per = spec.get("lanes") or 1, spec.get("cpus_per_lane")
-    where = ", on a Dask cluster's workers" if spec.get("distributed") else ""
+    lanes, per = spec.lanes, spec.cpus_per_lane
+    where = ", on a Dask cluster's workers" if spec.distributed else ""
     cpus = f" of {per} CPU(s) each" if per else " (the runner's CPUs split between them)"
     return f"parallel: {lanes} lane(s){cpus} side by side{where}"

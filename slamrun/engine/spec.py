@@ -275,6 +275,33 @@ MAX_RUNS = 200_000
 MAX_VIEWS = 10_000
 
 
+class RecordedSpec(BaseModel):
+    """The spec as run (the ledger's record, else spec.resolved.yaml), read back for what the report, the live page
+    and the session say of it: the campaign's settings they read, typed as CampaignSpec types them. Any other key is
+    ignored and a missing one takes CampaignSpec's default, so a spec recorded by another version, or naming a
+    plug-in that is not installed here, is still read."""
+
+    model_config = ConfigDict(extra="ignore")
+    name: str | None = None
+    backend: str = "local"
+    distributed: dict | None = None
+    measurement: Literal["parallel", "exclusive"] = "parallel"
+    lanes: int = 1
+    cpus_per_lane: int | None = None
+    contention_pct: float | None = None
+
+    @classmethod
+    def read(cls, recorded: object) -> RecordedSpec | None:
+        """`recorded` (a dict) as a RecordedSpec; None where nothing (or no mapping) was recorded or it does not
+        fit the spec's types."""
+        if not isinstance(recorded, dict):
+            return None
+        try:
+            return cls.model_validate(recorded)
+        except ValidationError:
+            return None
+
+
 class CampaignSpec(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Campaign name.")
     results: Path | None = Field(None, description="Results directory (default: results/<name>).")
