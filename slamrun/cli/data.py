@@ -127,13 +127,14 @@ def cmd_list_datasets(args) -> int:
 
 
 def cmd_new_dataset(args) -> int:
+    from slamrun.cli.images import next_steps
     from slamrun.images.scaffold_dataset import new_dataset
 
     dest = args.dest or Path(f"slamrun-dataset-{args.name}")
     files = new_dataset(args.name, dest)
-    console.print(f"{dest}: {len(files)} files; fill in the lines marked FILL IN, then:")
-    console.print(f"  pip install -e {dest}        # registers {args.name} (entry point slamrun.datasets)")
-    console.print(f"  slamrun list-datasets       # {args.name} is listed, from its package")
-    console.print(f"  pytest {dest}/tests          # its reader on its synthetic sequence")
-    console.print(f"  slamrun synth OUT --layout {args.name}   # a synthetic sequence in the layout")
-    return 0
+    return next_steps(dest, len(files), [
+        (f"pip install -e {dest}", f"registers {args.name} (entry point slamrun.datasets)"),
+        ("slamrun list-datasets", f"{args.name} is listed, from its package"),
+        (f"pytest {dest}/tests", "its reader on its synthetic sequence"),
+        (f"slamrun synth OUT --layout {args.name}", "a synthetic sequence in the layout"),
+    ])  # fmt: skip

@@ -193,11 +193,20 @@ def cmd_new_method(args) -> int:
 
     dest = args.dest or Path(f"slamrun-{args.name}")
     files = new_method(args.name, dest)
-    console.print(f"{dest}: {len(files)} files; fill in the lines marked FILL IN, then:")
-    console.print(f"  pip install -e {dest}        # registers {args.name} (entry point slamrun.methods)")
-    console.print(f"  slamrun list-methods        # {args.name} is listed")
-    console.print(f"  pytest {dest}/tests          # its adapter's tests")
-    console.print("  slamrun verify SPEC         # a spec naming it: the verification table on the synthetic rooms")
+    return next_steps(dest, len(files), [
+        (f"pip install -e {dest}", f"registers {args.name} (entry point slamrun.methods)"),
+        ("slamrun list-methods", f"{args.name} is listed"),
+        (f"pytest {dest}/tests", "its adapter's tests"),
+        ("slamrun verify SPEC", "a spec naming it: the verification table on the synthetic rooms"),
+    ])  # fmt: skip
+
+
+def next_steps(dest: Path, n_files: int, steps: list[tuple[str, str]]) -> int:
+    """What a scaffold wrote and what to do next: each command with what it does."""
+    console.print(f"{dest}: {n_files} files; fill in the lines marked FILL IN, then:")
+    width = max(len(command) for command, _ in steps)
+    for command, why in steps:
+        console.print(f"  {command:<{width}}   # {why}")
     return 0
 
 

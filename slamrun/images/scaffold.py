@@ -13,22 +13,27 @@ from pathlib import Path
 
 from slamrun.errors import SlamRunError
 
-PYPROJECT = """[build-system]
+
+def pyproject(distribution: str, description: str, group: str, entry: str, package: str) -> str:
+    """The pyproject.toml of a plug-in package: its distribution, one entry point (`entry` = "name = module:obj") in
+    the entry-point `group` (slamrun.methods, slamrun.datasets) and its one package."""
+    return f"""[build-system]
 requires = ["setuptools>=61"]
 build-backend = "setuptools.build_meta"
 
 [project]
-name = "slamrun-{name}"
+name = "{distribution}"
 version = "0.1.0"
-description = "{name} for slamrun"
+description = "{description}"
 requires-python = ">=3.11"
 
-[project.entry-points."slamrun.methods"]
-{name} = "slamrun_{module}.adapter:{cls}"
+[project.entry-points."{group}"]
+{entry}
 
 [tool.setuptools]
-packages = ["slamrun_{module}"]
+packages = ["{package}"]
 """
+
 
 ADAPTER = '''"""{name}: a slamrun adapter (the contract of slamrun.methods.Method)."""
 
@@ -166,7 +171,13 @@ def new_method(name: str, dest: Path) -> list[Path]:
         raise SlamRunError(problem)
     fill = {"name": name, "module": name, "cls": cls}
     files = {
-        dest / "pyproject.toml": PYPROJECT.format(**fill),
+        dest / "pyproject.toml": pyproject(
+            f"slamrun-{name}",
+            f"{name} for slamrun",
+            "slamrun.methods",
+            f'{name} = "slamrun_{name}.adapter:{cls}"',
+            f"slamrun_{name}",
+        ),
         dest / f"slamrun_{name}" / "__init__.py": "",
         dest / f"slamrun_{name}" / "adapter.py": ADAPTER.format(**fill),
         dest / "docker" / "Dockerfile": DOCKERFILE.format(**fill),

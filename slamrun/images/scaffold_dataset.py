@@ -13,24 +13,7 @@ import re
 from pathlib import Path
 
 from slamrun.errors import SlamRunError
-from slamrun.images.scaffold import MAX_NAME, destination_problem, write_files
-
-PYPROJECT = """[build-system]
-requires = ["setuptools>=61"]
-build-backend = "setuptools.build_meta"
-
-[project]
-name = "slamrun-dataset-__NAME__"
-version = "0.1.0"
-description = "The __NAME__ dataset layout for slamrun"
-requires-python = ">=3.11"
-
-[project.entry-points."slamrun.datasets"]
-__NAME__ = "slamrun_dataset___MODULE__.layout:LAYOUT"
-
-[tool.setuptools]
-packages = ["slamrun_dataset___MODULE__"]
-"""
+from slamrun.images.scaffold import MAX_NAME, destination_problem, pyproject, write_files
 
 LAYOUT = '''"""__NAME__: a dataset layout for slamrun (the contract of slamrun/datasets/protocol.py in slamrun's
 repository).
@@ -252,7 +235,13 @@ def new_dataset(name: str, dest: Path) -> list[Path]:
     module = name.replace("-", "_")
     package = dest / f"slamrun_dataset_{module}"
     files = {
-        dest / "pyproject.toml": PYPROJECT,
+        dest / "pyproject.toml": pyproject(
+            "slamrun-dataset-__NAME__",
+            "The __NAME__ dataset layout for slamrun",
+            "slamrun.datasets",
+            '__NAME__ = "slamrun_dataset___MODULE__.layout:LAYOUT"',
+            "slamrun_dataset___MODULE__",
+        ),
         package / "__init__.py": "",
         package / "layout.py": LAYOUT,
         dest / "tests" / f"test_{module}.py": TEST,
