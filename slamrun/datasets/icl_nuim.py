@@ -31,14 +31,12 @@ from slamrun.datasets import file_notes, frames
 from slamrun.datasets.file_notes import ICL_NUIM_FPS
 from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import (
+    FrameRow,
     Sequence,
     check_regular,
     finite_groundtruth,
     folder_sequence,
-    frame_list_problem,
-    image_path_problem,
-    read_text,
-    time_problem,
+    read_frame_list,
 )
 from slamrun.errors import DatasetError, TrajectoryFormatError
 
@@ -112,33 +110,19 @@ def open_icl_nuim(root: str | Path) -> Sequence:
 
 def _read_associations(path: Path, problems: list[str]) -> tuple[list[str], np.ndarray | None]:
     """associations.txt: the rgb/ frame of each row and its number, as a time in seconds (k / FPS)."""
-    names, stamps = [], []
-    for n, line in enumerate(read_text(path).splitlines(), start=1):
-        cells = line.split()
-        if not cells or cells[0].startswith("#"):
-            continue
-        pairs = list(zip(cells[0::2], cells[1::2], strict=False))
-        rgb = [(t, name) for t, name in pairs if name.startswith("rgb/")]
-        if len(cells) != 4 or len(rgb) != 1:
-            problems.append(f"{path}:{n}: {line.strip()[:80]!r}; expected 'k depth/k.png k rgb/k.png'")
-            return [], None
-        token, name = rgb[0]
-        try:
-            stamps.append(float(token) / FPS)
-        except ValueError:
-            problems.append(f"{path}:{n}: {token[:60]!r} is not a frame number")
-            return [], None
-        if problem := time_problem(path, n, token[:60], stamps[-1]):
-            problems.append(problem)
-            return [], None
-        if problem := image_path_problem(path, n, name):
-            problems.append(problem)
-            return [], None
-        names.append(name)
-    if problem := frame_list_problem(path, stamps, "frame numbers"):
-        problems.append(problem)
-        return [], None
-    return names, np.array(stamps)
+    return read_frame_list(path, problems, _associated_frame, "frame numbers")
+
+
+def _associated_frame(cells: list[str], line: str) -> FrameRow | str:
+    pairs = list(zip(cells[0::2], cells[1::2], strict=False))
+    rgb = [(t, name) for t, name in pairs if name.startswith("rgb/")]
+    if len(cells) != 4 or len(rgb) != 1:
+        return f"{line.strip()[:80]!r}; expected 'k depth/k.png k rgb/k.png'"
+    token, name = rgb[0]
+    try:
+        return token, float(token) / FPS, name
+    except ValueError:
+        return f"{token[:60]!r} is not a frame number"
 
 
 # ---------------------------------------------------------------------------------------------------- the layout

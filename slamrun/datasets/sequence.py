@@ -231,6 +231,36 @@ def image_path_problem(path: Path, lineno: int, name: str) -> str | None:
     return f"{path}:{lineno}: {name[:80]!r} is not an image path inside the sequence folder"
 
 
+FrameRow = tuple[str, float, str]  # a listed frame: its time as written, in seconds, its image's path
+
+
+def read_frame_list(
+    path: Path, problems: list[str], row: Callable[[list[str], str], FrameRow | str], what: str
+) -> tuple[list[str], np.ndarray | None]:
+    """A listing of frames, one row each (blank lines and # comments skipped): `row` turns a row's cells (and its
+    line) into a FrameRow, or says why it cannot; each time and image path is checked and the times must increase
+    (`what` names them). (image paths, times), or ([], None) with the first problem added to `problems`."""
+    names, stamps = [], []
+    for n, line in enumerate(read_text(path).splitlines(), start=1):
+        cells = line.split()
+        if not cells or cells[0].startswith("#"):
+            continue
+        parsed = row(cells, line)
+        if isinstance(parsed, str):
+            problems.append(f"{path}:{n}: {parsed}")
+            return [], None
+        token, t, name = parsed
+        if problem := time_problem(path, n, token[:60], t) or image_path_problem(path, n, name):
+            problems.append(problem)
+            return [], None
+        stamps.append(t)
+        names.append(name)
+    if problem := frame_list_problem(path, stamps, what):
+        problems.append(problem)
+        return [], None
+    return names, np.array(stamps)
+
+
 def frame_list_problem(path: Path, stamps: list | np.ndarray, what: str) -> str | None:
     """Why the frames listed in `path` (their `stamps`, in file order) are no sequence: none listed, or `what` (times,
     frame numbers, timestamps) not strictly increasing, naming the first row that is not; or None."""

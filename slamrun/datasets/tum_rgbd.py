@@ -20,14 +20,12 @@ from slamrun.core.trajectory import Trajectory, read_tum
 from slamrun.datasets import frames
 from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import (
+    FrameRow,
     Sequence,
     check_regular,
     finite_groundtruth,
     folder_sequence,
-    frame_list_problem,
-    image_path_problem,
-    read_text,
-    time_problem,
+    read_frame_list,
 )
 from slamrun.errors import DatasetError, TrajectoryFormatError
 
@@ -97,31 +95,17 @@ def open_tum_rgbd(root: str | Path) -> Sequence:
 
 
 def _read_listing(path: Path, problems: list[str]) -> tuple[list[str], np.ndarray | None]:
-    names, stamps = [], []
-    for n, line in enumerate(read_text(path).splitlines(), start=1):
-        cells = line.split()
-        if not cells or cells[0].startswith("#"):
-            continue
-        if len(cells) != 2:
-            problems.append(f"{path}:{n}: {len(cells)} values; expected 'timestamp rgb/<file>.png'")
-            return [], None
-        try:
-            stamps.append(float(cells[0]))
-        except ValueError:
-            problems.append(f"{path}:{n}: {cells[0][:60]!r} is not a time in seconds")
-            return [], None
-        if problem := time_problem(path, n, cells[0][:60], stamps[-1]):
-            problems.append(problem)
-            return [], None
-        name = cells[1]
-        if problem := image_path_problem(path, n, name):
-            problems.append(problem)
-            return [], None
-        names.append(name)
-    if problem := frame_list_problem(path, stamps, "times"):
-        problems.append(problem)
-        return [], None
-    return names, np.array(stamps)
+    """rgb.txt: `timestamp rgb/<file>.png` rows."""
+    return read_frame_list(path, problems, _listed_frame, "times")
+
+
+def _listed_frame(cells: list[str], line: str) -> FrameRow | str:
+    if len(cells) != 2:
+        return f"{len(cells)} values; expected 'timestamp rgb/<file>.png'"
+    try:
+        return cells[0], float(cells[0]), cells[1]
+    except ValueError:
+        return f"{cells[0][:60]!r} is not a time in seconds"
 
 
 # ---------------------------------------------------------------------------------------------------- the layout
