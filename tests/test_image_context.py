@@ -60,3 +60,22 @@ def test_no_method_folder_names_another_method_folder():
                 if other != name and re.search(rf"slamrun[./]methods[./]{other}\b", text):
                     found.append(f"{path.relative_to(METHODS)} names {other}")
     assert not found, found
+
+
+def test_a_recipe_outside_a_method_folder_takes_only_its_own_folder(tmp_path):
+    """A Dockerfile written anywhere (a test's, a user's) builds with its own folder as `method/`, never the folder
+    above it: that may hold anything (a test session's temporary folders held FIFOs, on which a copy blocks)."""
+    import os
+
+    (tmp_path / "elsewhere").mkdir()
+    os.mkfifo(tmp_path / "elsewhere" / "fifo")
+    own = tmp_path / "mine"
+    own.mkdir()
+    (own / "Dockerfile").write_text("FROM debian:bookworm-slim\n")
+    ctx = tmp_path / "ctx"
+    ctx.mkdir()
+    copy_code(own / "Dockerfile", ctx)
+    assert sorted(p.name for p in (ctx / "method").iterdir()) == ["Dockerfile"]
+    (tmp_path / "ctx2").mkdir()
+    copy_code(buildable()["dso"][1], tmp_path / "ctx2")  # a method's recipe: its whole folder
+    assert (tmp_path / "ctx2" / "method" / "image" / "patches.py").is_file()

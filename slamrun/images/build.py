@@ -207,11 +207,17 @@ def vocabulary_choice(name: str, archives: dict[str, Path], opts: BuildOptions) 
     )
 
 
+def recipe_owner(dockerfile: Path) -> Path:
+    """The folder a recipe belongs to: a method's folder for its image/Dockerfile, else the Dockerfile's own folder
+    (a recipe written anywhere else builds with nothing around it but its folder)."""
+    return dockerfile.parent.parent if dockerfile.parent.name == "image" else dockerfile.parent
+
+
 def copy_code(dockerfile: Path, ctx: Path) -> None:
     """The code a build context holds: the method's own folder as `method/` (no other method's), the shared recipe
     parts as `recipes/`, the modules families share (a GPU process's helpers) as `methods/`."""
     ignore = shutil.ignore_patterns("__pycache__", "*.pyc")
-    shutil.copytree(dockerfile.parent.parent, ctx / "method", ignore=ignore)
+    shutil.copytree(recipe_owner(dockerfile), ctx / "method", ignore=ignore)
     shutil.copytree(METHODS / "recipes", ctx / "recipes", ignore=ignore)
     (ctx / "methods").mkdir()
     for module in METHODS.glob("*.py"):
