@@ -380,9 +380,10 @@ def build_one(client, name: str, tag: str, dockerfile: Path, opts: BuildOptions,
 
             ctx = Path(tmp)
             labels = assemble_context(name, dockerfile, opts, ctx, note)
-            (ctx / "Dockerfile.slamrun").write_text(recipe_text(dockerfile))
+            recipe = recipe_text(dockerfile)
+            (ctx / "Dockerfile.slamrun").write_text(recipe)
             args = {"MARCH": opts.march, "JOBS": str(opts.jobs), **json.loads(labels[f"{LABEL}.build-args"])}
-            if METHOD_ARG.search(recipe_text(dockerfile)):  # a recipe that places slamrun's process by the name
+            if METHOD_ARG.search(recipe):  # a recipe that places slamrun's process by the name
                 args["METHOD"] = name
             note(f"build arguments: {json.dumps(args)}")
             run_build(client, ctx, tag, args, labels, logf, log, log_path, opts.no_cache)

@@ -26,11 +26,6 @@ MAX_ARG_BYTES = 131072  # Linux's limit on one argument or environment string (M
 BUILT_IN = Path(__file__).resolve().parent  # slamrun/methods/: each folder with an __init__.py is a method
 
 
-def folder_name(module: str) -> str:
-    """A built-in method's name: its folder's (`slamrun.methods.dso` -> `dso`), so a folder is a method."""
-    return module.rsplit(".", 1)[-1]
-
-
 def image_tag(name: str) -> str:
     """The tag of a built-in method's image (built from its folder's image/Dockerfile)."""
     return f"slamrun/{name}:latest"
