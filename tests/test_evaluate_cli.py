@@ -566,3 +566,13 @@ def test_one_reader_choice_every_command_the_same_formats(shared_data, tmp_path)
         return next(a for a in subs[command]._actions if flag in a.option_strings).choices
 
     assert offered("evaluate", "--est-format") == offered("import", "--format") == [*FORMATS, RECOGNISED]
+
+
+def test_an_unreadable_estimate_is_named_once_on_its_line(shared_data):
+    """A KITTI pose file read as TUM: its line names the file once, then the line of the file and what was wrong."""
+    evo = shared_data / "evo_test_data"
+    est = evo / "KITTI_00_ORB.txt"
+    out = slamrun("evaluate", "--gt", evo / "fr2_desk_groundtruth.txt", est)
+    assert out.returncode == 1, out.stderr
+    (line,) = out.stdout.splitlines()
+    assert line.startswith(f"{est}: unreadable (line 1: 12 values, expected 8") and line.count(str(est)) == 1, line

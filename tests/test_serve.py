@@ -244,7 +244,7 @@ def test_the_page_comes_with_its_first_state_and_a_headless_browser_settles_on_i
         assert status == 200 and "loading..." not in text  # what curl and a text browser show
         assert "8 of 8 runs finished (100 %) · done 4 · failed 4" in text and " · ".join(state["facts"]) in text
         assert "by kind: crashed 4" in text and "Per method and direction" in text
-        assert "e_align (ground-truth units)" in text and " steady " in text  # the medians table, with units
+        assert "alignment error e_align (GT units)" in text and " steady " in text  # the medians table, with units
         for figure in state["figures"]:
             assert f'src="/c/results/files/{figure["path"]}?v=' in page
         chromium = chromium_or_skip()
@@ -317,7 +317,7 @@ def test_the_box_plot_keeps_each_methods_colour_and_labels_its_log_axis_with_who
                 value = float(tick)  # a whole value, never a digit whose decade is written elsewhere
                 assert value >= 1 or tick.startswith("0.") or "e-" in tick, ticks
             title = page.evaluate(f"{box}.querySelector('.xtitle').textContent")
-            assert title == "e_align (ground-truth units)", title
+            assert title == "alignment error e_align (GT units)", title
 
 
 def test_the_reports_curves_take_the_campaigns_colours():

@@ -17,7 +17,8 @@ import pytest
 from slamrun.analysis.stats import study_statistics
 from slamrun.analysis.table_files import to_html, to_latex, to_markdown, write_all
 from slamrun.analysis.tables import medians_with_letters
-from slamrun.results.vocabulary import LABELS, METHOD_FAILURES, STUDY_METRICS
+from slamrun.results.catalogue import LABELS, STUDY_METRICS
+from slamrun.results.vocabulary import METHOD_FAILURES
 
 METHODS = ("reference_vo", "df_orb_slam", "study:dso", "orb_slam3_mono", "droid_slam", "dpvo_default", "ldso_loop")
 SEQUENCES = (*(f"sequence_{k:02d}" for k in range(1, 8)), "V1_01_easy", "V1_02_medium", "V1_03_difficult")

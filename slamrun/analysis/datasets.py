@@ -13,7 +13,7 @@ from slamrun.analysis.load import by_dataset, evaluated, metrics_for, one_datase
 from slamrun.analysis.stats import StudyStats, screen, study_statistics
 from slamrun.analysis.summary import pooled_summary, ranked_by
 from slamrun.errors import SlamRunError
-from slamrun.results.vocabulary import MAIN_METRICS
+from slamrun.results.catalogue import MAIN_METRICS
 
 POOLED_NOTE = (
     "pooled over the datasets: counts and success rates of every run, and each method's rank within each sequence "

@@ -22,7 +22,8 @@ from slamrun.analysis.load import counted  # noqa: E402
 from slamrun.analysis.paths import SequencePaths  # noqa: E402
 from slamrun.analysis.stats import StudyStats  # noqa: E402
 from slamrun.core.ticks import log_steps  # noqa: E402
-from slamrun.results.vocabulary import INFRA_FAILURES, LABELS  # noqa: E402
+from slamrun.results.catalogue import LABELS
+from slamrun.results.vocabulary import INFRA_FAILURES  # noqa: E402
 
 # best, median and worst run: told apart by colour and by line style (colour-blind safe, also in grey print)
 PICK_STYLES = {"best": ("#1b9e77", "-", 1.6), "median": ("#7570b3", "--", 1.3), "worst": ("#d95f02", ":", 1.6)}

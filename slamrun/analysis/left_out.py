@@ -10,16 +10,16 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
+from slamrun.results.catalogue import LABELS, TUM_MONO, metric_of
 from slamrun.results.marks import flags
-from slamrun.results.vocabulary import INFRA_FAILURES, LABELS, UNDER_MIN_COVERAGE
-
-# the name a run's message gives a metric's problem under (metric_table.campaign_figures: "kitti: ...", "rpe: ...")
-FAMILIES = (("ate_", "ate"), ("rpe_", "rpe"), ("kitti_", "kitti"))
+from slamrun.results.vocabulary import INFRA_FAILURES, UNDER_MIN_COVERAGE
 
 
-def family(metric: str) -> str:
-    """The metric's name in a run's message: ate, rpe, kitti, or `evaluation` for TUM-Mono's figures."""
-    return next((name for prefix, name in FAMILIES if metric.startswith(prefix)), "evaluation")
+def family(column: str) -> str:
+    """The name a run's message gives the problem of the metric that fills `column` (metric_table.campaign_figures:
+    "kitti: ...", "rpe: ..."): ate, rpe, kitti, or `evaluation` for a metric that judges the estimate (TUM-Mono's)."""
+    metric = metric_of(column)
+    return metric if metric and metric != TUM_MONO else "evaluation"
 
 
 def why_no_figure(runs: pd.DataFrame, metric: str) -> str:

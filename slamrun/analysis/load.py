@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 
 from slamrun.errors import SlamRunError
+from slamrun.results.catalogue import MAIN_METRICS, STUDY_METRICS, TRAJECTORY_STATS_METRICS
 from slamrun.results.files import CampaignFiles
-from slamrun.results.vocabulary import MAIN_METRICS, STUDY_METRICS, TRAJECTORY_STATS_METRICS
 
 NO_DATASET = "all"  # the one dataset of a table without a dataset column (or the name of rows that have none)
 

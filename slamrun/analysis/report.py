@@ -34,8 +34,20 @@ from slamrun.analysis.stats import screen, study_statistics
 from slamrun.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
 from slamrun.core import jsonio
 from slamrun.engine.folders import REPORT, claim_output_folder
+from slamrun.results.catalogue import (
+    ATE,
+    FIGURE_METRICS,
+    KITTI,
+    LABELS,
+    METRIC_TITLES,
+    PROGRESS_METRICS,
+    RPE,
+    TRAJECTORY_STATS_METRICS,
+    columns_of,
+    metric_of,
+)
 from slamrun.results.marks import marked
-from slamrun.results.vocabulary import LABELS, METHOD_FAILURES, TRAJECTORY_STATS_METRICS, UNDER_MIN_COVERAGE
+from slamrun.results.vocabulary import METHOD_FAILURES, UNDER_MIN_COVERAGE
 
 RUNS_COLUMNS = {
     "runs": "runs",
@@ -207,11 +219,7 @@ def pooled_report(df: pd.DataFrame, out: Path) -> list[Section]:
 
 def trajectory_title(metrics: list[str]) -> str:
     """What a table of ATE, RPE and KITTI's figures holds, by the metrics it has: "ATE and RPE", ..."""
-    names = [
-        name
-        for name, prefix in (("ATE", "ate_"), ("RPE", "rpe_"), ("KITTI's errors", "kitti_"))
-        if any(m.startswith(prefix) for m in metrics)
-    ]
+    names = [METRIC_TITLES[m] for m in (ATE, RPE, KITTI) if any(metric_of(c) == m for c in metrics)]
     if len(names) < 2:
         return "".join(names) or "Trajectory metrics"
     return ", ".join(names[:-1]) + " and " + names[-1]
@@ -267,7 +275,7 @@ def dataset_report(
 
     figs = []  # (figure, its metric)
     if not ok.empty:
-        for m in ("e_t", "e_r", "e_s_sym", "e_start", "e_end", "ate_rmse", "rpe_t_rmse"):
+        for m in FIGURE_METRICS:
             if m in metrics:
                 figs.append((figures.cumulative(ok, m, fig_dir, label=dataset, colours=colours, names=names), m))
         if main is not None:
@@ -389,9 +397,6 @@ def _resources(
     return sections
 
 
-METRIC_NAMES = {"kitti": ("kitti_t_pct", "KITTI's segment errors"), "rpe": ("rpe_t_rmse", "RPE")}
-
-
 def missing_metric_notes(df: pd.DataFrame) -> list[str]:
     """For each metric the dataset asked for that no run has a value of (its runs' messages say why), one line
     with the reason: a column a report leaves out is never left out without a word."""
@@ -399,7 +404,8 @@ def missing_metric_notes(df: pd.DataFrame) -> list[str]:
         return []
     done = df[df.status == "done"]
     out = []
-    for name, (column, title) in METRIC_NAMES.items():
+    for name in (ATE, RPE, KITTI):
+        column, title = next(c for c in columns_of(name) if c in PROGRESS_METRICS), METRIC_TITLES[name]
         if column in df.columns and df[column].notna().any():
             continue
         reasons = done["message"].dropna().astype(str)

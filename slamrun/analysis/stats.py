@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from slamrun.results.vocabulary import ATE_COLUMNS, KITTI_COLUMNS, RPE_COLUMNS, TUM_MONO_METRICS
+from slamrun.results.catalogue import NON_NEGATIVE
 
 ROUNDING = 1e-9  # a spread at most this, relative to the values' magnitude, is rounding: no spread
 # A figure whose magnitude is above LIMIT is no measurement but a numerical blow-up: in metres 7 astronomical units,
@@ -25,7 +25,6 @@ ROUNDING = 1e-9  # a spread at most this, relative to the values' magnitude, is 
 # finite (1e24 a square) however many runs a table has.
 LIMIT = 1e12
 # the figures that are errors or spreads, so never below 0 (e_s, e_s' are scale factors: positive)
-NON_NEGATIVE = frozenset((*TUM_MONO_METRICS, "e_s_sym", *ATE_COLUMNS, *RPE_COLUMNS, *KITTI_COLUMNS))
 
 
 def _no_spread(values: np.ndarray, scale: float) -> bool:

@@ -11,8 +11,9 @@ import numpy as np
 import pandas as pd
 
 from slamrun.analysis.load import by_dataset, counted, main_metric
+from slamrun.results.catalogue import SUMMARY_METRICS
 from slamrun.results.summary import tally
-from slamrun.results.vocabulary import INFRA_FAILURES, METHOD_FAILURES, SUMMARY_METRICS
+from slamrun.results.vocabulary import INFRA_FAILURES, METHOD_FAILURES
 
 POOLED_COLUMNS = ("method", "runs", "done", "failed", "infra", "pending", "success_pct", "failure_pct")
 

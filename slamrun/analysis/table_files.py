@@ -10,7 +10,8 @@ import numpy as np
 import pandas as pd
 
 from slamrun.analysis.tables import KRUSKAL_ROWS, LETTERS
-from slamrun.results.vocabulary import FAILURES, LABELS
+from slamrun.results.catalogue import LABELS
+from slamrun.results.vocabulary import FAILURES
 
 ROOM_PT = 345.0  # \linewidth of a one-column article at 10 pt: the width a LaTeX table's parts are fitted to
 _SEP_PT = 12.0  # a column's two \tabcolsep

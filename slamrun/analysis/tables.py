@@ -7,6 +7,7 @@ import pandas as pd
 
 from slamrun.analysis.load import counted
 from slamrun.analysis.stats import StudyStats, wilcoxon_rank_sum_p
+from slamrun.results.catalogue import RESOURCES_TABLE, column
 from slamrun.results.vocabulary import played
 
 LETTERS = " letters"  # the suffix of a medians column's letter groups
@@ -87,19 +88,7 @@ def resources_table(df: pd.DataFrame, contention_pct: float | None = None) -> pd
     """Table 2 layout: mean resources per method over its runs; with `contention_pct`, how many of them waited for a
     CPU longer than that share of their wall time beyond the wait they cause themselves (cpu_wait_own_pct: their
     FPS and CPU figures taken under contention)."""
-    cols = {
-        "cpu_mean_pct": "CPU mean %",
-        "cpu_peak_pct": "CPU peak %",
-        "gpu_util_mean_pct": "GPU %",
-        "gpu_mem_peak_mb": "GPU mem MB",
-        "ram_peak_mb": "RAM peak MB",
-        "wall_s": "time (s)",
-        "fps": "FPS",
-        "cpu_wait_pct": "CPU wait %",
-        "host_cpu_pressure_pct": "machine CPU pressure %",
-        "runnable_threads": "runnable threads",
-        "busy_threads": "declared threads",
-    }
+    cols = {c: column(c).heading for c in RESOURCES_TABLE}
     present = [c for c in cols if c in df.columns]
     out = df.groupby("method")[present].mean().reset_index().rename(columns=cols)
     out.insert(1, "runs", df.groupby("method").size().to_numpy())

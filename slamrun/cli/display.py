@@ -19,9 +19,10 @@ from rich.text import Text
 from slamrun.engine.paths import RunPaths
 from slamrun.engine.progress import Figures, Tracker, duration, one_line
 from slamrun.engine.session import read_tracker
+from slamrun.results.catalogue import PROGRESS_METRICS, SUMMARY_METRICS, column
 from slamrun.results.marks import marked
 from slamrun.results.marks import notes as mark_notes
-from slamrun.results.vocabulary import INFRA_FAILURES, MAIN_METRICS, played
+from slamrun.results.vocabulary import INFRA_FAILURES, played
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -70,17 +71,14 @@ def status_view(f: Figures) -> Group:
     return Group(group_table(f), headline(f), Text(f"campaign {state}, {f.lanes} lane(s)"))
 
 
-MAIN_FIGURES = tuple(zip((*MAIN_METRICS, "rpe_t_rmse", "kitti_t_pct"), ("", " m", " m", " %"), strict=True))
-
-
 def finished_line(lane: int, run_id: str, info: dict) -> str:
     """A finished run's plain line: its state, failure, and its main figure, whatever its dataset's metrics
     (TUM-Mono's e_align, else ATE's RMSE, else RPE's, else KITTI's segment error)."""
     line = f"[lane {lane}] {run_id}: {info.get('state')} ({info.get('failure') or 'ok'})"
-    for name, unit in MAIN_FIGURES:
-        value = info.get(name)
+    for name in PROGRESS_METRICS:
+        value, unit = info.get(name), column(name).unit
         if isinstance(value, float) and value == value:
-            return f"{line} {name}={value:.4g}{unit}"
+            return f"{line} {name}={value:.4g}" + (f" {unit}" if unit else "")
     return line
 
 
@@ -206,16 +204,13 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
     return t, max(len(failed) - limit, 0)
 
 
-SUMMARY_MEDIANS = ("e_t", "e_r", "e_s_sym", "e_align", "ate_rmse", "rpe_t_rmse")
-
-
 def method_table(summary: pd.DataFrame, title: str, marks: dict | None = None) -> Table:
     """The end-of-campaign table of one dataset's per-method summary (slamrun.analysis.summary.method_summary):
     counts, success rate, the medians of the metrics its runs have, fps and the failure kinds that occurred; a
     method marked (`marks`: low coverage, diverged) carries its mark, said under the table."""
     from slamrun.results.vocabulary import FAILURES
 
-    medians = [f"median_{m}" for m in SUMMARY_MEDIANS]
+    medians = [f"median_{m}" for m in SUMMARY_METRICS]
     medians = [c for c in medians if summary[c].notna().any()] or medians[:4]  # the metrics the dataset has
     cols = ["method", "runs", "done", "failed", "success_pct", *medians, "median_fps"]
     fails = [k for k in (*FAILURES, "infra") if k in summary and summary[k].sum() > 0 and k not in cols]

@@ -15,11 +15,10 @@ from slamrun.core import jsonio
 from slamrun.core.formats import FORMATS, RECOGNISED
 from slamrun.core.inputs import read_bounded
 from slamrun.errors import SlamRunError
+from slamrun.results.catalogue import METRIC_NAMES, RPE_UNITS
 from slamrun.results.files import RUN_RECORD
-from slamrun.results.vocabulary import METRIC_NAMES
 
 GT_FORMATS = ("tum-mono", *FORMATS)  # TUM-Mono's groundtruthSync.txt, and the trajectory formats
-RPE_UNITS = ("frames", "s", "m", "evo-f", "evo-m")  # slamrun.core.metrics.RPE_UNITS (not imported: a quick --help)
 
 
 def add_commands(sub) -> None:
@@ -292,5 +291,15 @@ def _options(args, gt, metrics: tuple[str, ...]):
 
 def _line(d: dict) -> str:
     vals = " ".join(f"{k}={v:.6g}" for k, v in d.items() if isinstance(v, float))
-    detail = f" ({d['detail']})" if d.get("detail") else ""
+    detail = f" ({_detail(d)})" if d.get("detail") else ""
     return f"{d['file']}: {d['status']}" + (f" {vals}" if vals else "") + detail
+
+
+def _detail(d: dict) -> str:
+    """A result's detail without the file its line already names: "line 1: 12 values, ..." for "FILE:1: ..."."""
+    text = str(d["detail"])
+    rest = text.removeprefix(f"{d['file']}:")
+    if rest == text:
+        return text
+    line, sep, why = rest.partition(": ")
+    return f"line {line}: {why}" if sep and line.isdigit() else rest.strip()

@@ -22,21 +22,16 @@ from pathlib import Path
 import numpy as np
 
 from slamrun.core import metrics
-from slamrun.core.evaluation import TumMonoResult, tum_mono_file, tum_mono_many
 from slamrun.core.formats import read_trajectory
 from slamrun.core.inputs import regular_file_problem
-from slamrun.core.metric_table import METRICS, Context, campaign_figures
+from slamrun.core.metric_table import METRICS, NO_PAIRS, Context, Metric, campaign_figures
 from slamrun.core.metric_table import metric as metric_named
 from slamrun.core.metrics import DEFAULT_TOLERANCE_S
 from slamrun.core.trajectory import Trajectory, read_tum_many
-from slamrun.errors import MetricError, TrajectoryFormatError
-from slamrun.results.vocabulary import (
-    EVALUATE_FIELDS,
-    EvalStatus,
-)
+from slamrun.errors import TrajectoryFormatError
+from slamrun.results.vocabulary import EvalStatus
 
-NO_PAIRS = "no_pairs"  # a metric the path is too short for (RPE's interval, KITTI's 100 m): among others, only noted
-GROUP = 32  # TUM-Mono estimates evaluated together (their arrays stay in the CPU's cache)
+GROUP = 32  # estimates of a metric with a batched form (TUM-Mono's) evaluated together (their arrays stay in cache)
 MAX_FILE_BYTES = 256 * 2**20  # a trajectory or ground-truth file: a million poses are about 100 MB
 # the figures a campaign records per metric (results.csv's columns)
 CAMPAIGN_FIELDS = {name: m.columns for name, m in METRICS.items()}
@@ -86,15 +81,8 @@ def evaluate_one(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
 
 
 def _single(gt: Trajectory, traj: Trajectory, metric: str, opts: Options) -> dict:
-    if metric == "tum-mono":
-        return _tum_mono_fields(tum_mono_file(gt, traj))
     ctx = Context(opts.alignment, opts.tolerance_s, opts.delta, opts.delta_unit, opts.frames)
-    try:
-        res = metric_named(metric).result(gt, traj, ctx)
-    except MetricError as exc:
-        status = NO_PAIRS if isinstance(exc, metrics.NoPairs) else "failed"
-        return {"status": status, "n_poses": len(traj), "detail": str(exc)}
-    return {"status": "ok", "n_poses": len(traj), **res.to_dict()}
+    return metric_named(metric).of_file(gt, traj, ctx)
 
 
 def _campaign_fields(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
@@ -132,15 +120,17 @@ def _unreadable(exc: TrajectoryFormatError, opts: Options) -> dict:
     d = {"status": "unreadable", "detail": str(exc)}
     if opts.campaign:
         return {"status": "unreadable", **dict.fromkeys(k for m in opts.metrics for k in CAMPAIGN_FIELDS[m]), **d}
-    if opts.metrics == ("tum-mono",):
-        return dict.fromkeys(EVALUATE_FIELDS) | d
+    if len(opts.metrics) == 1:
+        return dict.fromkeys(("status", *metric_named(opts.metrics[0]).file_fields)) | d
     return d
 
 
-def _tum_mono_fields(res: TumMonoResult) -> dict:
-    d = res.to_dict()
-    detail = {"detail": d["detail"]} if d["status"] != "ok" and d["detail"] else {}
-    return {k: d.get(k) for k in EVALUATE_FIELDS} | detail
+def _batched(opts: Options) -> Metric | None:
+    """The one metric asked for, where it evaluates many files at once (TUM-Mono's); else None."""
+    if len(opts.metrics) != 1 or opts.campaign:
+        return None
+    m = metric_named(opts.metrics[0])
+    return m if m.many is not None else None
 
 
 def _read(paths: Sequence[str | Path], opts: Options) -> list[Trajectory | TrajectoryFormatError]:
@@ -162,20 +152,22 @@ def _read_one(path: str | Path, opts: Options) -> Trajectory | TrajectoryFormatE
 
 
 def evaluate_one_chunk(paths: Sequence[str | Path], gt: Trajectory, opts: Options = Options()) -> list[dict]:
-    """Each file's result, in order; TUM-Mono's metric for `GROUP` files at a time (`tum_mono_many`)."""
+    """Each file's result, in order; a metric with a batched form (TUM-Mono's) for `GROUP` files at a time."""
     out: list[dict] = []
     group: list[tuple[str | Path, Trajectory]] = []
+    batched = _batched(opts)
 
     def flush() -> None:
-        for (path, _), res in zip(group, tum_mono_many(gt, [t for _, t in group]), strict=True):
-            out.append({"file": str(path), **_tum_mono_fields(res)})
+        if group:
+            for (path, _), res in zip(group, batched.many(gt, [t for _, t in group]), strict=True):
+                out.append({"file": str(path), **batched.file_dict(res)})
         group.clear()
 
     for path, traj in zip(paths, _read(paths, opts), strict=True):
         if isinstance(traj, TrajectoryFormatError):
             flush()
             out.append({"file": str(path), **_unreadable(traj, opts)})
-        elif opts.metrics == ("tum-mono",) and not opts.campaign:
+        elif batched is not None:
             group.append((path, traj))
             if len(group) == GROUP:
                 flush()

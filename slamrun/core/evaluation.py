@@ -15,7 +15,8 @@ import numpy as np
 from slamrun.core.alignment import Sim3, align_sim3, rmse, rotation_angle_deg
 from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory
-from slamrun.results.vocabulary import TUM_MONO_METRICS, EvalStatus
+from slamrun.results.catalogue import TUM_MONO_METRICS
+from slamrun.results.vocabulary import EvalStatus
 
 ASSOCIATION_TOLERANCE_S = 1e-3
 MIN_SEGMENT_POSES = 3  # a Sim(3) alignment needs at least three poses to be determined

@@ -21,6 +21,7 @@ from slamrun.core.alignment import Sim3, align_sim3
 from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory, quat_to_rotmat, rotmat_to_quat
 from slamrun.errors import MetricError
+from slamrun.results.catalogue import RPE_UNITS
 
 DEFAULT_TOLERANCE_S = 0.02  # TUM RGB-D's evaluate_ate.py, and evo's 0.01 doubled: frames at 30 Hz are 0.033 s apart
 KITTI_LENGTHS_M = (100, 200, 300, 400, 500, 600, 700, 800)
@@ -263,9 +264,8 @@ def ate(
 
 # ------------------------------------------------------------------------------------------------- RPE
 
-SEQUENCE_UNITS = ("frames", "s", "m")  # an interval of the sequence, whatever the estimate's rate
-EVO_UNITS = ("evo-f", "evo-m")  # evo_rpe's --delta_unit f and m: steps of the estimate's own associated poses
-RPE_UNITS = SEQUENCE_UNITS + EVO_UNITS
+SEQUENCE_UNITS = RPE_UNITS[:3]  # frames, s, m: an interval of the sequence, whatever the estimate's rate
+EVO_UNITS = RPE_UNITS[3:]  # evo_rpe's --delta_unit f and m: steps of the estimate's own associated poses
 # s and m: each pose is paired with the pose at exactly its time (path) + delta, interpolated between the estimate's
 # two poses around that point where none lies on it; both must lie within RPE_BRACKET x delta of it (within
 # [axis + delta/2, axis + 3 delta/2]), so that a hole in the track wider than delta gives no pair through it and no

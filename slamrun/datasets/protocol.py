@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from slamrun.core.metrics import RpeInterval
-from slamrun.results.vocabulary import METRIC_NAMES
+from slamrun.results.catalogue import METRIC_NAMES
 
 if TYPE_CHECKING:  # the synthetic writers import the renderer (scipy) only when a sequence is generated
     from slamrun.datasets.sequence import Sequence

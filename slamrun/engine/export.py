@@ -9,8 +9,8 @@ import pandas as pd
 
 from slamrun.datasets.perturb import NONE
 from slamrun.engine.ledger import Ledger
+from slamrun.results.catalogue import METRIC_COLUMNS, RESOURCE_COLUMNS, TEXT_METRIC_COLUMNS
 from slamrun.results.files import CampaignFiles
-from slamrun.results.vocabulary import METRIC_COLUMNS, RESOURCE_COLUMNS, TEXT_METRIC_COLUMNS
 
 COLUMNS = (
     "method",

@@ -16,8 +16,9 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from slamrun.errors import LedgerLockedError, LedgerLostError, SlamRunError, StorageError
+from slamrun.results.catalogue import CATALOGUE, METRIC_COLUMNS, RESOURCE_COLUMNS
 from slamrun.results.files import CampaignFiles
-from slamrun.results.vocabulary import FLAG_COLUMNS, IMPORTED, METRIC_COLUMNS, RESOURCE_COLUMNS, STATES
+from slamrun.results.vocabulary import IMPORTED, STATES
 
 if TYPE_CHECKING:
     from slamrun.engine.plan import PlannedRun
@@ -57,25 +58,23 @@ STATE_COLUMNS = (
 )
 ALL_COLUMNS = KEY_COLUMNS + STATE_COLUMNS + METRIC_COLUMNS + RESOURCE_COLUMNS
 
-_TYPES = {
+_TYPES = {  # the ledger's own columns; the results' types are the catalogue's
     "trial": "INTEGER",
     "active": "INTEGER",
     "attempts": "INTEGER",
     "contended_attempts": "INTEGER",
     "exit_code": "INTEGER",
     "pid": "INTEGER",
-    "n_poses": "INTEGER",
-    "n_frames": "INTEGER",
-    "rpe_pairs": "INTEGER",
-    "rpe_interval": "TEXT",
     "level": "REAL",
-    **dict.fromkeys(FLAG_COLUMNS, "INTEGER"),
+    "started_at": "REAL",
+    "ended_at": "REAL",
+    "pid_start": "REAL",
+    **{c.name: c.type for c in CATALOGUE.values()},
 }
-_REAL = set(METRIC_COLUMNS + RESOURCE_COLUMNS + ("started_at", "ended_at", "pid_start")) - set(_TYPES)
 
 
 def _coltype(c: str) -> str:
-    return _TYPES.get(c, "REAL" if c in _REAL else "TEXT")
+    return _TYPES.get(c, "TEXT")
 
 
 FULL_BELOW_BYTES = 1 << 20  # free space under which a ledger SQLite cannot open is a full disk, not damage

@@ -22,7 +22,8 @@ from slamrun.engine.folders import (
     path_part_problem,
 )
 from slamrun.errors import DatasetError
-from slamrun.results.vocabulary import CONTENTION_PCT, METRIC_NAMES
+from slamrun.results.catalogue import METRIC_NAMES
+from slamrun.results.vocabulary import CONTENTION_PCT
 
 
 class Strict(BaseModel):

@@ -19,8 +19,10 @@ from slamrun.core.ticks import log_ticks
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.progress import Tracker, duration
 from slamrun.engine.session import current_session, measurement_conditions
+from slamrun.results.catalogue import FLAG_COLUMNS, MAIN_METRICS, SUMMARY_METRICS
+from slamrun.results.catalogue import label as column_label
 from slamrun.results.marks import flags, marked, notes
-from slamrun.results.vocabulary import FLAG_COLUMNS, MAIN_METRICS, NONE, SUMMARY_METRICS
+from slamrun.results.vocabulary import NONE
 from slamrun.serve.folders import LEDGER
 
 MAX_FAILED = 100  # the newest failed runs listed (every failure is counted by kind)
@@ -29,18 +31,9 @@ MAX_FIGURES = 200
 MESSAGE_CHARS = 300
 FIGURE_SUFFIXES = (".png", ".svg")
 RUN_COLUMNS = ("key", "label", "dataset", "sequence", "direction", "trial", "attempts", "started_at", "ended_at")
-# a metric's name on the page, with its unit: TUM-Mono's lengths are in its ground truth's units (the benchmark's
-# ground truth has no metric scale)
-LABELS = {
-    "coverage": "coverage (median, share of frames)",
-    "e_t": "e_t (ground-truth units)",
-    "e_r": "e_r (deg)",
-    "e_s_sym": "e_s' (factor)",
-    "e_align": "e_align (ground-truth units)",
-    "e_rmse": "e_rmse (ground-truth units)",
-    "ate_rmse": "ATE RMSE (m)",
-    "rpe_t_rmse": "RPE-t RMSE (m)",
-}
+# a metric's name on the page, with its unit, as the report names it (TUM-Mono's lengths are in its ground truth's
+# units: the benchmark's ground truth has no metric scale)
+LABELS = {"coverage": "coverage (median, share of frames)"} | {m: column_label(m) for m in SUMMARY_METRICS}
 
 
 @dataclass(frozen=True)
