@@ -119,3 +119,36 @@ def test_a_copied_gpu_method_has_its_own_process_build_folder_and_patches(tmp_pa
                   cwd=tmp_path)  # fmt: skip
     assert out.returncode == 0, out.stdout + out.stderr
     assert len(list((tmp_path / "b").glob("*/MY_DPVO_PATCHES"))) == 1
+
+
+def test_a_copied_docker_method_builds_from_its_own_folder(tmp_path):
+    """A copy of dso is listed with its own image, and the build context `slamrun images` assembles for it (what
+    Docker is sent) holds the copy's folder (its patches, changed here to leave a mark) and the real pinned archive,
+    and no other method's folder: its recipe never builds from dso's."""
+    from tests.conftest import require_upstream
+
+    upstream = require_upstream()
+    tree = copied_tree(tmp_path, "dso", "my_dso")
+    patches = tree / "slamrun" / "methods" / "my_dso" / "image" / "patches.py"
+    patches.write_text(patches.read_text() + "\n# MY_DSO PATCHES\n")
+    images = slamrun(tree, "images", "--list", cwd=tmp_path)
+    assert images.returncode == 0, images.stderr
+    assert "my_dso: slamrun/my_dso:latest <- my_dso/image/Dockerfile" in images.stdout
+    code = (
+        "import sys; from pathlib import Path; from slamrun.images.build import BuildOptions, assemble_context, "
+        "buildable\n"
+        "tag, dockerfile = buildable()['my_dso']\n"
+        f"ctx = Path({str(tmp_path / 'ctx')!r}); ctx.mkdir()\n"
+        f"labels = assemble_context('my_dso', dockerfile, BuildOptions(sources_dir=Path({str(upstream)!r})), ctx, "
+        "lambda line: None)\n"
+        "print(tag, labels['slamrun.method'], sorted(p.name for p in ctx.iterdir()))"
+    )
+    assert python_in(tree, code, tmp_path).split() == [
+        "slamrun/my_dso:latest", "my_dso", "['inputs',", "'method',", "'methods',", "'recipes',", "'sources']"
+    ]  # fmt: skip
+    ctx = tmp_path / "ctx"
+    assert "# MY_DSO PATCHES" in (ctx / "method" / "image" / "patches.py").read_text()
+    assert (ctx / "method" / "__init__.py").read_text() == (tree / "slamrun/methods/my_dso/__init__.py").read_text()
+    assert sorted(p.name for p in (ctx / "sources").iterdir()) == ["dso.tar.gz", "pangolin-0.6.tar.gz"]
+    others = {p.name for p in (ROOT / "slamrun" / "methods").iterdir() if p.is_dir()} - {"recipes", "__pycache__"}
+    assert not others & {p.name for p in ctx.rglob("*") if p.is_dir()}, "a method's folder in my_dso's context"
