@@ -206,6 +206,18 @@ def check_files(
     problems.extend(_listed(found))
 
 
+def check_listed(
+    root: Path, names: list[str], listing: str, size: tuple[int, int], problems: list[str], source: str
+) -> None:
+    """The frames a listing (`listing`: rgb.txt, associations.txt) names below `root`: each present (else how many
+    are missing, and one), then `check_files`."""
+    missing = [n for n in names if not ((root / n).exists() or (root / n).is_symlink())]
+    if missing:
+        problems.append(f"{root}: {len(missing)} frame(s) listed in {listing} missing (e.g. {missing[0]})")
+    else:
+        check_files(root, names, size, problems, source)
+
+
 def check_members(
     zf: zipfile.ZipFile,
     zip_path: Path,

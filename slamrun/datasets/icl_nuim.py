@@ -86,12 +86,7 @@ def open_icl_nuim(root: str | Path) -> Sequence:
         problems.append(f"{listing}: missing; expected 'k depth/k.png k rgb/k.png' rows")
     else:
         names, times = _read_associations(listing, problems)
-    if names:
-        missing = [n for n in names if not ((root / n).exists() or (root / n).is_symlink())]
-        if missing:
-            problems.append(f"{root}: {len(missing)} frame(s) listed in {ASSOCIATIONS} missing (e.g. {missing[0]})")
-        else:
-            frames.check_files(root, names, (WIDTH, HEIGHT), problems, "ICL-NUIM's published camera")
+    frames.check_listed(root, names, ASSOCIATIONS, (WIDTH, HEIGHT), problems, "ICL-NUIM's published camera")
     if problems:
         raise DatasetError(f"{root}: invalid ICL-NUIM sequence:\n  " + "\n  ".join(problems))
     assert times is not None

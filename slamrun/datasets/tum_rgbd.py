@@ -74,12 +74,7 @@ def open_tum_rgbd(root: str | Path) -> Sequence:
         problems.append(f"{listing}: missing; expected 'timestamp rgb/<file>.png' rows")
     else:
         names, times = _read_listing(listing, problems)
-    if names:
-        missing = [n for n in names if not ((root / n).exists() or (root / n).is_symlink())]
-        if missing:
-            problems.append(f"{root}: {len(missing)} frame(s) listed in rgb.txt missing (e.g. {missing[0]})")
-        else:
-            frames.check_files(root, names, (WIDTH, HEIGHT), problems, "the TUM RGB-D camera")
+    frames.check_listed(root, names, "rgb.txt", (WIDTH, HEIGHT), problems, "the TUM RGB-D camera")
     if problems:
         raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
     assert camera is not None and times is not None
