@@ -26,6 +26,8 @@ import pytest
 from tests.conftest import fake_method, one_sequence, write_spec
 from tests.test_report_page import chromium_page
 
+ROOT = Path(__file__).resolve().parents[1]
+
 SLAMRUN = [sys.executable, "-m", "slamrun.cli"]
 
 
@@ -265,7 +267,7 @@ def test_the_page_comes_with_its_first_state_and_a_headless_browser_settles_on_i
 
 
 def test_the_first_state_escapes_every_text_it_shows():
-    from slamrun.serve.firstpaint import campaign_body, embedded
+    from slamrun.serve.sections import campaign_body, embedded
 
     hostile = "</script><script>alert(1)</script>"
     progress = {"total": 1, "finished": 1, "done": 0, "failed": 1, "infra": 0, "active": False, "per_group": []}
@@ -275,14 +277,39 @@ def test_the_first_state_escapes_every_text_it_shows():
         "report": None,
         "failed": {"total": 1, "kinds": {"crashed": 1}, "runs": [
             {"failure": "crashed", "label": hostile, "dataset": "d", "sequence": "s", "direction": "forward",
-             "trial": 0, "message": hostile}
+             "trial": 0, "message": hostile, "key": '"><img src=x onerror=alert(1)>'}
         ]},
     }  # fmt: skip
     body = campaign_body(snap)
     assert "<script" not in body and "<b>" not in body and "&lt;/script&gt;&lt;script&gt;alert(1)" in body
+    assert "<img" not in body and 'data-key="&quot;&gt;&lt;img' in body  # the log tail's key, escaped
     block = embedded(json.dumps(snap).encode())
     assert block.count("</script>") == 1 and block.endswith("</script>")  # no text in it ends the block
     assert json.loads(block.split(">", 1)[1].removesuffix("</script>")) == snap
+
+
+def test_the_sections_are_rendered_once_on_the_server_for_the_page_and_its_stream(finished):
+    """The page's first paint and every state it follows carry the same sections, rendered by the server; the script
+    renders none of them (it places them, and draws the plots, log tails and path viewer)."""
+    from slamrun.serve.sections import SECTIONS
+
+    with serving(finished) as base:
+        state = json.loads(get(base, "/c/results/api/state")[1])
+        page = get(base, "/c/results/")[1].decode()
+    assert list(state["sections"]) == list(SECTIONS)
+    for name, html in state["sections"].items():
+        assert html.startswith(("<section", "<header")) and f'id="{name}"' in html.split(">", 1)[0]
+        if name != "progress":  # the header says when it was read
+            assert html in page, name
+    script = (ROOT / "slamrun" / "serve" / "static" / "page.js").read_text()
+    for title in (
+        "What each lane runs",
+        "Failures",
+        "Medians per dataset",
+        "Per method and direction",
+        "Report figures",
+    ):
+        assert title not in script
 
 
 def test_the_box_plot_keeps_each_methods_colour_and_labels_its_log_axis_with_whole_values(finished, tmp_path):

@@ -37,7 +37,7 @@ from slamrun.engine.paths import RunPaths
 from slamrun.errors import SlamRunError
 from slamrun.results import files as campaign_files
 from slamrun.results.files import CampaignFiles
-from slamrun.serve import firstpaint, runview
+from slamrun.serve import runview, sections
 from slamrun.serve.connections import Watch
 from slamrun.serve.folders import campaigns, open_served
 from slamrun.serve.snapshot import Signature, snapshot
@@ -111,6 +111,7 @@ class Hub:
             if stale or not entry.body:
                 started = time.monotonic()
                 data = await asyncio.to_thread(snapshot, folder, name)
+                data["sections"] = sections.sections(data)  # the page's sections, rendered once per change
                 body = jsonio.dumps(data).encode()
                 entry.signature, entry.read_at = signature, time.monotonic()
                 entry.cost_s = entry.read_at - started
@@ -331,7 +332,7 @@ async def page(request: web.Request) -> web.Response:
         return web.Response(text=_html(f"slamrun: {name}", attrs, main), content_type="text/html")
     snap = json.loads(body)
     title = f"{snap['progress']['finished']}/{snap['progress']['total']} · {snap['campaign']} · slamrun"
-    page_html = _html(title, attrs, firstpaint.campaign_body(snap), firstpaint.embedded(body))
+    page_html = _html(title, attrs, "".join(snap["sections"].values()), sections.embedded(body))
     return web.Response(text=page_html, content_type="text/html")
 
 

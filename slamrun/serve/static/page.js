@@ -1,5 +1,5 @@
 // slamrun serve: the live page. Plain DOM, no framework, no network beyond this server.
-// Every text from the server is set as text (never as HTML).
+// Texts are set as text; the sections are HTML the server rendered, every text escaped there (serve/sections.py).
 "use strict";
 
 const $ = (tag, attrs = {}, ...children) => {
@@ -21,8 +21,6 @@ function duration(s) {
   return `${s} s`;
 }
 
-const num = (v) => (v == null ? "–" : Math.abs(v) >= 1000 || Math.abs(v) < 0.001 ? v.toExponential(3) : v.toPrecision(4));
-
 function table(headers, rows, cls = "") {
   return $(
     "table",
@@ -37,60 +35,20 @@ function section(id, title, ...children) {
 }
 
 // ---------------------------------------------------------------- one campaign
+// Its sections come rendered by the server (slamrun/serve/sections.py, every text escaped there) in each state: the
+// script places those that changed and adds what needs a browser: the box plots, the log tails, the path viewer.
 const base = () => `/c/${encodeURIComponent(document.body.dataset.campaign)}/`;
 
-function header(s) {
-  const p = s.progress;
-  const state = s.state;
-  const bar = $("div", { class: "bar" }, $("div", { class: "done", style: `width:${(100 * p.done) / (p.total || 1)}%` }),
-    $("div", { class: "failed", style: `width:${(100 * (p.failed + p.infra)) / (p.total || 1)}%` }));
-  const facts = s.facts;  // written by the server (the same line its first render of the page shows)
-  return $(
-    "header",
-    { id: "progress", "data-state": state, "data-finished": p.finished, "data-total": p.total, "data-done": p.done },
-    $("h1", {}, `${s.campaign} `, $("span", { class: `state ${state}`, text: state })),
-    bar,
-    $("p", { class: "facts", text: facts.join(" · ") }),
-    s.report ? $("p", {}, $("a", { href: `${base()}files/${s.report}`, text: "the report (written when the campaign ends)" })) : null,
-    $("p", { class: "muted", text: `read ${new Date(s.generated_at * 1000).toLocaleTimeString()}` }),
-  );
-}
-
-function lanes(s) {
-  if (!s.lanes.length) return section("lanes", "Lanes", $("p", { class: "muted", text: "no run is running now" }));
-  const rows = s.lanes.map((r) => [r.label, `${r.dataset}/${r.sequence}`, r.direction, r.trial, r.attempts, duration(r.running_s)]);
-  return section("lanes", "What each lane runs", table(["method", "sequence", "direction", "trial", "attempt", "running for"], rows));
-}
-
-function groups(s) {
-  const rows = s.progress.per_group.map((g) => [g.method, g.direction, g.done, g.failed, g.infra, g.running, g.pending,
-    g.success_pct == null ? "–" : `${g.success_pct.toFixed(0)} %`]);
-  return section("groups", "Per method and direction", table(["method", "direction", "done", "failed", "infra", "running", "pending", "success"], rows));
-}
-
-function logButton(key) {
-  const pre = $("pre", { class: "log" });
-  const details = $("details", {}, $("summary", { text: "log tail" }), pre);
-  details.addEventListener("toggle", async () => {
-    if (!details.open || pre.dataset.loaded) return;
-    const r = await fetch(`${base()}api/log?key=${encodeURIComponent(key)}`);
-    pre.textContent = r.ok ? await r.text() : `(no log: ${(await r.text()).trim()})`;
-    pre.dataset.loaded = "1";
-  });
-  return details;
-}
-
-function failures(s) {
-  const f = s.failed;
-  if (!f.total) return section("failures", "Failures", $("p", { class: "muted", text: "no run has failed" }));
-  const kinds = Object.entries(f.kinds).map(([k, n]) => `${k} ${n}`).join(" · ");
-  const rows = f.runs.map((r) => [r.failure, r.label, `${r.dataset}/${r.sequence}`, r.direction, r.trial, r.message || "", logButton(r.key)]);
-  return section(
-    "failures",
-    `Failures: ${f.total}`,
-    $("p", { text: `by kind: ${kinds}` + (f.total > f.runs.length ? ` (the newest ${f.runs.length} listed)` : "") }),
-    $("div", { class: "scroll" }, table(["kind", "method", "sequence", "direction", "trial", "message", ""], rows)),
-  );
+function wireLogs(node) {
+  for (const details of node.querySelectorAll("details.logtail")) {
+    const pre = details.querySelector("pre");
+    details.addEventListener("toggle", async () => {
+      if (!details.open || pre.dataset.loaded) return;
+      const r = await fetch(`${base()}api/log?key=${encodeURIComponent(details.dataset.key)}`);
+      pre.textContent = r.ok ? await r.text() : `(no log: ${(await r.text()).trim()})`;
+      pre.dataset.loaded = "1";
+    });
+  }
 }
 
 // The box plot's log axis: the ticks the server chose (slamrun/core/ticks.py, the report's rule: 1, 2 and 5 of each
@@ -102,41 +60,19 @@ function logAxis(ticks) {
   return { tickmode: "array", tickvals: ticks, ticktext: ticks.map(String), autorange: false, range: [a - pad, b + pad] };
 }
 
-function medians(s) {
-  const out = [];
+function drawBoxes(s) {
+  if (!window.Plotly) return;
   for (const [dataset, d] of Object.entries(s.medians)) {
-    const rows = d.methods.map((m) => [m.method, m.done, ...d.metrics.map((k) => num(m[k]))]);
-    const plot = $("div", { class: "box", id: `box-${dataset}` });
-    out.push($("h3", { text: `${dataset || "(no dataset)"}: medians over the done runs so far` }),
-      $("div", { class: "scroll" }, table(["method", "done", ...d.metrics.map((k) => s.labels[k] || k)], rows)),
-      ...(d.notes || []).map((n) => $("p", { class: "muted", text: n })), plot);
-    if (d.main && window.Plotly) {
-      // each method in its colour for the whole campaign (the report's figures use the same)
-      const traces = Object.entries(d.values).map(([method, vs]) => ({ type: "box", x: vs, name: method, orientation: "h", boxpoints: vs.length < 60 ? "all" : "outliers", marker: { color: s.colours[method] }, line: { color: s.colours[method] } }));
-      const ticks = logAxis(d.ticks);
-      setTimeout(() => Plotly.react(plot, traces, {  // once the section is in the page (a frame may never come in a hidden tab)
-        title: { text: `${s.labels[d.main] || d.main} per method (${dataset}), done runs so far`, font: { size: 13 } },
-        xaxis: { type: "log", title: { text: s.labels[d.main] || d.main }, ...ticks }, yaxis: { title: { text: "method" } }, margin: { l: 110, r: 20, t: 40, b: 45 }, height: 90 + 40 * traces.length, showlegend: false,
-      }, { displaylogo: false, responsive: true }));
-    }
+    const plot = document.getElementById(`box-${dataset}`);
+    if (!d.main || !plot) continue;
+    // each method in its colour for the whole campaign (the report's figures use the same)
+    const traces = Object.entries(d.values).map(([method, vs]) => ({ type: "box", x: vs, name: method, orientation: "h", boxpoints: vs.length < 60 ? "all" : "outliers", marker: { color: s.colours[method] }, line: { color: s.colours[method] } }));
+    const ticks = logAxis(d.ticks);
+    setTimeout(() => Plotly.react(plot, traces, {  // once the section is in the page (a frame may never come in a hidden tab)
+      title: { text: `${s.labels[d.main] || d.main} per method (${dataset}), done runs so far`, font: { size: 13 } },
+      xaxis: { type: "log", title: { text: s.labels[d.main] || d.main }, ...ticks }, yaxis: { title: { text: "method" } }, margin: { l: 110, r: 20, t: 40, b: 45 }, height: 90 + 40 * traces.length, showlegend: false,
+    }, { displaylogo: false, responsive: true }));
   }
-  if (!out.length) out.push($("p", { class: "muted", text: "no run is done yet" }));
-  return section("medians", "Medians per dataset", ...out);
-}
-
-function figures(s) {
-  if (!s.figures.length) return section("figures", "Report figures", $("p", { class: "muted", text: "no report yet: its figures appear here when it is written" }));
-  const grid = (list) => $("div", { class: "grid" },
-    ...list.map((f) => $("figure", {}, $("a", { href: `${base()}files/${f.path}` },
-      $("img", { src: `${base()}files/${f.path}?v=${f.mtime}`, alt: f.name, loading: "lazy" })), $("figcaption", { text: f.name }))));
-  const byDataset = new Map();  // the campaign's own figures first, then each dataset's (a multi-dataset report)
-  for (const f of s.figures) {
-    const key = f.dataset || "";
-    if (!byDataset.has(key)) byDataset.set(key, []);
-    byDataset.get(key).push(f);
-  }
-  return section("figures", "Report figures", ...[...byDataset].map(([name, list]) =>
-    name ? $("div", { class: "dataset-figures" }, $("h3", { text: `dataset ${name}` }), grid(list)) : grid(list)));
 }
 
 // The path viewer keeps its own state across updates (what the user picked).
@@ -171,26 +107,32 @@ async function drawPath(key) {
   viewer.plot.dataset.key = key;
 }
 
-// A section is rebuilt only when its part of the snapshot changed: an open log tail stays open, a plot is not redrawn.
-const drawn = {};
-function part(name, build, input) {
-  const key = JSON.stringify(input);
-  if (!drawn[name] || drawn[name].key !== key) drawn[name] = { key, node: build() };
-  return drawn[name].node;
+// A section is placed again only when it changed: an open log tail stays open, a plot is not redrawn.
+const placed = {};
+
+function place(app, id, html) {
+  const t = document.createElement("template");
+  t.innerHTML = html;
+  const node = t.content.firstElementChild;
+  const old = document.getElementById(id);
+  if (old) old.replaceWith(node);
+  else app.insertBefore(node, viewer.root && viewer.root.isConnected ? viewer.root : null);
+  return node;
 }
 
 function render(s) {
   const app = document.getElementById("app");
-  const p = s.progress;
-  app.replaceChildren(
-    header(s),
-    part("lanes", () => lanes(s), s.lanes.map((l) => [l.key, Math.round((l.running_s || 0) / 5)])),
-    part("failures", () => failures(s), s.failed),
-    part("medians", () => medians(s), [s.medians, s.colours]),
-    part("groups", () => groups(s), p.per_group),
-    part("figures", () => figures(s), [s.figures, s.report]),
-    pathViewer(),
-  );
+  if (!document.getElementById("progress")) app.replaceChildren();  // a problem said instead of the first state
+  app.querySelectorAll(":scope > p.problem").forEach((p) => p.remove());  // a newer state: the problem passed
+  for (const [id, html] of Object.entries(s.sections)) {
+    const key = id === "medians" ? html + JSON.stringify([s.medians, s.colours]) : html;
+    if (placed[id] === key && document.getElementById(id)) continue;
+    const node = place(app, id, html);
+    placed[id] = key;
+    if (id === "failures") wireLogs(node);
+    if (id === "medians") drawBoxes(s);
+  }
+  if (!viewer.root || !viewer.root.isConnected) app.append(pathViewer());
   document.title = `${s.progress.finished}/${s.progress.total} · ${s.campaign} · slamrun`;
 }
 
@@ -227,7 +169,7 @@ function polling() {
   const tick = async () => {
     try {
       const r = await fetch(`${base()}api/state`);
-      if (r.ok) { render(await r.json()); document.getElementById("app").prepend(note); }
+      if (r.ok) { render(await r.json()); if (!note.isConnected) document.getElementById("app").prepend(note); }
     } catch (err) { /* the server is away: the next tick asks again */ }
     setTimeout(tick, POLL_MS);
   };

@@ -1,7 +1,7 @@
-"""The live page's first state as plain HTML, rendered by the server from the snapshot: what curl, a text browser
-and a screenshot taken at the page's load see. The page's script renders the same sections from the same snapshot
-(embedded in the page, so its first render needs no request), adds the box plots, the log tails and the path
-viewer, then follows the campaign. Every text from the ledger is escaped."""
+"""The live page's sections as HTML, rendered once, by the server, from the snapshot: the page's first state (what
+curl, a text browser and a screenshot taken at the page's load see) and every later one, sent in the snapshot over
+the event stream. The page's script only places them, and keeps what needs a browser: the box plots (from the
+snapshot's values), the log tails (read when opened) and the path viewer. Every text from the ledger is escaped."""
 
 from __future__ import annotations
 
@@ -12,10 +12,18 @@ import urllib.parse
 
 from slamrun.engine.progress import duration
 
+SECTIONS = ("progress", "lanes", "failures", "medians", "groups", "figures")  # their ids, in the page's order
+
+
+def sections(snap: dict) -> dict[str, str]:
+    """The campaign page's sections for `snap`, by id: header, lanes, failures, medians, groups, figures."""
+    parts = (_header, _lanes, _failures, _medians, _groups, _figures)
+    return dict(zip(SECTIONS, (part(snap) for part in parts), strict=True))
+
 
 def campaign_body(snap: dict) -> str:
-    """The sections of the campaign page (header, lanes, failures, medians, groups, figures) for `snap`."""
-    return "".join((_header(snap), _lanes(snap), _failures(snap), _medians(snap), _groups(snap), _figures(snap)))
+    """The sections of the campaign page, in order."""
+    return "".join(sections(snap).values())
 
 
 def embedded(state_json: bytes) -> str:
@@ -26,8 +34,12 @@ def embedded(state_json: bytes) -> str:
     )
 
 
+class Html(str):
+    """A table cell that is markup this module wrote (every other cell is escaped)."""
+
+
 def _e(value) -> str:
-    return html.escape(str(value), quote=True)
+    return value if isinstance(value, Html) else html.escape(str(value), quote=True)
 
 
 def number(v) -> str:
@@ -104,12 +116,19 @@ def _failures(snap: dict) -> str:
     more = f" (the newest {len(f['runs'])} listed)" if f["total"] > len(f["runs"]) else ""
     rows = [
         [r["failure"], r["label"], f"{r['dataset']}/{r['sequence']}", r["direction"], r["trial"], r["message"] or ""]
+        + [_log_tail(r["key"])]
         for r in f["runs"]
     ]
-    table = _table(["kind", "method", "sequence", "direction", "trial", "message"], rows)
+    table = _table(["kind", "method", "sequence", "direction", "trial", "message", ""], rows)
     return _section(
         "failures", f"Failures: {f['total']}", f"<p>{_e(f'by kind: {kinds}{more}')}</p><div class=scroll>{table}</div>"
     )
+
+
+def _log_tail(key: str) -> Html:
+    """A run's log tail, read by the page's script when it is opened."""
+    summary = '<summary>log tail</summary><pre class="log"></pre>'
+    return Html(f'<details class="logtail" data-key="{_e(key)}">{summary}</details>')
 
 
 def _medians(snap: dict) -> str:
