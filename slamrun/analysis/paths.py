@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from slamrun.core.metrics import Alignment
 from slamrun.engine.paths import RunPaths
 from slamrun.errors import SlamRunError
 
@@ -33,6 +34,7 @@ class SequencePaths:
     gt: np.ndarray  # (n, 3); NaN rows where the ground truth has no pose (TUM-Mono between its segments)
     full: np.ndarray | None  # the whole path where the sequence has one (groundtruth_full.txt)
     runs: list[RunPath]
+    alignment: str = "sim3"  # ATE's, as the campaign evaluated the runs (sim3, se3, none, first:N, se3:first:N)
 
     def plane(self) -> tuple[int, int]:
         """The two coordinates in which the ground truth spreads most, in axis order: the top view's axes."""
@@ -58,23 +60,24 @@ class SequencePaths:
         return "ground truth" if finite.all() else "ground truth (start and end segments)"
 
     def aligned_by(self) -> str:
-        return (
-            "aligned by a Sim(3) over all poses (ATE)"
-            if self.metric != "e_align"
-            else "aligned by the start segment's Sim(3)"
-        )
+        if self.metric == "e_align":
+            return "aligned by the start segment's Sim(3)"
+        a = Alignment.parse(self.alignment)
+        if a.kind == "none":
+            return "not aligned (ATE without alignment)"
+        over = f"the first {a.first_n} poses" if a.first_n else "all poses"
+        return f"aligned by {'a Sim(3)' if a.kind == 'sim3' else 'an SE(3)'} over {over} (ATE)"
 
 
 def sequence_paths(df: pd.DataFrame, sequence: str, metric: str) -> SequencePaths | None:
     """The best, median and worst evaluated run by `metric` of each method on `sequence`, read from their run
     folders and aligned to the ground truth; None where none could be read (run folders moved, no ground truth)."""
     from slamrun.core.trajectory import read_tum
-    from slamrun.datasets.layouts import open_sequence
 
     ok = df[(df.sequence.astype(str) == sequence)].dropna(subset=[metric])
     if "status" in ok.columns:
         ok = ok[ok.status == "done"]
-    gt, full, layout, runs = None, None, None, []
+    gt, full, layout, runs, alignment = None, None, None, [], "sim3"
     for method, g in ok.groupby("method", sort=True):
         g = g.sort_values(metric)
         picks = {"best": g.iloc[0], "median": g.iloc[(len(g) - 1) // 2], "worst": g.iloc[-1]}
@@ -86,36 +89,65 @@ def sequence_paths(df: pd.DataFrame, sequence: str, metric: str) -> SequencePath
             run_dir = Path(row.run_dir)
             try:
                 if gt is None:
-                    folder = Path(json.loads(RunPaths.run_json(run_dir).read_text())["sequence_dir"])
-                    seq = open_sequence(folder)
-                    gt, layout = seq.groundtruth(), seq.layout
-                    full_path = folder / "groundtruth_full.txt"
-                    full = read_tum(full_path).positions if full_path.is_file() else None
+                    gt, full, layout = sequence_truth(
+                        Path(json.loads(RunPaths.run_json(run_dir).read_text())["sequence_dir"])
+                    )
                 traj = read_tum(RunPaths.trajectory(run_dir))
             except (OSError, KeyError, ValueError, TypeError, SlamRunError):
                 continue
-            positions = aligned(traj, gt, metric)
+            alignment = run_alignment(row.get("eval_settings"))
+            positions = aligned(traj, gt, metric, alignment)
             if positions is not None:
                 trial = str(row.trial) if "trial" in row.index else ""
                 direction = str(row.direction) if "direction" in row.index else ""
                 runs.append(RunPath(str(method), which, float(row[metric]), trial, direction, positions))
     if gt is None or not runs:
         return None
-    units = "ground-truth units" if layout == "tum-mono" else "m"
-    return SequencePaths(sequence, metric, units, layout, gt.positions, full, runs)
+    return SequencePaths(sequence, metric, units_of(layout), layout, gt.positions, full, runs, alignment)
 
 
-def aligned(traj, gt, metric: str) -> np.ndarray | None:
-    """A run's positions in the ground truth's frame: a Sim(3) over every associated pose (ATE), or over the start
-    segment's (e_align); None under three associated poses."""
+def sequence_truth(sequence_dir: Path):
+    """A sequence's ground truth (a Trajectory), its whole path where it has one (groundtruth_full.txt) and its
+    layout: what a view draws its runs over."""
+    from slamrun.core.trajectory import read_tum
+    from slamrun.datasets.layouts import open_sequence
+
+    seq = open_sequence(sequence_dir)
+    full_path = sequence_dir / "groundtruth_full.txt"
+    return seq.groundtruth(), read_tum(full_path).positions if full_path.is_file() else None, seq.layout
+
+
+def units_of(layout: str) -> str:
+    """The ground truth's units: TUM-Mono's has an arbitrary scale."""
+    return "ground-truth units" if layout == "tum-mono" else "m"
+
+
+def aligned(traj, gt, metric: str, alignment: str = "sim3") -> np.ndarray | None:
+    """A run's positions in the ground truth's frame, as its metric aligned them: TUM-Mono's e_align by the start
+    segment's Sim(3); ATE by the transform its ATE found (the campaign's `alignment`: sim3, se3, none, first:N, over
+    the poses it paired), so the drawn distance is the figure the tables give; None under three paired poses."""
+    from slamrun.core import metrics
     from slamrun.core.alignment import align_sim3
-    from slamrun.core.evaluation import ground_truth_rows
+    from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S, ground_truth_rows
+    from slamrun.errors import MetricError
 
+    if metric != "e_align":
+        try:
+            return metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).transform.apply(traj.positions)
+        except MetricError:  # nothing paired, or too few poses for its first:N
+            return None
     valid = np.isfinite(gt.positions).all(axis=1)
     match = ground_truth_rows(gt.timestamps, traj.timestamps)
-    use = (match >= 0) & valid[np.maximum(match, 0)]
-    if metric == "e_align":
-        use &= match < len(gt) // 2
+    use = (match >= 0) & valid[np.maximum(match, 0)] & (match < len(gt) // 2)
     if use.sum() < 3:
         return None
     return align_sim3(traj.positions[use], gt.positions[match[use]]).apply(traj.positions)
+
+
+def run_alignment(eval_settings) -> str:
+    """The alignment a run's figures were made with (its recorded evaluation settings), sim3 where none is recorded."""
+    try:
+        found = json.loads(eval_settings).get("alignment") if isinstance(eval_settings, str) else None
+    except (ValueError, AttributeError):
+        found = None
+    return found if isinstance(found, str) and found else "sim3"

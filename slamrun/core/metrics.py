@@ -236,6 +236,7 @@ class AteResult:
     alignment: str
     errors: np.ndarray  # per associated pose, in the estimate's order
     gt_spread: float = math.nan  # the associated ground truth's RMS distance from its centroid
+    transform: Sim3 | None = None  # the alignment's: the estimate onto the ground truth (the views draw it so)
 
     @property
     def relative(self) -> float:
@@ -259,7 +260,7 @@ def ate(
     errors = np.linalg.norm(sim.apply(pairs.est.positions) - pairs.gt.positions, axis=1)
     centred = pairs.gt.positions - pairs.gt.positions.mean(axis=0)
     spread = math.sqrt(float(np.einsum("ij,ij->", centred, centred)) / len(centred))
-    return AteResult(ErrorStats.of(errors), float(sim.scale), str(alignment), errors, spread)
+    return AteResult(ErrorStats.of(errors), float(sim.scale), str(alignment), errors, spread, sim)
 
 
 # ------------------------------------------------------------------------------------------------- RPE

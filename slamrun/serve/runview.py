@@ -12,6 +12,7 @@ from pathlib import Path
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.paths import RunPaths
 from slamrun.errors import SlamRunError
+from slamrun.results.catalogue import MAIN_METRICS
 from slamrun.serve.folders import LEDGER
 
 LOG_TAIL_BYTES = 8192
@@ -62,11 +63,11 @@ def log_tail(results: Path, key: str) -> str | None:
 
 def path_figure(results: Path, key: str) -> dict:
     """The plotly figure of a done run's path over its sequence's ground truth, aligned as its main metric aligns
-    it (TUM-Mono: the start segment's Sim(3); else a Sim(3) over every pose). SlamRunError says why there is none."""
+    it (TUM-Mono: the start segment's Sim(3); else the transform its ATE found): the report's view, for this run
+    alone. SlamRunError says why there is none."""
     from slamrun.analysis.interactive import view_figure
-    from slamrun.analysis.paths import RunPath, SequencePaths, aligned
+    from slamrun.analysis.paths import RunPath, SequencePaths, aligned, run_alignment, sequence_truth, units_of
     from slamrun.core.trajectory import read_tum
-    from slamrun.datasets.layouts import open_sequence
 
     row = run_row(results, key)
     if row is None:
@@ -79,20 +80,16 @@ def path_figure(results: Path, key: str) -> dict:
     run_json = RunPaths.run_json(folder)
     if not run_json.is_file() or run_json.stat().st_size > MAX_RUN_JSON:
         raise SlamRunError(f"run {key}: no readable run.json")
-    sequence_dir = json.loads(run_json.read_text()).get("sequence_dir")
-    seq = open_sequence(Path(sequence_dir))
-    gt = seq.groundtruth()
-    metric = "e_align" if row.get("e_align") is not None else "ate_rmse"
-    positions = aligned(read_tum(RunPaths.trajectory(folder)), gt, metric)
+    gt, full, layout = sequence_truth(Path(json.loads(run_json.read_text()).get("sequence_dir")))
+    metric = next((m for m in MAIN_METRICS if row.get(m) is not None), MAIN_METRICS[-1])
+    alignment = run_alignment(row.get("eval_settings"))
+    positions = aligned(read_tum(RunPaths.trajectory(folder)), gt, metric, alignment)
     if positions is None:
         raise SlamRunError(f"run {key}: under three of its poses meet the ground truth")
-    full_path = Path(sequence_dir) / "groundtruth_full.txt"
-    full = read_tum(full_path).positions if full_path.is_file() else None
     value = row.get(metric)
     value = float(value) if value is not None else float("nan")
     run = RunPath(row["label"], "best", value, str(row["trial"]), str(row["direction"]), positions)
-    units = "ground-truth units" if seq.layout == "tum-mono" else "m"
-    paths = SequencePaths(str(row["sequence"]), metric, units, seq.layout, gt.positions, full, [run])
+    paths = SequencePaths(str(row["sequence"]), metric, units_of(layout), layout, gt.positions, full, [run], alignment)
     title = f"{row['label']} on {row['dataset']}/{row['sequence']}, {row['direction']} trial {row['trial']}"
     figure = view_figure(paths, title)
     figure["data"][-1]["name"] = f"{row['label']} ({metric} {value:.4g})"
