@@ -43,6 +43,13 @@ def add_commands(sub) -> None:
     )
     sy.add_argument("--scene", choices=["indoor", "outdoor"], default="indoor", help="room or courtyard scale")
     sy.add_argument(
+        "--motion",
+        choices=["default", "plain", "hard"],
+        default="default",
+        help="the camera path's envelope: default (the seed's loop within the plain loop's speed, rotation rate and "
+        "start parallax), plain (that loop), hard (faster, less start parallax: on purpose)",
+    )
+    sy.add_argument(
         "--layout",
         default="tum-mono",
         help=f"the dataset layout to write ({BUILT_IN}, or a plug-in's; kitti: OUT is sequences/NN, its poses go to "
@@ -98,7 +105,7 @@ def cmd_synth(args) -> int:
     except ValueError:
         raise DatasetError(f"--size {args.size!r}: expected WIDTHxHEIGHT, e.g. 640x480") from None
     t0 = time.monotonic()
-    out = generate(args.out, args.frames, args.seed, (w, h), args.scene, args.layout)
+    out = generate(args.out, args.frames, args.seed, (w, h), args.scene, args.layout, args.motion)
     console.print(f"{out}: {args.frames} frames, {args.layout} layout, in {time.monotonic() - t0:.1f} s")
     return 0
 

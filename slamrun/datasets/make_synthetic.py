@@ -9,7 +9,7 @@ from pathlib import Path
 
 from slamrun.datasets.generated import SYNTH_MARKER, target_problem, write_marker
 from slamrun.datasets.layouts import get
-from slamrun.datasets.synth import Synth
+from slamrun.datasets.synth import MOTIONS, Synth
 from slamrun.errors import DatasetError
 
 
@@ -20,10 +20,13 @@ def generate(
     size: tuple[int, int] = (640, 480),
     scene_kind: str = "indoor",
     layout: str = "tum-mono",
+    motion: str = "default",
 ) -> Path:
     """Write a synthetic sequence folder at `out` in a dataset's layout (written to a temporary folder, then
-    renamed); a layout whose published camera has one size (`fixed_size`) is written at that size. `out` must not
-    exist, be empty, or be a sequence slamrun generated (DatasetError otherwise: nothing of a user's is replaced).
+    renamed); a layout whose published camera has one size (`fixed_size`) is written at that size. `motion`: the
+    camera path's envelope (synth.MOTIONS: "default" within the plain loop's, "plain" that loop, "hard" faster).
+    `out` must not exist, be empty, or be a sequence slamrun generated (DatasetError otherwise: nothing of a user's
+    is replaced).
     Files a layout keeps beside the sequence's folder (KITTI's poses/NN.txt) are written only where no such file
     exists or slamrun wrote it."""
     out = Path(out)
@@ -38,13 +41,16 @@ def generate(
     for beside in kind.synth_outside(out):
         if beside.exists() and not (out / SYNTH_MARKER).is_file():
             raise DatasetError(f"{beside} exists and slamrun did not write it; move it away to generate {out}")
+    if motion not in MOTIONS:
+        raise DatasetError(f"motion {motion!r}: one of {', '.join(MOTIONS)}")
     size = kind.fixed_size or size
     tmp = out.with_name(out.name + ".tmp-synth")
     if tmp.exists():
         shutil.rmtree(tmp)
     tmp.mkdir(parents=True)
-    write_marker(tmp, {"frames": frames, "seed": seed, "size": list(size), "scene": scene_kind, "layout": layout})
-    placed = kind.synth(tmp, Synth(frames, seed, size, scene_kind, out.name))
+    settings = {"frames": frames, "seed": seed, "size": list(size), "scene": scene_kind, "layout": layout}
+    write_marker(tmp, settings if motion == "default" else {**settings, "motion": motion})
+    placed = kind.synth(tmp, Synth(frames, seed, size, scene_kind, out.name, motion=motion))
     declared = set(kind.synth_outside(out))
     for _, place in placed or ():
         if place not in declared:  # never replace what the writer did not name in advance (checked above)

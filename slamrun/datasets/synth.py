@@ -3,7 +3,9 @@
 The scene is a textured room (or courtyard) with boxes in the middle; the camera circles them once,
 looking at them, so the path closes a loop and start and end see the same place. The loop follows the seed too
 (`PathShape`: size, aspect, turning sense, where it starts, height, speed profile, gaze): two sequences are two
-motions, each within the plain loop's speed and rotation rate, so what tracks the plain loop tracks them. Frames
+motions, each within the plain loop's envelope (its fastest speed and rotation rate, and the parallax of its first
+frames, each within MOTION_SLACK: datasets/envelope.py measures them), so what tracks the plain loop's motion tracks
+them. `motion` asks for another envelope on purpose (MOTIONS: the plain loop itself, or harder loops). Frames
 are ray-cast through each layout's camera; each layout's module writes them with its files and quirks (its `synth`:
 TUM-Mono's vignette, response curve and exposures, EuRoC's nanosecond names and body frame, ...).
 Deterministic for a seed.
@@ -12,7 +14,7 @@ Deterministic for a seed.
 from __future__ import annotations
 
 import io
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -28,7 +30,15 @@ GT_FRACTION = 0.2  # first and last 20 % of the frames carry ground truth
 
 PATH_STREAM = 0x9A7  # the path's random stream: a seed's boxes and texture stay what they were before paths varied
 SCALES = {"indoor": 1.0, "outdoor": 5.0}
-MOTION_SLACK = 1.1  # a seed's loop moves and turns at most 10 % faster than the plain loop at its fastest
+MOTION_SLACK = 1.1  # a seed's loop moves and turns at most 10 % faster than the plain loop at its fastest, and its
+# first frames give at least the plain loop's start parallax / MOTION_SLACK
+START_LOOPS = (1 / 30, 2 / 30)  # the start's parallax is over these parts of the loop (10 and 20 of 300 frames)
+MOTIONS = {  # motion -> what the paths are
+    "default": "the seed's loop, within the plain loop's envelope (MOTION_SLACK)",
+    "plain": "the plain loop every sequence had before paths followed their seed, for every seed",
+    "hard": "the seed's loop not drawn back, with a stronger speed profile (surge up to 0.5) and twice the gaze "
+    "wander: up to about 1.45x the plain loop's fastest speed, 1.85x its rotation rate, 0.6x its start parallax",
+}
 
 
 @dataclass(frozen=True)
@@ -44,18 +54,27 @@ class PathShape:
     surge: float  # speed profile: the phase advances as 2 pi u + surge sin(2 pi u), |surge| < 1
     gaze: tuple[float, float, float]  # phase offsets of the look-at point's wander (x, y, z)
     scale: float = 1.0  # the scene's (1 indoor, 5 outdoor)
+    wander: float = 0.3  # the look-at point's wander (m, the same at either scale, as it always was)
 
     @classmethod
     def plain(cls, scale: float = 1.0) -> PathShape:
         return cls((2.3 * scale, 1.9 * scale), 1.3 * scale, (3, 0.1 * scale), 1, 0.0, 0.0, (0.0, 0.0, 0.0), scale)
 
 
-def path_shape(kind: str, seed: int) -> PathShape:
+def path_shape(kind: str, seed: int, motion: str = "default") -> PathShape:
     """The loop of a sequence of seed `seed`: size (0.92-1.1 of the plain loop's), aspect (either axis the long one,
     up to the plain loop's 1.21), turning sense, start, height, vertical wobble, speed profile and gaze drawn from
     the seed, then drawn back towards the plain loop until its fastest translation and rotation per step are within
-    MOTION_SLACK of the plain loop's (`path_motion`): the boxes are never nearer, the motion about as fast."""
+    MOTION_SLACK of the plain loop's (`path_motion`) and its start's parallax at least the plain loop's over
+    MOTION_SLACK (`start_parallax`): the boxes are never nearer, the motion about as fast, the start no slower.
+    `motion` (MOTIONS): "plain" the plain loop whatever the seed, "hard" the drawn loop with a stronger speed
+    profile and gaze wander, not drawn back."""
+    if motion not in MOTIONS:
+        raise ValueError(f"motion {motion!r}: one of {', '.join(MOTIONS)}")
     scale = SCALES[kind]
+    plain = PathShape.plain(scale)
+    if motion == "plain":
+        return plain
     rng = np.random.default_rng([seed, PATH_STREAM])
     size = rng.uniform(0.92, 1.1)
     aspect = rng.uniform(1.0, 2.3 / 1.9)
@@ -73,14 +92,29 @@ def path_shape(kind: str, seed: int) -> PathShape:
         gaze=tuple(rng.uniform(-np.pi, np.pi, 3)),
         scale=scale,
     )
-    plain = PathShape.plain(scale)
+    if motion == "hard":
+        return replace(drawn, surge=2.5 * drawn.surge, wander=2 * plain.wander)
     limit = path_motion(plain)
+    start_limit = [start_parallax(plain, part) / MOTION_SLACK for part in START_LOOPS]
     for weight in np.linspace(1.0, 0.0, 11):
         shape = _toward(plain, drawn, weight)
         speed, turning = path_motion(shape)
-        if speed <= limit[0] * MOTION_SLACK and turning <= limit[1] * MOTION_SLACK:
+        if (
+            speed <= limit[0] * MOTION_SLACK
+            and turning <= limit[1] * MOTION_SLACK
+            and all(start_parallax(shape, part) >= low for part, low in zip(START_LOOPS, start_limit, strict=True))
+        ):
             return shape
     return plain
+
+
+def start_parallax(shape: PathShape, part: float) -> float:
+    """The translation over the first `part` of the loop, the shorter of the two ways round (a backward run starts at
+    the end), over the distance from the start to the boxes' middle: the parallax a monocular initialisation starts
+    from (radians, small-angle)."""
+    _, pos = loop_poses(shape, np.array([0.0, part, 1.0 - part]))
+    depth = np.linalg.norm(pos[0] - np.array([0.0, 0.0, 0.7]) * shape.scale)
+    return float(min(np.linalg.norm(pos[1] - pos[0]), np.linalg.norm(pos[2] - pos[0])) / depth)
 
 
 def _toward(plain: PathShape, drawn: PathShape, w: float) -> PathShape:
@@ -98,6 +132,7 @@ def _toward(plain: PathShape, drawn: PathShape, w: float) -> PathShape:
         surge=mix(plain.surge, drawn.surge),
         gaze=tuple(mix(p, d) for p, d in zip(plain.gaze, drawn.gaze, strict=True)),
         scale=drawn.scale,
+        wander=mix(plain.wander, drawn.wander),
     )
 
 
@@ -184,7 +219,7 @@ def loop_poses(shape: PathShape, loops: np.ndarray, look_at: np.ndarray | None =
     cycles, amplitude = shape.bob
     pos = np.column_stack([a * np.cos(phase), b * np.sin(phase), shape.height + amplitude * np.sin(cycles * u)])
     gx, gy, gz = shape.gaze
-    wander = 0.3 * np.column_stack([np.sin(2 * u + gx), np.cos(u + gy), 2 / 3 * np.sin(u + gz)])
+    wander = shape.wander * np.column_stack([np.sin(2 * u + gx), np.cos(u + gy), 2 / 3 * np.sin(u + gz)])
     fwd = look_at + wander - pos
     fwd /= np.linalg.norm(fwd, axis=1, keepdims=True)
     right = np.cross(fwd, [0.0, 0.0, 1.0])
@@ -384,14 +419,19 @@ class Synth:
     scene_kind: str
     name: str
     laps: int = 1  # loops over the sequence (KITTI's drive: long enough for its 100 m segments)
+    motion: str = "default"  # the paths' envelope (MOTIONS)
+
+    @property
+    def path(self) -> PathShape:
+        return path_shape(self.scene_kind, self.seed, self.motion)
 
     @property
     def scene(self) -> Scene:
-        return make_scene(self.scene_kind, np.random.default_rng(self.seed), path_shape(self.scene_kind, self.seed))
+        return make_scene(self.scene_kind, np.random.default_rng(self.seed), self.path)
 
     def renderer(self, cam) -> tuple[Scene, Renderer]:
         rng = np.random.default_rng(self.seed)
-        scene = make_scene(self.scene_kind, rng, path_shape(self.scene_kind, self.seed))
+        scene = make_scene(self.scene_kind, rng, self.path)
         return scene, Renderer(scene, make_texture(rng), camera_rays(cam), (cam.height, cam.width))
 
     def poses_at(self, scene: Scene, fraction: np.ndarray) -> np.ndarray:

@@ -77,6 +77,7 @@ def ensure_datasets(spec: CampaignSpec, log=print) -> None:
                     size=ds.synthetic.size_wh,
                     scene_kind=ds.synthetic.scene.value,
                     layout=ds.layout,
+                    motion=ds.synthetic.motion,
                 )
 
 

@@ -35,6 +35,9 @@ class SceneKind(StrEnum):
     outdoor = "outdoor"
 
 
+Motion = Literal["default", "plain", "hard"]  # datasets/synth.py MOTIONS (tested equal)
+
+
 class SynthSpec(Strict):
     """Generate the dataset's sequences on first use (cached in its folder)."""
 
@@ -42,6 +45,12 @@ class SynthSpec(Strict):
     seed: int = Field(0, description="Seed of the first sequence; the i-th sequence uses seed + i.")
     size: str = Field("640x480", pattern=r"^\d+x\d+$", description="Image size WIDTHxHEIGHT.")
     scene: SceneKind = Field(SceneKind.indoor, description="Room scale (indoor) or courtyard scale (outdoor).")
+    motion: Motion = Field(
+        "default",
+        description="The camera paths' envelope: default, each seed's loop within the plain loop's speed, rotation "
+        "rate and start parallax; plain, the plain loop for every seed; hard, faster and with less start parallax "
+        "on purpose (README, Synthetic sequences).",
+    )
 
     @property
     def size_wh(self) -> tuple[int, int]:
