@@ -36,7 +36,7 @@ def bench_demo(tmp: Path) -> None:
         subprocess.run(cmd, check=True, capture_output=True, cwd=code, env=env)
         wall = time.time() - t0
         db = sqlite3.connect(tmp / name / "results" / "ledger.sqlite")
-        busy, last = db.execute("SELECT SUM(wall_s), MAX(ended_at) FROM runs WHERE state = 'done'").fetchone()
+        busy, last = db.execute("SELECT SUM(wall_s), MAX(ended_at) FROM runs WHERE status = 'done'").fetchone()
         db.close()
         return busy / (spec["lanes"] * (last - t0)), busy, wall
 

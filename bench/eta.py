@@ -34,11 +34,11 @@ def planned() -> list[dict]:
                     rows.append(
                         {
                             "key": f"{label}/{seq}/{direction}/{trial}",
-                            "label": label,
+                            "method": label,
                             "dataset": "d",
                             "sequence": seq,
                             "direction": direction,
-                            "state": "pending",
+                            "status": "pending",
                             "failure": None,
                             "wall_s": None,
                             "started_at": None,
@@ -58,14 +58,14 @@ def replay(rows: list[dict]) -> tuple[list[tuple[float, int, float | None]], flo
     def start_runs(now: float) -> None:
         while queue and len(starts) < LANES:
             i = queue.pop(0)
-            rows[i].update(state="running", started_at=now)
+            rows[i].update(status="running", started_at=now)
             heapq.heappush(starts, (now + rows[i]["takes"], i))
 
     start_runs(0.0)
     while starts or queue:
         while starts and starts[0][0] <= t:
             end, i = heapq.heappop(starts)
-            rows[i].update(state="done", wall_s=rows[i]["takes"])
+            rows[i].update(status="done", wall_s=rows[i]["takes"])
             finished += 1
             start_runs(end)
         fresh = [{k: v for k, v in r.items() if k != "takes"} for r in rows]

@@ -316,7 +316,7 @@ def test_a_frame_only_view_preparation_finds_broken_is_a_dataset_error_never_the
     spec = spec_for(root, "kitti", tmp_path, directions=["forward"], lanes=1, retries=0)
     res = run_campaign(load_spec(spec), log=lambda *a: None)
     rows = ledger_rows(res.results)
-    assert rows and all(r["state"] != "done" and r["failure"] not in METHOD_FAILURES for r in rows), rows
+    assert rows and all(r["status"] != "done" and r["failure"] not in METHOD_FAILURES for r in rows), rows
     assert all("image_0/000008.png" in r["message"] for r in rows), [r["message"] for r in rows]
     assert all("Traceback" not in r["message"] for r in rows)
 
@@ -388,7 +388,7 @@ def test_a_fifo_as_a_frame_or_beside_the_frames_never_blocks(seq, tmp_path):
     out = slamrun("campaign", str(spec), timeout=120)
     assert out.returncode == 0, out.stdout + out.stderr
     rows = ledger_rows(tmp_path / "t" / "results")
-    assert [r["state"] for r in rows] == ["done"], [(r["failure"], r["message"]) for r in rows]
+    assert [r["status"] for r in rows] == ["done"], [(r["failure"], r["message"]) for r in rows]
 
 
 def test_a_sparse_2_gib_frame_is_refused_without_reading_it(seq, tmp_path):

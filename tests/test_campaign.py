@@ -245,14 +245,14 @@ def test_kill_9_then_resume(tmp_path, tiny_dataset):
 
     def mid_way():
         rows = ledger_rows(results)
-        return sum(r["state"] == "done" for r in rows) >= 3 and any(r["state"] == "running" for r in rows)
+        return sum(r["status"] == "done" for r in rows) >= 3 and any(r["status"] == "running" for r in rows)
 
     assert _wait_for(mid_way), proc.communicate(timeout=5)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     rows = ledger_rows(results)
-    finished = {r["key"]: Path(r["run_dir"]) for r in rows if r["state"] == "done"}
-    in_flight = [r for r in rows if r["state"] == "running"]
+    finished = {r["key"]: Path(r["run_dir"]) for r in rows if r["status"] == "done"}
+    in_flight = [r for r in rows if r["status"] == "running"]
     assert finished and in_flight
     before = {k: _snapshot(d) for k, d in finished.items()}
 
@@ -260,7 +260,7 @@ def test_kill_9_then_resume(tmp_path, tiny_dataset):
     out, err = proc2.communicate(timeout=120)
     assert proc2.returncode == 0, err
     rows = ledger_rows(results)
-    assert len(rows) == 12 and all(r["state"] == "done" for r in rows)
+    assert len(rows) == 12 and all(r["status"] == "done" for r in rows)
     for key, run_dir in finished.items():  # finished runs untouched, never executed again
         assert _snapshot(run_dir) == before[key]
         assert json.loads((run_dir / "run.json").read_text())["attempt"] == 1
@@ -287,7 +287,7 @@ def test_sigint_stops_cleanly_and_resumes(tmp_path, tiny_dataset):
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=1.5)], trials=2, stop_grace_s=0.5)
     results = tmp_path / "results"
     proc = slamrun("campaign", str(spec))
-    assert _wait_for(lambda: any(r["state"] == "running" for r in ledger_rows(results)))
+    assert _wait_for(lambda: any(r["status"] == "running" for r in ledger_rows(results)))
     t0 = time.monotonic()
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=60)
@@ -295,14 +295,14 @@ def test_sigint_stops_cleanly_and_resumes(tmp_path, tiny_dataset):
     assert proc.returncode == 130, err
     assert "resume" in out
     rows = ledger_rows(results)
-    assert not any(r["state"] == "running" for r in rows)
-    assert any(r["state"] == "pending" for r in rows)
+    assert not any(r["status"] == "running" for r in rows)
+    assert any(r["status"] == "pending" for r in rows)
     for r in rows:
-        if r["state"] == "done":
+        if r["status"] == "done":
             assert (Path(r["run_dir"]) / "trajectory.txt").exists()
     proc2 = slamrun("campaign", str(spec))
     proc2.communicate(timeout=120)
-    assert all(r["state"] == "done" for r in ledger_rows(results))
+    assert all(r["status"] == "done" for r in ledger_rows(results))
 
 
 def test_ctrl_c_after_which_every_run_finished_says_so_and_writes_the_report(tmp_path, tiny_dataset):
@@ -315,11 +315,11 @@ def test_ctrl_c_after_which_every_run_finished_says_so_and_writes_the_report(tmp
     results = tmp_path / "results"
     proc = slamrun("campaign", str(spec))
     # both runs (forward, backward) on the two lanes: nothing pending, so the stop can only let them finish
-    assert _wait_for(lambda: sum(r["state"] == "running" for r in ledger_rows(results)) == 2)
+    assert _wait_for(lambda: sum(r["status"] == "running" for r in ledger_rows(results)) == 2)
     proc.send_signal(signal.SIGINT)
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, out + err
-    assert all(r["state"] == "done" for r in ledger_rows(results))
+    assert all(r["status"] == "done" for r in ledger_rows(results))
     assert "stopped before the end" not in out
     assert (
         "SIGINT came after the last runs had started; they finished within the grace period: the campaign is "
@@ -373,7 +373,7 @@ def test_full_disk_stops_keeps_finished_runs_and_resumes(tmp_path, tiny_dataset,
     results = small_disk / "results"
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(sleep=0.5)], trials=3, results=str(results))
     proc = slamrun("campaign", str(spec))
-    assert _wait_for(lambda: sum(r["state"] == "done" for r in ledger_rows(results)) >= 3), proc.communicate(timeout=5)
+    assert _wait_for(lambda: sum(r["status"] == "done" for r in ledger_rows(results)) >= 3), proc.communicate(timeout=5)
     filler = _fill(small_disk)
     out, err = proc.communicate(timeout=120)  # it stops by itself, it does not hang
     assert proc.returncode != 0
@@ -382,8 +382,8 @@ def test_full_disk_stops_keeps_finished_runs_and_resumes(tmp_path, tiny_dataset,
     assert "make campaign" in said or "again" in said, said[-2000:]
     rows = ledger_rows(results)
     assert len(rows) == 12
-    assert not [r for r in rows if r["state"] == "failed"], [r["message"] for r in rows if r["state"] == "failed"]
-    finished = {r["key"]: Path(r["run_dir"]) for r in rows if r["state"] == "done"}
+    assert not [r for r in rows if r["status"] == "failed"], [r["message"] for r in rows if r["status"] == "failed"]
+    finished = {r["key"]: Path(r["run_dir"]) for r in rows if r["status"] == "done"}
     assert len(finished) >= 3
     before = {k: _snapshot(d) for k, d in finished.items()}
 
@@ -392,7 +392,7 @@ def test_full_disk_stops_keeps_finished_runs_and_resumes(tmp_path, tiny_dataset,
     out, err = proc2.communicate(timeout=180)
     assert proc2.returncode == 0, err
     rows = ledger_rows(results)
-    assert len(rows) == 12 and all(r["state"] == "done" for r in rows), [(r["state"], r["message"]) for r in rows]
+    assert len(rows) == 12 and all(r["status"] == "done" for r in rows), [(r["status"], r["message"]) for r in rows]
     for key, run_dir in finished.items():
         assert _snapshot(run_dir) == before[key]
     assert not list((results / "runs").rglob(".*.tmp-*"))
@@ -409,7 +409,7 @@ def test_full_disk_while_preparing_views_is_reported_then_resumes(tmp_path, tiny
     proc = slamrun("campaign", str(spec))
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
-    assert all(r["state"] == "done" for r in ledger_rows(tmp_path / "results"))
+    assert all(r["status"] == "done" for r in ledger_rows(tmp_path / "results"))
 
 
 def test_dask_engine_runs_on_workers_and_stops_them(tmp_path, tiny_dataset):
@@ -427,7 +427,7 @@ def test_dask_engine_runs_on_workers_and_stops_them(tmp_path, tiny_dataset):
     out, err = proc.communicate(timeout=180)
     assert proc.returncode == 0, err[-3000:]
     rows = ledger_rows(tmp_path / "results")
-    assert len(rows) == 4 and all(r["state"] == "done" and r["eval_status"] == "ok" for r in rows)
+    assert len(rows) == 4 and all(r["status"] == "done" and r["eval_status"] == "ok" for r in rows)
     records = [json.loads((Path(r["run_dir"]) / "run.json").read_text()) for r in rows]
     assert {rec["engine"] for rec in records} == {"dask"} and {rec["backend"] for rec in records} == {"local"}
     starts = [line.split() for line in marker.read_text().splitlines()]
@@ -443,7 +443,7 @@ def test_dask_engine_runs_on_workers_and_stops_them(tmp_path, tiny_dataset):
     )
     results = tmp_path / "h" / "results"
     proc = slamrun("campaign", str(hang))
-    assert _wait_for(lambda: sum(r["state"] == "running" for r in ledger_rows(results)) == 2, timeout=120)
+    assert _wait_for(lambda: sum(r["status"] == "running" for r in ledger_rows(results)) == 2, timeout=120)
     assert _wait_for(lambda: len(_fake_processes("hang")) == 2, timeout=60)
     workers = {p.ppid() for p in _fake_processes("hang")}
     assert proc.pid not in workers  # started by the Dask workers
@@ -451,7 +451,7 @@ def test_dask_engine_runs_on_workers_and_stops_them(tmp_path, tiny_dataset):
     out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err[-3000:]
     assert _wait_for(lambda: not _fake_processes("hang"), timeout=30)
-    assert all(r["state"] == "pending" for r in ledger_rows(results))
+    assert all(r["status"] == "pending" for r in ledger_rows(results))
 
 
 def _fake_processes(mode: str) -> list[psutil.Process]:
@@ -541,7 +541,7 @@ def test_a_full_disk_on_a_finished_campaign_is_said_as_a_full_disk_by_every_comm
         report=False,
     )
     out, err = slamrun("campaign", str(spec)).communicate(timeout=300)
-    assert all(r["state"] == "done" for r in ledger_rows(results)), err
+    assert all(r["status"] == "done" for r in ledger_rows(results)), err
     run_dir = Path(ledger_rows(results)[0]["run_dir"])
     source = tmp_path / "published"
     source.mkdir()
@@ -593,7 +593,7 @@ def test_concurrent_reports_of_one_campaign_are_written_one_after_the_other(tmp_
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(extra=["--noise", "0.01", "--vary"])], trials=2)
     out, err = slamrun("campaign", str(spec)).communicate(timeout=300)
     results = tmp_path / "results"
-    assert all(r["state"] == "done" for r in ledger_rows(results)), err
+    assert all(r["status"] == "done" for r in ledger_rows(results)), err
     for _ in range(2):
         procs = [slamrun("report", str(results)) for _ in range(3)]
         ends = [p.communicate(timeout=300) + (p.returncode,) for p in procs]

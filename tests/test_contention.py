@@ -135,7 +135,7 @@ def test_a_real_time_method_starved_by_a_hog_is_contended_and_retried(tmp_path: 
         second.kill()
         second.wait()
     (row,) = Ledger(res.results / "ledger.sqlite", read_only=True).rows()
-    assert (row["state"], row["failure"]) == ("failed", "contended"), {k: row[k] for k in ("wall_s", "cpu_wait_pct")}
+    assert (row["status"], row["failure"]) == ("failed", "contended"), {k: row[k] for k in ("wall_s", "cpu_wait_pct")}
     assert "waited for a CPU" in row["message"] and "not charged to the method" in row["message"]
     assert [kind for kind, _ in events].count("retry") == 1  # retried once (retries: 1), contended again
     df = pd.read_csv(res.results_csv)

@@ -82,7 +82,7 @@ def test_the_live_pages_medians_show_coverage(campaign):
     res, _ = campaign
     ledger = Ledger(res.results / "ledger.sqlite", read_only=True)
     try:
-        done = ledger.rows(state="done", columns=("label", "dataset", "coverage", "ate_rmse", "rpe_t_rmse"))
+        done = ledger.rows(status="done", columns=("method", "dataset", "coverage", "ate_rmse", "rpe_t_rmse"))
     finally:
         ledger.close()
     block = medians(done)["open"]

@@ -325,7 +325,7 @@ def _running_keys(results: Path) -> set[str]:
         return set()
     db = sqlite3.connect(f"file:{path}?mode=ro", uri=True, timeout=30)
     try:
-        return {key for (key,) in db.execute("SELECT key FROM runs WHERE state = 'running'")}
+        return {key for (key,) in db.execute("SELECT key FROM runs WHERE status = 'running'")}
     except sqlite3.OperationalError:  # the table is not created yet
         return set()
     finally:

@@ -159,9 +159,9 @@ def test_a_dead_daemon_is_named_within_seconds_and_its_finished_container_is_col
     assert "Docker daemon unreachable" in msg and daemon.host in msg and "run the same command" in msg
     first, second = (started[0].direction.value, 0), (started[1].direction.value, 0)
     rows = {(r["direction"], r["trial"]): r for r in ledger_rows(tmp_path / "results")}
-    assert rows[first]["state"] == "done"
-    assert rows[second]["state"] == "pending" and rows[second]["attempts"] == 1
-    assert all(r["state"] in ("done", "pending") for r in rows.values())  # nothing charged, nothing infra
+    assert rows[first]["status"] == "done"
+    assert rows[second]["status"] == "pending" and rows[second]["attempts"] == 1
+    assert all(r["status"] in ("done", "pending") for r in rows.values())  # nothing charged, nothing infra
     assert all(r["failure"] is None for r in rows.values())
     first_done = Path(rows[first]["run_dir"])
     mtime = (first_done / "run.json").stat().st_mtime_ns

@@ -269,7 +269,7 @@ def test_the_providing_package_is_recorded_and_keys_the_runs(tmp_path, tiny_data
     out = slamrun("campaign", spec, env=env)
     assert out.returncode == 0, out.stdout + out.stderr
     (row,) = ledger_rows(tmp_path / "results")
-    assert row["state"] == "done"
+    assert row["status"] == "done"
     record = json.loads((Path(row["run_dir"]) / "run.json").read_text())
     assert record["provider"] == {"distribution": "my-vo", "version": "1.0"}
     listed = slamrun("list-methods", env=env).stdout
@@ -280,7 +280,7 @@ def test_the_providing_package_is_recorded_and_keys_the_runs(tmp_path, tiny_data
     out = slamrun("campaign", spec, env=env)
     assert out.returncode == 0, out.stdout + out.stderr
     (row2,) = ledger_rows(tmp_path / "results")
-    assert row2["settings"] != row["settings"] and row2["state"] == "done"
+    assert row2["settings"] != row["settings"] and row2["status"] == "done"
     assert json.loads((Path(row2["run_dir"]) / "run.json").read_text())["provider"]["version"] == "2.0"
 
 
@@ -331,7 +331,7 @@ def test_config_paths_outside_the_run_are_refused_as_the_methods_fault(tmp_path,
     assert not outside.exists()
     assert not list(tmp_path.rglob("outside.txt"))
     (row,) = ledger_rows(tmp_path / "results")
-    assert (row["state"], row["failure"], row["attempts"]) == ("failed", "crashed", 1), row
+    assert (row["status"], row["failure"], row["attempts"]) == ("failed", "crashed", 1), row
     assert "leaky" in row["message"] and "outside" in row["message"] and "\n" not in row["message"]
     assert not list((tmp_path / "results" / "runs").rglob("settings.yaml"))  # nothing written of it at all
 
@@ -345,7 +345,7 @@ def test_a_plugin_that_raises_is_the_methods_failure_not_infra(tmp_path, tiny_da
     out = slamrun("campaign", spec, env=env)
     assert out.returncode == 0, out.stdout + out.stderr
     (row,) = ledger_rows(tmp_path / "results")
-    assert (row["state"], row["failure"], row["attempts"]) == ("failed", "crashed", 1), row
+    assert (row["status"], row["failure"], row["attempts"]) == ("failed", "crashed", 1), row
     message = row["message"]
     assert "Traceback" not in message and "\n" not in message
     assert "shaky" in message and "shaky-vo 0.2" in message
@@ -361,7 +361,7 @@ def test_a_plugin_that_raises_is_the_methods_failure_not_infra(tmp_path, tiny_da
     assert record["failure"] == "crashed" and record["provider"]["distribution"] == "shaky-vo"
     out = slamrun("campaign", spec, env=env)  # a method's failure is a result: never retried
     (again,) = ledger_rows(tmp_path / "results")
-    assert (again["state"], again["attempts"], again["message"]) == ("failed", 1, message)
+    assert (again["status"], again["attempts"], again["message"]) == ("failed", 1, message)
 
 
 # ---------------------------------------------------------------- item 7: damaged ledger, missing executable

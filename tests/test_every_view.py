@@ -199,7 +199,7 @@ def test_a_method_tracking_under_the_coverage_mark_is_marked_in_every_view(kitti
         assert "short †" in (results / "report" / "figures" / f"{name}.svg").read_text(), name
     ledger = Ledger(results / "ledger.sqlite", read_only=True)
     try:
-        live = medians(ledger.rows(state="done", columns=MEDIAN_COLUMNS))["kitti"]
+        live = medians(ledger.rows(status="done", columns=MEDIAN_COLUMNS))["kitti"]
     finally:
         ledger.close()
     assert "short †" in {m["method"] for m in live["methods"]} and said in live["notes"][0]

@@ -93,7 +93,7 @@ def split_archives(study: Path, dest: Path, code: str, direction: str, part_size
 def rows_of(results: Path, label: str) -> list[dict]:
     ledger = Ledger(results / "ledger.sqlite", read_only=True)
     try:
-        return [r for r in ledger.rows() if r["label"] == label]
+        return [r for r in ledger.rows() if r["method"] == label]
     finally:
         ledger.close()
 
@@ -108,9 +108,9 @@ def test_the_studys_files_import_as_runs_evaluated_by_the_campaigns_code(campaig
         ("sequence_48", "backward", 0),
         ("sequence_48", "backward", 1),
     ]
-    assert all(r["state"] == "done" and r["eval_status"] == "ok" and r["e_align"] is not None for r in runs)
+    assert all(r["status"] == "done" and r["eval_status"] == "ok" and r["e_align"] is not None for r in runs)
     record = json.loads((Path(runs[0]["run_dir"]) / "run.json").read_text())
-    assert record["method"] == "imported" and len(record["imported"]["sha256"]) == 64
+    assert record["method_name"] == "imported" and len(record["imported"]["sha256"]) == 64
     assert record["imported"]["source"].endswith(".zip.001:dso_bw/sequence_47_9.txt")
     assert "wall_s" not in record and "fps" not in record  # no resources: nothing was run here
 

@@ -151,7 +151,7 @@ def refused(out: subprocess.CompletedProcess, *names: str) -> str:
 
 
 def nothing_imported(results: Path, label: str) -> None:
-    assert [r for r in rows_of(results, label) if r["method"] == "imported"] == []
+    assert [r for r in rows_of(results, label) if r["method_name"] == "imported"] == []
     assert not list((results / "runs").glob(f"{label}@imported-*")), list((results / "runs").glob(f"{label}@*"))
     assert not [p for p in results.iterdir() if p.name.startswith(".import")]
 

@@ -173,9 +173,9 @@ def test_a_busy_threads_failing_after_the_run_leaves_the_run_done(tmp_path, tiny
     assert "Traceback" not in out.stdout + out.stderr, out.stdout + out.stderr
     assert (site / "latevo.started").exists()
     (row,) = ledger_rows(tmp_path / "results")
-    assert (row["state"], row["attempts"]) == ("done", 1), row
+    assert (row["status"], row["attempts"]) == ("done", 1), row
     record = json.loads((Path(row["run_dir"]) / "run.json").read_text())
-    assert record["state"] == "done" and record["cpu_wait_own_pct"] == 0
+    assert record["status"] == "done" and record["cpu_wait_own_pct"] == 0
     message = record["message"]
     assert "plug-in latevo (late-vo 0.1)" in message and "busy_threads()" in message, message
     assert "own-wait allowance taken as its measured excess alone" in message and "\n" not in message, message
@@ -229,7 +229,7 @@ def test_a_method_folder_without_a_method_class_is_named_and_the_others_work(tmp
     out = tree_slamrun(tree, "campaign", spec, cwd=tmp_path)
     assert out.returncode == 0 and "Traceback" not in out.stderr, out.stdout[-2000:] + out.stderr[-2000:]
     (row,) = ledger_rows(tmp_path / "results")
-    assert row["state"] == "done", row
+    assert row["status"] == "done", row
 
     asks = tmp_path / "asks"
     asks.mkdir()

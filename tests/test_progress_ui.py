@@ -83,15 +83,15 @@ def test_the_eta_does_not_jump_when_a_slow_methods_first_run_ends():
     running run now shows its pace as it goes, and a running run counts for what it has still to go."""
 
     def row(key, label, state, wall=None, started=None):
-        return {"key": key, "label": label, "dataset": "d", "sequence": "s", "direction": "forward"} | {
-            "state": state, "failure": None, "wall_s": wall, "started_at": started
+        return {"key": key, "method": label, "dataset": "d", "sequence": "s", "direction": "forward"} | {
+            "status": state, "failure": None, "wall_s": wall, "started_at": started
         }  # fmt: skip
 
     rows = [row(f"f{i}", "fast", "done", 4.0) for i in range(4)]
     rows += [row("s0", "slow", "running", started=10.0)] + [row(f"s{i}", "slow", "pending") for i in range(1, 6)]
     tracker = Tracker(rows, {"lanes": 1, "started_at": 0.0})
     before = tracker.figures(now=49.9).eta_s
-    tracker.update("s0", state="done", wall_s=40.0)
+    tracker.update("s0", status="done", wall_s=40.0)
     after = tracker.figures(now=50.0).eta_s
     assert after == pytest.approx(5 * 40.0)
     assert before == pytest.approx(6 * 39.9 - 39.9)  # its run so far: at least 39.9 s a run, 39.9 s of it gone
@@ -102,7 +102,7 @@ def test_the_eta_does_not_jump_when_a_slow_methods_first_run_ends():
 
 def test_the_tracker_and_figures_agree_per_sequence():
     rows = [
-        {"key": f"k{i}", "label": "m", "dataset": "d", "sequence": seq, "direction": "forward", "state": state}
+        {"key": f"k{i}", "method": "m", "dataset": "d", "sequence": seq, "direction": "forward", "status": state}
         | {"failure": None, "wall_s": wall, "started_at": 100.0 + i}
         for i, (seq, state, wall) in enumerate(
             [("s1", "done", 10.0), ("s1", "pending", None), ("s2", "done", 50.0), ("s2", "pending", None)]
@@ -111,8 +111,8 @@ def test_the_tracker_and_figures_agree_per_sequence():
     session = {"started_at": 100.0, "lanes": 1}
     tracker = Tracker(rows, session)
     assert tracker.figures(now=200.0).eta_s == figures(rows, session, now=200.0).eta_s
-    tracker.update("k1", state="done", wall_s=12.0, started_at=150.0)
-    rows[1] |= {"state": "done", "wall_s": 12.0, "started_at": 150.0}
+    tracker.update("k1", status="done", wall_s=12.0, started_at=150.0)
+    rows[1] |= {"status": "done", "wall_s": 12.0, "started_at": 150.0}
     assert tracker.figures(now=200.0) == figures(rows, session, now=200.0)
     overhead = (1 * 100.0 - (10.0 + 50.0 + 12.0)) / 3  # the lane's time per run beyond the runs' own
     assert tracker.figures(now=200.0).eta_s == pytest.approx(50.0 + overhead)  # s2's run left, at s2's pace
@@ -120,13 +120,16 @@ def test_the_tracker_and_figures_agree_per_sequence():
 
 def test_figures_count_infra_apart_and_measure_lane_occupancy():
     rows = [
-        {"label": "m", "direction": "forward", "state": "done", "failure": None, "wall_s": 10.0, "started_at": 100.0},
-        {"label": "m", "direction": "forward", "state": "failed", "failure": "lost", "wall_s": 6.0, "started_at": 111},
-        {"label": "m", "direction": "backward", "state": "failed", "failure": "infra", "wall_s": None, "started_at": 1},
+        {"method": "m", "direction": "forward", "status": "done", "failure": None, "wall_s": 10.0}
+        | {"started_at": 100.0},
+        {"method": "m", "direction": "forward", "status": "failed", "failure": "lost", "wall_s": 6.0}
+        | {"started_at": 111},
+        {"method": "m", "direction": "backward", "status": "failed", "failure": "infra", "wall_s": None}
+        | {"started_at": 1},
         {
-            "label": "m",
+            "method": "m",
             "direction": "backward",
-            "state": "pending",
+            "status": "pending",
             "failure": None,
             "wall_s": None,
             "started_at": None,
@@ -235,7 +238,7 @@ def test_dry_run_counts_are_exact(tmp_path, tiny_dataset, capsys):
     sched_ref = []
     run_campaign(load_spec(spec), on_event=on_event, scheduler_hook=sched_ref.append, log=lambda *a: None)
     out = _dry(capsys, spec, tmp_path)  # half-finished (the run in flight at the stop finished too)
-    done = sum(r["state"] == "done" for r in ledger_rows(tmp_path / "results"))
+    done = sum(r["status"] == "done" for r in ledger_rows(tmp_path / "results"))
     assert 3 <= done < 8
     counts = _counts(out)
     assert sum(c[3] for c in counts.values()) == done and sum(c[1] for c in counts.values()) == 0
@@ -317,9 +320,9 @@ def test_the_tracker_equals_the_figures_of_the_same_rows_after_every_change():
     rows = [
         {
             "key": f"k{i}",
-            "label": f"m{i % 3}",
+            "method": f"m{i % 3}",
             "direction": ("forward", "backward")[i % 2],
-            "state": "pending",
+            "status": "pending",
             "failure": None,
             "wall_s": None,
             "started_at": None,
@@ -333,17 +336,17 @@ def test_the_tracker_equals_the_figures_of_the_same_rows_after_every_change():
         r = by_key[f"k{rng.randrange(300)}"]
         change = rng.choice(["start", "done", "fail", "infra", "requeue"])
         if change == "start":
-            upd = {"state": "running", "started_at": 1000.0 + step}
+            upd = {"status": "running", "started_at": 1000.0 + step}
         elif change == "done":
-            upd = {"state": "done", "failure": None, "wall_s": rng.uniform(0.5, 3.0)}
+            upd = {"status": "done", "failure": None, "wall_s": rng.uniform(0.5, 3.0)}
         elif change == "fail":
-            upd = {"state": "failed", "failure": rng.choice(["lost", "crashed", "timeout"]), "wall_s": 1.0}
+            upd = {"status": "failed", "failure": rng.choice(["lost", "crashed", "timeout"]), "wall_s": 1.0}
         elif change == "infra":
-            upd = {"state": "failed", "failure": "infra", "wall_s": None}
+            upd = {"status": "failed", "failure": "infra", "wall_s": None}
         else:
-            upd = {"state": "pending"}
+            upd = {"status": "pending"}
         r.update(upd)
-        if upd["state"] == "pending":
+        if upd["status"] == "pending":
             r["failure"] = None
         tracker.update(r["key"], **upd)
         if step % 97 == 0 or step == 1999:
@@ -359,11 +362,11 @@ def test_the_eta_counts_the_runners_own_time_per_run():
     from slamrun.engine.progress import figures
 
     rows = [
-        {"key": f"k{i}", "label": "m", "direction": "forward", "state": "done", "failure": None, "wall_s": 0.1,
+        {"key": f"k{i}", "method": "m", "direction": "forward", "status": "done", "failure": None, "wall_s": 0.1,
          "started_at": 100.0 + 0.5 * i}
         for i in range(100)
     ] + [
-        {"key": f"p{i}", "label": "m", "direction": "forward", "state": "pending", "failure": None, "wall_s": None,
+        {"key": f"p{i}", "method": "m", "direction": "forward", "status": "pending", "failure": None, "wall_s": None,
          "started_at": None}
         for i in range(900)
     ]  # fmt: skip
@@ -411,8 +414,8 @@ def test_status_reads_only_the_columns_the_figures_use(tmp_path):
 
     ledger = Ledger(tmp_path / "ledger.sqlite")
     rows = [
-        {"key": f"k{i:03d}", "label": "m", "method": "m", "dataset": "d", "sequence": f"s{i % 3}"}
-        | {"direction": "forward", "trial": i, "settings": "", "state": "done", "wall_s": 1.0 + i % 5}
+        {"key": f"k{i:03d}", "method": "m", "method_name": "m", "dataset": "d", "sequence": f"s{i % 3}"}
+        | {"direction": "forward", "trial": i, "settings": "", "status": "done", "wall_s": 1.0 + i % 5}
         | {"started_at": 10.0 + i, "e_align": 0.01, "failure": None}
         for i in range(40)
     ]

@@ -93,7 +93,7 @@ def test_runs_of_an_older_evaluation_are_evaluated_again_by_report(finished):
     results = root / "results"
     db = sqlite3.connect(results / "ledger.sqlite")
     with db:
-        db.execute("UPDATE runs SET eval_settings = NULL, rpe_t_rmse = 123.0 WHERE label = 'every'")
+        db.execute("UPDATE runs SET eval_settings = NULL, rpe_t_rmse = 123.0 WHERE method = 'every'")
     db.close()
     assert "4 run(s) to re-evaluate" in cli("plan", spec)
     out = cli("report", results)

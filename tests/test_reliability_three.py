@@ -33,7 +33,7 @@ def test_a_view_prepared_again_while_a_run_reads_it_is_infra_not_the_methods_fai
     res = campaign(spec)
     rows = ledger_rows(res.results)
     assert once.exists(), "the run did not rebuild the view"
-    assert [(r["state"], r["failure"]) for r in rows] == [("done", None)], [(r["state"], r["message"]) for r in rows]
+    assert [(r["status"], r["failure"]) for r in rows] == [("done", None)], [(r["status"], r["message"]) for r in rows]
     assert rows[0]["attempts"] == 2  # the first attempt was infra (its view replaced), retried
 
 

@@ -168,7 +168,7 @@ def test_poses_at_timestamps_the_sequence_does_not_have_are_never_a_success(tmp_
     spec = write_spec(tmp_path, tiny_dataset, [fake_method(mode)], datasets=one_sequence(tiny_dataset))
     res = run_campaign(load_spec(spec), on_event=None)
     rows = ledger_rows(res.results)
-    assert [r["state"] for r in rows] == ["failed", "failed"], rows
+    assert [r["status"] for r in rows] == ["failed", "failed"], rows
     for r in rows:
         kind = "lost" if mode == "single-pose" else "bad_timestamps"
         assert r["failure"] == kind, r
@@ -288,12 +288,12 @@ def test_the_run_that_fills_the_disk_is_charged_and_the_others_finish(tmp_path, 
     for _ in range(2):  # the second start finds everything finished
         res = run_campaign(load_spec(spec), on_event=None)
         rows = ledger_rows(res.results)
-        filler = [r for r in rows if r["label"] == "filler"]
-        assert [(r["state"], r["failure"]) for r in filler] == [("failed", "output_limit")], filler
+        filler = [r for r in rows if r["method"] == "filler"]
+        assert [(r["status"], r["failure"]) for r in filler] == [("failed", "output_limit")], filler
         assert "disk" in filler[0]["message"]
         assert not (Path(filler[0]["run_dir"]) / "raw" / "fill.bin").exists()  # its output removed
-        good = [r for r in rows if r["label"] == "external"]
-        assert [r["state"] for r in good] == ["done"] * 4, good
+        good = [r for r in rows if r["method"] == "external"]
+        assert [r["status"] for r in good] == ["done"] * 4, good
         assert all(r["attempts"] == 1 for r in rows)
 
 
@@ -303,7 +303,7 @@ def test_a_run_past_max_output_mb_is_stopped_and_charged(tmp_path, tiny_dataset)
     )
     res = run_campaign(load_spec(spec), on_event=None)
     rows = ledger_rows(res.results)
-    assert {(r["state"], r["failure"]) for r in rows} == {("failed", "output_limit")}, rows
+    assert {(r["status"], r["failure"]) for r in rows} == {("failed", "output_limit")}, rows
     assert "max_output_mb" in rows[0]["message"]
     assert not (Path(rows[0]["run_dir"]) / "raw" / "dump.bin").exists()
 
@@ -344,7 +344,7 @@ def test_a_results_folder_that_turns_read_only_stops_the_campaign_cleanly(tmp_pa
     )
     try:
         deadline = time.monotonic() + 120
-        while sum(r["state"] == "done" for r in ledger_rows(results)) < 3 and time.monotonic() < deadline:
+        while sum(r["status"] == "done" for r in ledger_rows(results)) < 3 and time.monotonic() < deadline:
             time.sleep(0.1)
         read_only(results)
         try:
@@ -357,10 +357,10 @@ def test_a_results_folder_that_turns_read_only_stops_the_campaign_cleanly(tmp_pa
     assert proc.returncode != 0 and "Traceback" not in said, said[-3000:]
     assert "read-only" in said and "again" in said, said[-3000:]
     rows = ledger_rows(results)
-    assert not [r for r in rows if r["state"] == "failed"], [r["message"] for r in rows if r["state"] == "failed"]
+    assert not [r for r in rows if r["status"] == "failed"], [r["message"] for r in rows if r["status"] == "failed"]
     code, said = cli("campaign", str(spec))
     assert code == 0, said
-    assert all(r["state"] == "done" for r in ledger_rows(results))
+    assert all(r["status"] == "done" for r in ledger_rows(results))
 
 
 def test_a_read_only_results_folder_at_start_is_one_message(tmp_path, tiny_dataset, disk):
@@ -451,7 +451,7 @@ def test_a_hung_dask_worker_gets_no_more_runs_and_the_campaign_finishes(
     res = run_campaign(load_spec(spec), on_event=None)
     took = time.monotonic() - t0
     rows = ledger_rows(res.results)
-    assert [r["state"] for r in rows] == ["done"] * 6, [(r["state"], r["message"]) for r in rows]
+    assert [r["status"] for r in rows] == ["done"] * 6, [(r["status"], r["message"]) for r in rows]
     assert stopped, "no worker was stopped"
     assert took < 150, took  # bounded: a heartbeat silence of 8 s, then a retry elsewhere (not timeout + 120 s)
     assert any(r["attempts"] > 1 for r in rows)  # the run on the stopped worker was retried elsewhere
@@ -472,7 +472,7 @@ def test_a_lost_dask_scheduler_stops_the_campaign_with_one_message(tmp_path, tin
         [sys.executable, "-m", "slamrun.cli", "campaign", str(spec)], stdout=subprocess.PIPE, stderr=subprocess.PIPE
     )
     deadline = time.monotonic() + 120
-    while sum(r["state"] == "done" for r in ledger_rows(results)) < 2 and time.monotonic() < deadline:
+    while sum(r["status"] == "done" for r in ledger_rows(results)) < 2 and time.monotonic() < deadline:
         time.sleep(0.1)
     scheduler.kill()
     out, err = proc.communicate(timeout=120)  # it ends by itself, within a bound
@@ -480,9 +480,9 @@ def test_a_lost_dask_scheduler_stops_the_campaign_with_one_message(tmp_path, tin
     assert proc.returncode != 0 and "Traceback" not in said, said[-3000:]
     assert "Dask scheduler" in said and "stopped answering" in said, said[-3000:]
     rows = ledger_rows(results)
-    assert not [r for r in rows if r["state"] == "failed"], [r["message"] for r in rows if r["state"] == "failed"]
-    assert sum(r["state"] == "done" for r in rows) >= 2
-    assert any(r["state"] == "pending" for r in rows)
+    assert not [r for r in rows if r["status"] == "failed"], [r["message"] for r in rows if r["status"] == "failed"]
+    assert sum(r["status"] == "done" for r in rows) >= 2
+    assert any(r["status"] == "pending" for r in rows)
 
 
 # ------------------------------------------------------------------ nothing outside results, cache and dataset
@@ -516,6 +516,6 @@ def test_a_campaign_with_hostile_names_writes_only_into_results_cache_and_datase
     after = {k: v for k, v in snapshot(tmp_path).items() if not k.startswith(("scratch/out", "scratch/data"))}
     assert after == outside
     rows = ledger_rows(scratch / "out" / "results")
-    assert len(rows) == 20 and all(r["state"] == "done" for r in rows), [(r["key"], r["message"]) for r in rows]
+    assert len(rows) == 20 and all(r["status"] == "done" for r in rows), [(r["key"], r["message"]) for r in rows]
     assert (scratch / "out" / "results" / "report" / "index.html").exists()
     assert not list(Path("/").glob("pwned*")) and not list(Path.cwd().glob("pwned*"))

@@ -276,7 +276,7 @@ def test_the_first_state_escapes_every_text_it_shows():
         "facts": ["1 of 1 runs finished (100 %)"], "labels": {}, "lanes": [], "medians": {}, "figures": [],
         "report": None,
         "failed": {"total": 1, "kinds": {"crashed": 1}, "runs": [
-            {"failure": "crashed", "label": hostile, "dataset": "d", "sequence": "s", "direction": "forward",
+            {"failure": "crashed", "method": hostile, "dataset": "d", "sequence": "s", "direction": "forward",
              "trial": 0, "message": hostile, "key": '"><img src=x onerror=alert(1)>'}
         ]},
     }  # fmt: skip

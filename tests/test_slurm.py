@@ -157,7 +157,7 @@ def test_a_campaign_runs_on_slurm_jobs_and_a_cancelled_job_costs_no_run(tmp_path
         release.touch()
     rows = ledger_rows(res.results)
     assert len(rows) == 8  # 2 sequences x 2 directions x 2 trials, each once
-    assert [r["state"] for r in rows] == ["done"] * 8, [(r["state"], r["message"]) for r in rows]
+    assert [r["status"] for r in rows] == ["done"] * 8, [(r["status"], r["message"]) for r in rows]
     assert cancelled, f"no job was cancelled mid-run (jobs seen: {sorted(seen)})"
     assert any(r["attempts"] > 1 for r in rows), f"the cancelled job's run was not retried ({timing}, {cancelled})"
     assert "replaced" in timing, (
@@ -182,7 +182,7 @@ def test_a_job_left_by_a_crashed_start_is_cancelled_by_the_next(tmp_path, rooms,
     while left not in [j[0] for j in slurm.jobs()] and time.monotonic() < deadline:
         time.sleep(0.2)
     res = run_campaign(spec, on_event=None)
-    assert [r["state"] for r in ledger_rows(res.results)] == ["done"] * 4
+    assert [r["status"] for r in ledger_rows(res.results)] == ["done"] * 4
     assert left not in [j[0] for j in slurm.jobs()]
 
 
@@ -194,7 +194,7 @@ def test_no_sbatch_on_path_is_said_before_any_run(tmp_path, rooms, slurm, monkey
     spec = load_spec(slurm_spec(tmp_path, rooms))
     with pytest.raises(InfraError, match=r"missing: sbatch, squeue, scancel, sinfo.*login node"):
         run_campaign(spec, on_event=None)
-    assert {r["state"] for r in ledger_rows(spec.results)} == {"pending"}
+    assert {r["status"] for r in ledger_rows(spec.results)} == {"pending"}
 
 
 def test_a_partition_that_does_not_exist_is_named_with_the_ones_that_do(tmp_path, rooms, slurm):
@@ -209,7 +209,7 @@ def test_a_job_slurm_cannot_satisfy_is_refused_before_it_is_queued(tmp_path, roo
     with pytest.raises(InfraError, match=r"Slurm refuses the worker job.*node configuration is not available"):
         run_campaign(spec, on_event=None)
     assert our_jobs(slurm, spec.results) == []
-    assert {r["state"] for r in ledger_rows(spec.results)} == {"pending"}
+    assert {r["status"] for r in ledger_rows(spec.results)} == {"pending"}
 
 
 def test_jobs_that_stay_pending_end_the_wait_with_slurms_reason(tmp_path, rooms, slurm):
@@ -219,7 +219,7 @@ def test_jobs_that_stay_pending_end_the_wait_with_slurms_reason(tmp_path, rooms,
         run_campaign(spec, on_event=None)
     assert time.monotonic() - t0 < 60
     assert our_jobs(slurm, spec.results) == []  # cancelled, not left queued
-    assert {r["state"] for r in ledger_rows(spec.results)} == {"pending"}
+    assert {r["status"] for r in ledger_rows(spec.results)} == {"pending"}
 
 
 def test_a_walltime_shorter_than_a_run_is_a_spec_error(tmp_path, tiny_dataset):

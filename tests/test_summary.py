@@ -24,12 +24,12 @@ def rows() -> list[dict]:
     return [
         {
             "key": f"k{i}",
-            "label": "dso",
             "method": "dso",
+            "method_name": "dso",
             "sequence": f"sequence_{i:02d}",
             "direction": "forward",
             "trial": 0,
-            "state": state,
+            "status": state,
             "failure": failure,
             "eval_status": eval_status,
             **(metrics(i) if state == "done" else {}),
@@ -39,7 +39,7 @@ def rows() -> list[dict]:
 
 
 def results_table() -> pd.DataFrame:
-    df = pd.DataFrame(rows()).rename(columns={"method": "method_name", "state": "status", "label": "method"})
+    df = pd.DataFrame(rows())
     return df.assign(e_start=0.01, e_end=0.01)
 
 

@@ -66,8 +66,20 @@ def test_an_image_with_a_standin_network_is_judged_on_its_plumbing_only():
 def test_a_run_that_ended_done_without_metrics_says_why():
     from slamrun.images.verify import _why_not_ok
 
-    assert _why_not_ok({"failure": None, "state": "done", "eval_status": "incomplete"}) == "not evaluated (incomplete)"
-    assert _why_not_ok({"failure": "lost", "state": "failed", "eval_status": "incomplete"}) == "lost"
+    assert _why_not_ok({"failure": None, "status": "done", "eval_status": "incomplete"}) == "not evaluated (incomplete)"
+    assert _why_not_ok({"failure": "lost", "status": "failed", "eval_status": "incomplete"}) == "lost"
+
+
+def test_a_run_with_poses_for_few_of_its_frames_is_not_ok():
+    """SVO lost early and relocalised at the loop's end: 23 poses of 300, an e_align of 3 % of the extent; it was
+    counted ok. A run is ok when done, evaluated and not marked low coverage."""
+    from slamrun.images.verify import _why_not_ok, run_ok
+
+    short = {"failure": None, "status": "done", "eval_status": "ok", "e_align": 0.05, "low_coverage": 1}
+    short["coverage"] = 23 / 300
+    assert not run_ok(short) and _why_not_ok(short) == "low coverage (8 % of its frames)"
+    assert run_ok(short | {"low_coverage": 0, "coverage": 0.99})
+    assert not run_ok(short | {"low_coverage": 0, "e_align": None})
 
 
 def test_segment_errors_are_taken_in_the_order_the_method_processed_them():

@@ -74,7 +74,7 @@ def status_view(f: Figures) -> Group:
 def finished_line(lane: int, run_id: str, info: dict) -> str:
     """A finished run's plain line: its state, failure, and its main figure, whatever its dataset's metrics
     (TUM-Mono's e_align, else ATE's RMSE, else RPE's, else KITTI's segment error)."""
-    line = f"[lane {lane}] {run_id}: {info.get('state')} ({info.get('failure') or 'ok'})"
+    line = f"[lane {lane}] {run_id}: {info.get('status')} ({info.get('failure') or 'ok'})"
     for name in PROGRESS_METRICS:
         value, unit = info.get(name), column(name).unit
         if isinstance(value, float) and value == value:
@@ -131,13 +131,13 @@ class LiveProgress:
         if self._tracker is None:
             return
         if kind == "started":
-            self._tracker.update(run.key.id, state="running", started_at=time.time())
+            self._tracker.update(run.key.id, status="running", started_at=time.time())
         elif kind == "finished":
             self._tracker.update(
-                run.key.id, state=info.get("state"), failure=info.get("failure"), wall_s=info.get("wall_s")
+                run.key.id, status=info.get("status"), failure=info.get("failure"), wall_s=info.get("wall_s")
             )
         elif kind in ("retry", "requeued"):
-            self._tracker.update(run.key.id, state="pending")
+            self._tracker.update(run.key.id, status="pending")
 
     def render(self):
         f = self.figures()
@@ -185,7 +185,7 @@ class LiveProgress:
 def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple[Table | None, int]:
     """The failed runs (method failures and infrastructure), at most `limit`, with their dataset where the runs
     have several; returns the table and how many more there are."""
-    failed = sorted((r for r in rows if r["state"] == "failed"), key=lambda r: r["key"])
+    failed = sorted((r for r in rows if r["status"] == "failed"), key=lambda r: r["key"])
     if not failed:
         return None, 0
     several = len({r.get("dataset") for r in rows}) > 1
@@ -200,7 +200,7 @@ def failed_runs_table(rows: list[dict], campaign: str, limit: int = 20) -> tuple
         )
         where = (str(r.get("dataset")),) if several else ()
         how = played(r["direction"], r.get("perturbation"), r.get("level"))
-        t.add_row(r["label"], *where, r["sequence"], how, str(r["trial"]), r.get("failure") or "?", log)
+        t.add_row(r["method"], *where, r["sequence"], how, str(r["trial"]), r.get("failure") or "?", log)
     return t, max(len(failed) - limit, 0)
 
 

@@ -221,7 +221,7 @@ def _run_campaign(spec: CampaignSpec, backend, on_event, scheduler_hook, log) ->
         remove_damaged(spec.cache)  # no run in flight any more
         csv = _export(spec, ledger, sched)
         counts = ledger.counts()
-        infra = sum(1 for r in ledger.rows(state="failed") if is_infra(r["state"], r["failure"]))
+        infra = sum(1 for r in ledger.rows(status="failed") if is_infra(r["status"], r["failure"]))
         ledger.close()
         left = counts.get("pending", 0) + counts.get("running", 0)
         stopped = sched.stop.is_set()

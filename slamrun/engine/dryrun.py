@@ -71,17 +71,17 @@ def dry_run(spec: CampaignSpec) -> DryRun:
         row = rows.get(run.key.id)
         if row is None:
             rec = finished_record(RunPaths(spec.results, run.key).final, run.key.id)  # imported at the start
-            state = "new" if rec is None else rec["state"]
-        elif is_infra(row["state"], row.get("failure")):
+            state = "new" if rec is None else rec["status"]
+        elif is_infra(row["status"], row.get("failure")):
             state = "infra"
-        elif row["state"] in ("pending", "running"):
+        elif row["status"] in ("pending", "running"):
             state = "pending"
         else:
-            state = row["state"]
+            state = row["status"]
         counts[(run.key.label, run.key.played)][state] += 1
         if state in ("new", "pending", "infra"):
             todo_by_group[
-                run_group({"label": run.key.label, "dataset": run.dataset, "sequence": run.key.sequence})
+                run_group({"method": run.key.label, "dataset": run.dataset, "sequence": run.key.sequence})
             ] += 1
             todo_views.add((run.sequence_dir, run.key.direction, run.profile, run.perturbation))
     groups = []
@@ -113,7 +113,7 @@ def dry_run(spec: CampaignSpec) -> DryRun:
     _count_views(out, todo_views, spec)
     out.perturbed_runs = sum(1 for r in runs if not r.perturbation.is_none)
     planned = {r.key.id for r in runs}
-    active = [r for k, r in rows.items() if k in planned or r.get("method") == IMPORTED]
+    active = [r for k, r in rows.items() if k in planned or r.get("method_name") == IMPORTED]
     out.to_reevaluate = len(stale(active, spec))
     overhead = last_session_overhead(list(rows.values()), session)
     out.eta_s, out.eta_basis = eta(dict(todo_by_group), wall_times(rows.values()), lanes, overhead)
@@ -148,7 +148,7 @@ def last_session_overhead(rows: list[dict], session: dict) -> float:
     mine = [
         float(r["wall_s"] or 0.0)
         for r in rows
-        if r.get("started_at") and start <= r["started_at"] <= end and r["state"] in ("done", "failed")
+        if r.get("started_at") and start <= r["started_at"] <= end and r["status"] in ("done", "failed")
     ]
     return overhead_per_run(sum(mine), len(mine), int(session.get("lanes") or 1), end - start)
 

@@ -320,8 +320,8 @@ def _record(
     """The run's run.json: what ran, on what, and what came out."""
     return {
         "key": run.key.id,
-        "label": run.key.label,
-        "method": run.method,
+        "method": run.key.label,  # its label: the ledger's and results.csv's names
+        "method_name": run.method,
         "dataset": run.dataset,
         "sequence": run.key.sequence,
         "data": run.key.data,
@@ -334,7 +334,7 @@ def _record(
         "settings": run.key.settings,
         "params": method.params.model_dump(mode="json"),
         "provider": slamrun.methods.provider_record(run.method),  # which package's implementation made this run
-        "state": state,
+        "status": state,
         "attempt": attempt,
         "started_at": started,
         "view": str(view.root),
@@ -355,7 +355,7 @@ def _placed(paths: RunPaths, stage: Path, run: PlannedRun, state: str, values: d
         earlier = finished_record(final, run.key.id)
         if earlier is not None:  # it finished in an earlier attempt: that one stands, this one is dropped
             shutil.rmtree(stage, ignore_errors=True)
-            return RunOutcome(earlier["state"], {**earlier, "run_dir": str(final)})
+            return RunOutcome(earlier["status"], {**earlier, "run_dir": str(final)})
         final.rename(final.with_name(f".{final.name}.incomplete-{int(time.time())}"))  # kept for a look
     final.parent.mkdir(parents=True, exist_ok=True)
     os.rename(stage, final)

@@ -46,7 +46,6 @@ def results_frame(ledger: Ledger) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=list(rows[0]) if rows else None)
     if df.empty:
         return pd.DataFrame(columns=list(COLUMNS))
-    df = df.rename(columns={"method": "method_name", "state": "status"}).rename(columns={"label": "method"})
     for col in COLUMNS:  # a ledger read read-only from an earlier version lacks the newer columns
         if col not in df.columns:
             df[col] = None

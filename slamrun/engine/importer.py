@@ -49,7 +49,7 @@ from slamrun.datasets.perturb import BASELINE
 from slamrun.datasets.view import Direction
 from slamrun.engine.execute import foreign_timestamps_of
 from slamrun.engine.folders import path_part_problem
-from slamrun.engine.ledger import Ledger
+from slamrun.engine.ledger import Ledger, record_names
 from slamrun.engine.paths import RunPaths
 from slamrun.engine.plan import RunKey
 from slamrun.engine.run_evaluation import evaluate_trajectory, run_frames, settle
@@ -375,7 +375,7 @@ def _stage(
             raise ImportRefused(f"{e.source}: not a trajectory of {e.sequence} ({why}); nothing imported")
         key = RunKey(label, e.sequence, e.direction, e.trial, settings, identity)
         row = ledger.get(key.id)
-        if row is not None and row["state"] in ("done", "failed"):
+        if row is not None and row["status"] in ("done", "failed"):
             earlier = _recorded_sha(Path(row["run_dir"] or "")) if row["run_dir"] else None
             (report.unchanged if earlier == sha else report.kept).append(e.source)
             continue
@@ -448,15 +448,15 @@ def _record(key: RunKey, source: str, sha256: str, ds, seq, gt, traj: Trajectory
         settle(values, None, note, detail, ds.evaluation)
     return {
         "key": key.id,
-        "label": key.label,
-        "method": IMPORTED,
+        "method": key.label,
+        "method_name": IMPORTED,
         "dataset": ds.name,
         "sequence": key.sequence,
         "data": key.data,
         "direction": key.direction.value,
         "trial": key.trial,
         "settings": key.settings,
-        "state": "failed" if values["failure"] else "done",
+        "status": "failed" if values["failure"] else "done",
         "attempts": 0,
         "ended_at": time.time(),
         "sequence_dir": str(seq.root),
@@ -475,7 +475,8 @@ def reimport_lost(ledger: Ledger, results: Path) -> int:
             rec = json.loads(path.read_text())
         except (OSError, ValueError):
             continue
-        if isinstance(rec, dict) and rec.get("method") == IMPORTED and ledger.get(rec.get("key", "")) is None:
+        rec = record_names(rec) if isinstance(rec, dict) else rec
+        if isinstance(rec, dict) and rec.get("method_name") == IMPORTED and ledger.get(rec.get("key", "")) is None:
             rows.append(rec | {"run_dir": str(path.parent)})
     if rows:
         ledger.insert_finished(rows)

@@ -25,8 +25,8 @@ if TYPE_CHECKING:
 
 KEY_COLUMNS = (
     "key",
-    "label",
-    "method",
+    "method",  # the method's label in the spec (its name, or the label given): what every view calls it
+    "method_name",  # the registered method that ran (or `imported`)
     "dataset",
     "sequence",
     "direction",
@@ -37,7 +37,7 @@ KEY_COLUMNS = (
 )
 STATE_COLUMNS = (
     "active",
-    "state",
+    "status",
     "attempts",
     "failure",
     "message",
@@ -75,6 +75,55 @@ _TYPES = {  # the ledger's own columns; the results' types are the catalogue's
 
 def _coltype(c: str) -> str:
     return _TYPES.get(c, "TEXT")
+
+
+# The columns a ledger of an earlier version names otherwise (before 2026-11-29 the ledger said label, method and
+# state where results.csv says method, method_name and status): renamed in this order when it is opened to write,
+# seen through a view of the new names when it is only read.
+RENAMED = (("method", "method_name"), ("label", "method"), ("state", "status"))
+
+
+def record_names(rec: dict) -> dict:
+    """A run's record (run.json, a ledger row) in the ledger's names, whichever version wrote it."""
+    if "label" not in rec and "state" not in rec:
+        return rec
+    out = {k: v for k, v in rec.items() if k not in ("label", "state", "method")}
+    if "label" in rec:
+        out |= {"method": rec["label"], "method_name": rec.get("method")}
+    elif "method" in rec:
+        out["method"] = rec["method"]
+    if "state" in rec:
+        out["status"] = rec["state"]
+    return out
+
+
+def _columns(db: sqlite3.Connection) -> list[str]:
+    return [row[1] for row in db.execute("PRAGMA main.table_info(runs)")]
+
+
+def _rename_columns(db: sqlite3.Connection) -> None:
+    """A ledger of an earlier version takes the names results.csv gives its columns (one transaction)."""
+    if "label" not in _columns(db):
+        return
+    db.execute("BEGIN IMMEDIATE")
+    try:
+        for old, new in RENAMED:
+            db.execute(f"ALTER TABLE runs RENAME COLUMN {old} TO {new}")
+        db.execute("COMMIT")
+    except BaseException:
+        db.execute("ROLLBACK")
+        raise
+
+
+def _renamed_view(db: sqlite3.Connection) -> None:
+    """A ledger of an earlier version opened read-only: a temporary view (of this connection only, nothing written)
+    names its columns as the ledger now does."""
+    have = _columns(db)
+    if "label" not in have:
+        return
+    new = dict((old, n) for old, n in RENAMED)
+    select = ", ".join(f"{c} AS {new[c]}" if c in new else c for c in have)
+    db.execute(f"CREATE TEMP VIEW runs AS SELECT {select} FROM main.runs")
 
 
 FULL_BELOW_BYTES = 1 << 20  # free space under which a ledger SQLite cannot open is a full disk, not damage
@@ -233,12 +282,13 @@ class Ledger:
         self._inode = os.stat(self.path).st_ino
         with self._lock:
             self._db.execute(f"CREATE TABLE IF NOT EXISTS runs (key TEXT PRIMARY KEY, {cols})")
+            _rename_columns(self._db)
             have = {row[1] for row in self._db.execute("PRAGMA table_info(runs)")}
             for c in ALL_COLUMNS:  # a ledger of an earlier version gets the columns added since
                 if c not in have:
                     self._db.execute(f"ALTER TABLE runs ADD COLUMN {c} {_coltype(c)}")
             self._db.execute("CREATE TABLE IF NOT EXISTS meta (name TEXT PRIMARY KEY, value TEXT)")
-            self._db.execute("CREATE INDEX IF NOT EXISTS runs_state ON runs(active, state)")
+            self._db.execute("CREATE INDEX IF NOT EXISTS runs_state ON runs(active, status)")
 
     def _open_read_only(self, immutable: bool) -> None:
         mode = "mode=ro&immutable=1" if immutable else "mode=ro"
@@ -250,6 +300,7 @@ class Ledger:
         except sqlite3.OperationalError:
             self._db.close()
             raise
+        _renamed_view(self._db)
 
     def _check_whole(self) -> None:
         """LedgerDamaged (closed) when SQLite finds the file is no database or a damaged one (overwritten,
@@ -303,10 +354,10 @@ class Ledger:
         with self._lock, self._db:
             self._db.execute("BEGIN")
             before = self._db.execute("SELECT COUNT(*) FROM runs").fetchone()[0]
-            self._db.execute("UPDATE runs SET active = 0 WHERE method IS NOT ?", (IMPORTED,))  # imports stay
+            self._db.execute("UPDATE runs SET active = 0 WHERE method_name IS NOT ?", (IMPORTED,))  # imports stay
             self._db.executemany(
-                "INSERT OR IGNORE INTO runs (key, label, method, dataset, sequence, direction, trial, settings, "
-                "perturbation, level, active, state, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)",
+                "INSERT OR IGNORE INTO runs (key, method, method_name, dataset, sequence, direction, trial, settings, "
+                "perturbation, level, active, status, attempts) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, 1, 'pending', 0)",
                 rows,
             )
             self._db.executemany("UPDATE runs SET active = 1 WHERE key = ?", [(r[0],) for r in rows])
@@ -314,12 +365,12 @@ class Ledger:
         return after - before
 
     def stale_running(self) -> list[sqlite3.Row]:
-        return self._db.execute("SELECT * FROM runs WHERE state = 'running'").fetchall()
+        return self._db.execute("SELECT * FROM runs WHERE status = 'running'").fetchall()
 
     def reset_to_pending(self, key: str, keep_attempts: bool = True) -> None:
         with self._lock:
             self._db.execute(
-                "UPDATE runs SET state = 'pending', pid = NULL, pid_start = NULL"
+                "UPDATE runs SET status = 'pending', pid = NULL, pid_start = NULL"
                 + ("" if keep_attempts else ", attempts = 0, failure = NULL, message = NULL")
                 + " WHERE key = ?",
                 (key,),
@@ -329,8 +380,8 @@ class Ledger:
         """Infrastructure failures are not results: a new campaign start tries them again."""
         with self._lock:
             cur = self._db.execute(
-                "UPDATE runs SET state = 'pending', attempts = 0, failure = NULL, message = NULL "
-                "WHERE state = 'failed' AND failure IN ('infra', 'contended')"
+                "UPDATE runs SET status = 'pending', attempts = 0, failure = NULL, message = NULL "
+                "WHERE status = 'failed' AND failure IN ('infra', 'contended')"
             )
             return cur.rowcount
 
@@ -352,7 +403,7 @@ class Ledger:
         self.check_present()
         with self._lock:
             self._db.execute(
-                "UPDATE runs SET state = 'running', attempts = attempts + 1, started_at = ?, "
+                "UPDATE runs SET status = 'running', attempts = attempts + 1, started_at = ?, "
                 "ended_at = NULL, run_dir = ? WHERE key = ?",
                 (time.time(), run_dir, key),
             )
@@ -372,12 +423,12 @@ class Ledger:
         with self._lock:
             self._db.execute("UPDATE runs SET pid = ?, pid_start = ? WHERE key = ?", (pid, pid_start, key))
 
-    def finish(self, key: str, state: str, values: dict) -> None:
+    def finish(self, key: str, status: str, values: dict) -> None:
         """Record a finished run (done or failed) with its metrics and resources, in one statement."""
-        if state not in ("done", "failed"):
-            raise ValueError(state)
-        values = {k: v for k, v in values.items() if k in ALL_COLUMNS and k not in KEY_COLUMNS}
-        values.update(state=state, ended_at=values.get("ended_at") or time.time(), pid=None, pid_start=None)
+        if status not in ("done", "failed"):
+            raise ValueError(status)
+        values = {k: v for k, v in record_names(values).items() if k in ALL_COLUMNS and k not in KEY_COLUMNS}
+        values.update(status=status, ended_at=values.get("ended_at") or time.time(), pid=None, pid_start=None)
         sets = ", ".join(f"{k} = ?" for k in values)
         with self._lock:
             self._db.execute(f"UPDATE runs SET {sets} WHERE key = ?", (*values.values(), key))
@@ -388,7 +439,7 @@ class Ledger:
         with self._lock, self._db:
             self._db.execute("BEGIN")
             for rec in records:
-                values = {k: v for k, v in rec.items() if k in ALL_COLUMNS}
+                values = {k: v for k, v in record_names(rec).items() if k in ALL_COLUMNS}
                 values.update(active=1, pid=None, pid_start=None)
                 cols = ", ".join(values)
                 marks = ", ".join("?" for _ in values)
@@ -396,7 +447,7 @@ class Ledger:
 
     # ------------------------------------------------------------ reading
     def rows(
-        self, active_only: bool = True, state: str | None = None, columns: tuple[str, ...] | None = None
+        self, active_only: bool = True, status: str | None = None, columns: tuple[str, ...] | None = None
     ) -> list[dict]:
         """The runs as dicts, in key order: every column, or only `columns` (those a ledger of an earlier version,
         opened read-only, lacks are left out)."""
@@ -407,9 +458,9 @@ class Ledger:
         cond, args = [], []
         if active_only:
             cond.append("active = 1")
-        if state:
-            cond.append("state = ?")
-            args.append(state)
+        if status:
+            cond.append("status = ?")
+            args.append(status)
         if cond:
             sql += " WHERE " + " AND ".join(cond)
         try:
@@ -418,7 +469,7 @@ class Ledger:
             return []
 
     PROGRESS_COLUMNS = (
-        "key", "label", "dataset", "sequence", "direction", "perturbation", "level", "state", "failure", "wall_s",
+        "key", "method", "dataset", "sequence", "direction", "perturbation", "level", "status", "failure", "wall_s",
         "started_at", "cpu_wait_pct",
     )  # fmt: skip
 
@@ -431,10 +482,10 @@ class Ledger:
         return dict(row) if row else None
 
     def pending_keys(self) -> list[str]:
-        return [r[0] for r in self._db.execute("SELECT key FROM runs WHERE active = 1 AND state = 'pending'")]
+        return [r[0] for r in self._db.execute("SELECT key FROM runs WHERE active = 1 AND status = 'pending'")]
 
     def counts(self) -> dict[str, int]:
         out = dict.fromkeys(STATES, 0)
-        for state, n in self._db.execute("SELECT state, COUNT(*) FROM runs WHERE active = 1 GROUP BY state"):
-            out[state] = n
+        for status, n in self._db.execute("SELECT status, COUNT(*) FROM runs WHERE active = 1 GROUP BY status"):
+            out[status] = n
         return out

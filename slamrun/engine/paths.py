@@ -9,6 +9,7 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
+from slamrun.engine.ledger import record_names
 from slamrun.engine.plan import RunKey
 from slamrun.errors import SlamRunError
 from slamrun.results import files
@@ -83,9 +84,10 @@ def finished_record(run_dir: Path, key: str) -> dict | None:
         rec = json.loads(RunPaths.run_json(run_dir).read_text())
     except (OSError, ValueError):
         return None
-    if not isinstance(rec, dict) or rec.get("key") != key or rec.get("state") not in ("done", "failed"):
+    if not isinstance(rec, dict) or rec.get("key") != key:
         return None
-    if is_infra(rec["state"], rec.get("failure")):
+    rec = record_names(rec)  # a run.json of an earlier version says label, method, state
+    if rec.get("status") not in ("done", "failed") or is_infra(rec["status"], rec.get("failure")):
         return None
     return rec
 

@@ -45,7 +45,7 @@ RunGroup = tuple[str, str]  # (method label, "dataset/sequence"): runs whose wal
 
 
 def run_group(row: dict) -> RunGroup:
-    return row["label"], f"{row.get('dataset') or ''}/{row.get('sequence') or ''}"
+    return row["method"], f"{row.get('dataset') or ''}/{row.get('sequence') or ''}"
 
 
 class WallTimes:
@@ -134,7 +134,7 @@ def wall_times(rows: Iterable[dict]) -> dict[RunGroup, list[float]]:
     failures)."""
     walls: dict[RunGroup, list[float]] = defaultdict(list)
     for r in rows:
-        if r["state"] in ("done", "failed") and not is_infra(r["state"], r.get("failure")) and r.get("wall_s"):
+        if r["status"] in ("done", "failed") and not is_infra(r["status"], r.get("failure")) and r.get("wall_s"):
             walls[run_group(r)].append(float(r["wall_s"]))
     return walls
 
@@ -184,7 +184,7 @@ class Tracker:
     """A campaign's figures kept current from its runs' changes at a constant cost per run, never rescanning the
     ledger: the live view of a 10,000-run plan costs per finished run what that of a 10-run plan does.
 
-    Built from the ledger's rows once; `update(key, state=..., ...)` applies one run's change (its event); the
+    Built from the ledger's rows once; `update(key, status=..., ...)` applies one run's change (its event); the
     figures equal `figures(rows, session, now)` over the same rows."""
 
     def __init__(self, rows: Iterable[dict], session: dict | None = None, campaign: str = ""):
@@ -203,9 +203,8 @@ class Tracker:
         self.session_runs = 0
         self.unknown = 0
         for i, r in enumerate(rows):
-            row = {
-                k: r.get(k) for k in ("label", "direction", "state", "failure", "wall_s", "started_at", "cpu_wait_pct")
-            }
+            row = {k: r.get(k) for k in ("method", "direction", "status", "failure", "wall_s", "started_at")}
+            row["cpu_wait_pct"] = r.get("cpu_wait_pct")
             row["direction"] = played(row["direction"], r.get("perturbation"), r.get("level"))
             row["group"], row["key"] = run_group(r), r.get("key", i)
             self.rows[row["key"]] = row
@@ -219,17 +218,17 @@ class Tracker:
             return
         self._count(row, -1)
         row.update({k: v for k, v in changes.items() if k in row})
-        if changes.get("state") in ("pending", "running") and "failure" not in changes:
+        if changes.get("status") in ("pending", "running") and "failure" not in changes:
             row["failure"] = None
         self._count(row, +1)
 
     def _count(self, row: dict, sign: int) -> None:
-        cat = _category(row["state"], row["failure"])
-        self.groups[(row["label"], row["direction"])][cat] += sign
+        cat = _category(row["status"], row["failure"])
+        self.groups[(row["method"], row["direction"])][cat] += sign
         if cat == "failed":
             self.failures[row["failure"]] += sign
         if cat in ("done", "failed") and row.get("cpu_wait_pct") is not None:
-            wait = self.waits[(row["label"], row["direction"])]
+            wait = self.waits[(row["method"], row["direction"])]
             wait[0] += sign * float(row["cpu_wait_pct"])
             wait[1] += sign
         group = row["group"]

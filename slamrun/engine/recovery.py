@@ -31,7 +31,7 @@ def import_finished(ledger: Ledger, runs: list[PlannedRun], results: Path) -> in
         final = RunPaths(results, run.key).final
         rec = finished_record(final, run.key.id)
         if rec is not None:
-            ledger.finish(run.key.id, rec["state"], {**rec, "run_dir": str(final)})
+            ledger.finish(run.key.id, rec["status"], {**rec, "run_dir": str(final)})
             n += 1
     return n
 
@@ -50,7 +50,7 @@ def recover(ledger: Ledger, results: Path, keep_attempts: bool = False) -> dict[
             killed += kill_processes(processes_with_token(token))
         rec = finished_record(Path(row["run_dir"]), row["key"]) if row["run_dir"] else None
         if rec is not None:
-            ledger.finish(row["key"], rec["state"], {**rec, "run_dir": row["run_dir"]})
+            ledger.finish(row["key"], rec["status"], {**rec, "run_dir": row["run_dir"]})
             imported += 1
             continue
         ledger.reset_to_pending(row["key"])
@@ -90,7 +90,7 @@ def collect_leftovers(
         except ValueError:
             attempt = 0
         paths = RunPaths(results, run.key) if run else None
-        if run and row and row["state"] == "pending" and attempt and paths.staging(attempt).is_dir():
+        if run and row and row["status"] == "pending" and attempt and paths.staging(attempt).is_dir():
             view = view_of(run.view_key)
             stage = paths.staging(attempt)
             result = backend.collect(container, RunPaths.log(stage), log_cap_bytes, view.n_frames) if view else None

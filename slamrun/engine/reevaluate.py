@@ -46,10 +46,10 @@ def target_of(row: dict, spec: CampaignSpec) -> Target | None:
     ds = next((d for d in spec.datasets if d.name == row.get("dataset")), None)
     if ds is None:
         return None
-    if row.get("method") == IMPORTED:
+    if row.get("method_name") == IMPORTED:
         given = _all
     else:
-        m = next((m for m in spec.methods if m.run_label == row.get("label")), None)
+        m = next((m for m in spec.methods if m.run_label == row.get("method")), None)
         if m is None:
             return None
         given = slamrun.methods.get(m.name)(m.params).frames_given
@@ -68,7 +68,7 @@ def stale(rows: Iterable[dict], spec: CampaignSpec) -> list[tuple[dict, Target]]
     dataset's now, with their target."""
     out = []
     for row in rows:
-        if row.get("state") not in ("done", "failed") or row.get("failure") in INFRA_FAILURES:
+        if row.get("status") not in ("done", "failed") or row.get("failure") in INFRA_FAILURES:
             continue
         target = target_of(row, spec)
         if target is not None and row.get("eval_settings") != target.evaluation.text():

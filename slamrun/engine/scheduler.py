@@ -170,7 +170,7 @@ class Scheduler:
         """The run failed for infrastructure reasons (not the method's result; `contended`: the machine's load):
         recorded, retried next start."""
         self.ledger.finish(run.key.id, "failed", {"failure": failure, "message": message[-2000:]})
-        self.on_event("finished", run, lane, {"state": "failed", "failure": failure, "message": message})
+        self.on_event("finished", run, lane, {"status": "failed", "failure": failure, "message": message})
 
     def _stop_for_storage(self, run: PlannedRun, lane: Lane, error: StorageError, requeue: bool) -> None:
         """No new runs. A row the ledger cannot update stays `running`: the next start recovers it (imports
@@ -206,7 +206,7 @@ class Scheduler:
         paths = RunPaths(self.spec.results, run.key)
         rec = finished_record(paths.final, run.key.id)
         if rec is not None:  # finished earlier and not in the ledger (it was lost): record it, never redo it
-            self.ledger.finish(run.key.id, rec["state"], {**rec, "run_dir": str(paths.final)})
+            self.ledger.finish(run.key.id, rec["status"], {**rec, "run_dir": str(paths.final)})
             self.on_event("finished", run, lane, {**rec, "imported": True})
             return
         for retry in range(self.spec.retries + 1):
@@ -287,7 +287,7 @@ class Scheduler:
                 self.spec.contention_pct,
             )
             self.ledger.finish(run.key.id, outcome.state, outcome.values)
-            self.on_event("finished", run, lane, {"state": outcome.state, **outcome.values})
+            self.on_event("finished", run, lane, {"status": outcome.state, **outcome.values})
         except StorageError as exc:
             self._stop_for_storage(run, lane, exc, requeue=True)
         except LedgerLostError as exc:

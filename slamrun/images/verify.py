@@ -290,7 +290,7 @@ def _campaign(
         done = [r for r in ledger.rows() if r["active"]]
     finally:
         ledger.close()
-    ok = [r for r in done if r["state"] == "done" and r["e_align"] is not None]
+    ok = [r for r in done if run_ok(r)]
     row.runs, row.runs_ok = len(done), len(ok)
     rel = [r["e_align"] / extents[r["sequence"]] for r in ok]
     if rel:
@@ -314,13 +314,21 @@ def _campaign(
         row.note = "not ok: " + "; ".join(failed[:4]) + (f" (+{len(failed) - 4})" if len(failed) > 4 else "")
 
 
+def run_ok(row) -> bool:
+    """A verification run that counts: done and evaluated, with poses for at least the coverage mark of the frames
+    it was given (a run lost early that relocalised only at the loop's end is not ok, whatever its e_align)."""
+    return row["status"] == "done" and row["e_align"] is not None and not row.get("low_coverage")
+
+
 def _why_not_ok(row) -> str:
-    """A run's failure kind, or why a run that ended done has no e_align."""
+    """A run's failure kind, why a run that ended done has no e_align, or its low coverage."""
     if row["failure"]:
         return row["failure"]
-    if row["state"] == "done":
+    if row["status"] == "done" and row.get("low_coverage"):
+        return f"low coverage ({row['coverage']:.0%} of its frames)".replace("%", " %")
+    if row["status"] == "done":
         return f"not evaluated ({row['eval_status'] or 'no metrics'})"
-    return row["state"]
+    return row["status"]
 
 
 def _fmt(v, spec: str = "", none: str = "-") -> str:

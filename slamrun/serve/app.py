@@ -36,6 +36,7 @@ from slamrun.core import jsonio
 from slamrun.engine.paths import RunPaths
 from slamrun.errors import SlamRunError
 from slamrun.results import files as campaign_files
+from slamrun.results.catalogue import MAIN_METRICS
 from slamrun.results.files import CampaignFiles
 from slamrun.serve import runview, sections
 from slamrun.serve.connections import Watch
@@ -390,12 +391,12 @@ async def runs(request: web.Request) -> web.Response:
 
     folder = request.app["hub"].folder(request.match_info["name"])
     sequence = request.query.get("sequence")
-    cols = ("key", "label", "dataset", "sequence", "direction", "trial", "e_align", "ate_rmse")
+    cols = ("key", "method", "dataset", "sequence", "direction", "trial", *MAIN_METRICS)
 
     def read() -> list[dict]:
         ledger = Ledger(CampaignFiles(folder).ledger, read_only=True)
         try:
-            rows = ledger.rows(state="done", columns=cols)
+            rows = ledger.rows(status="done", columns=cols)
         finally:
             ledger.close()
         return [r for r in rows if sequence is None or r["sequence"] == sequence]

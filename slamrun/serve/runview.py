@@ -72,8 +72,8 @@ def path_figure(results: Path, key: str) -> dict:
     row = run_row(results, key)
     if row is None:
         raise SlamRunError(f"no run {key!r} in this campaign's ledger")
-    if row["state"] != "done":
-        raise SlamRunError(f"run {key} is {row['state']}: only a done run has a path to draw")
+    if row["status"] != "done":
+        raise SlamRunError(f"run {key} is {row['status']}: only a done run has a path to draw")
     folder = run_folder(results, key)
     if folder is None:
         raise SlamRunError(f"run {key}: its folder is not under this campaign's runs/ (moved or deleted)")
@@ -88,9 +88,9 @@ def path_figure(results: Path, key: str) -> dict:
         raise SlamRunError(f"run {key}: under three of its poses meet the ground truth")
     value = row.get(metric)
     value = float(value) if value is not None else float("nan")
-    run = RunPath(row["label"], "best", value, str(row["trial"]), str(row["direction"]), positions)
+    run = RunPath(row["method"], "best", value, str(row["trial"]), str(row["direction"]), positions)
     paths = SequencePaths(str(row["sequence"]), metric, units_of(layout), layout, gt.positions, full, [run], alignment)
-    title = f"{row['label']} on {row['dataset']}/{row['sequence']}, {row['direction']} trial {row['trial']}"
+    title = f"{row['method']} on {row['dataset']}/{row['sequence']}, {row['direction']} trial {row['trial']}"
     figure = view_figure(paths, title)
-    figure["data"][-1]["name"] = f"{row['label']} ({metric} {value:.4g})"
+    figure["data"][-1]["name"] = f"{row['method']} ({metric} {value:.4g})"
     return figure

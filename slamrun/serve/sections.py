@@ -95,7 +95,7 @@ def _lanes(snap: dict) -> str:
         return _section("lanes", "Lanes", _muted("no run is running now"))
     rows = [
         [
-            r["label"],
+            r["method"],
             f"{r['dataset']}/{r['sequence']}",
             r["direction"],
             r["trial"],
@@ -115,7 +115,7 @@ def _failures(snap: dict) -> str:
     kinds = " · ".join(f"{k} {n}" for k, n in f["kinds"].items())
     more = f" (the newest {len(f['runs'])} listed)" if f["total"] > len(f["runs"]) else ""
     rows = [
-        [r["failure"], r["label"], f"{r['dataset']}/{r['sequence']}", r["direction"], r["trial"], r["message"] or ""]
+        [r["failure"], r["method"], f"{r['dataset']}/{r['sequence']}", r["direction"], r["trial"], r["message"] or ""]
         + [_log_tail(r["key"])]
         for r in f["runs"]
     ]

@@ -30,7 +30,7 @@ MAX_VALUES = 500  # per dataset and method: the live box plot's values (evenly t
 MAX_FIGURES = 200
 MESSAGE_CHARS = 300
 FIGURE_SUFFIXES = (".png", ".svg")
-RUN_COLUMNS = ("key", "label", "dataset", "sequence", "direction", "trial", "attempts", "started_at", "ended_at")
+RUN_COLUMNS = ("key", "method", "dataset", "sequence", "direction", "trial", "attempts", "started_at", "ended_at")
 # a metric's name on the page, with its unit, as the report names it (TUM-Mono's lengths are in its ground truth's
 # units: the benchmark's ground truth has no metric scale)
 LABELS = {"coverage": "coverage (median, share of frames)"} | {m: column_label(m) for m in SUMMARY_METRICS}
@@ -66,9 +66,9 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         measurement = measurement_conditions(ledger.meta("spec"))
         rows = ledger.progress_rows()
         progress = Tracker(rows, session, campaign).figures(now)
-        running = ledger.rows(state="running", columns=RUN_COLUMNS)
-        failed = ledger.rows(state="failed", columns=(*RUN_COLUMNS, "failure", "message"))
-        done = ledger.rows(state="done", columns=MEDIAN_COLUMNS)
+        running = ledger.rows(status="running", columns=RUN_COLUMNS)
+        failed = ledger.rows(status="failed", columns=(*RUN_COLUMNS, "failure", "message"))
+        done = ledger.rows(status="done", columns=MEDIAN_COLUMNS)
     finally:
         ledger.close()
     counts = progress.to_dict()
@@ -83,7 +83,7 @@ def snapshot(results: Path, name: str, now: float | None = None) -> dict:
         "lanes": [_lane(r, now) for r in sorted(running, key=lambda r: r.get("started_at") or 0.0)],
         "failed": _failed(failed),
         "medians": medians(done),
-        "colours": method_colours(r["label"] for r in rows),
+        "colours": method_colours(r["method"] for r in rows),
         "figures": report_figures(results),
         "report": "report/index.html" if (results / "report" / "index.html").is_file() else None,
     }
@@ -139,7 +139,7 @@ def _failed(rows: list[dict]) -> dict:
 
 
 MEDIAN_COLUMNS = (
-    "label", "dataset", "sequence", "direction", "perturbation", "coverage", *SUMMARY_METRICS, *FLAG_COLUMNS,
+    "method", "dataset", "sequence", "direction", "perturbation", "coverage", *SUMMARY_METRICS, *FLAG_COLUMNS,
     "eval_settings",
 )  # fmt: skip
 
@@ -164,10 +164,10 @@ def medians(done: list[dict]) -> dict:
     for dataset, rows in sorted(by_dataset.items()):
         metrics = [m for m in ("coverage", *SUMMARY_METRICS) if any(_finite(r.get(m)) for r in rows)]
         main = next((m for m in MAIN_METRICS if m in metrics), None)
-        found = flags({**r, "method": r["label"], "done": True} for r in rows)
+        found = flags({**r, "done": True} for r in rows)
         methods, values = [], {}
-        for label in sorted({r["label"] for r in rows}):
-            mine = [r for r in rows if r["label"] == label]
+        for label in sorted({r["method"] for r in rows}):
+            mine = [r for r in rows if r["method"] == label]
             row = {"method": marked(label, found), "done": len(mine)}
             for m in metrics:
                 finite = _distinct(mine, m)

@@ -92,7 +92,7 @@ async function listRuns() {
   const r = await fetch(`${base()}api/runs`);
   const d = await r.json();
   viewer.select.replaceChildren($("option", { value: "", text: `pick one of ${d.total} done runs` }),
-    ...d.runs.map((run) => $("option", { value: run.key, text: `${run.label} · ${run.dataset}/${run.sequence} · ${run.direction} · trial ${run.trial}` })));
+    ...d.runs.map((run) => $("option", { value: run.key, text: `${run.method} · ${run.dataset}/${run.sequence} · ${run.direction} · trial ${run.trial}` })));
   viewer.note.textContent = d.total > d.runs.length ? `the first ${d.runs.length} of ${d.total} listed` : "";
 }
 
