@@ -22,8 +22,10 @@ from slamrun.analysis.load import counted  # noqa: E402
 from slamrun.analysis.paths import SequencePaths  # noqa: E402
 from slamrun.analysis.stats import StudyStats  # noqa: E402
 from slamrun.core.ticks import log_steps  # noqa: E402
-from slamrun.results.catalogue import LABELS
+from slamrun.results.catalogue import LABELS, MAIN_METRICS  # noqa: E402
 from slamrun.results.vocabulary import INFRA_FAILURES  # noqa: E402
+
+MAIN = MAIN_METRICS[0]  # TUM-Mono's e_align: the figures' metric when none is named
 
 # best, median and worst run: told apart by colour and by line style (colour-blind safe, also in grey print)
 PICK_STYLES = {"best": ("#1b9e77", "-", 1.6), "median": ("#7570b3", "--", 1.3), "worst": ("#d95f02", ":", 1.6)}
@@ -189,7 +191,7 @@ def heatmap_cells(
 
 
 def heatmap(
-    df: pd.DataFrame, folder: Path, metric: str = "e_align", label: str = "", names: dict[str, str] | None = None
+    df: pd.DataFrame, folder: Path, metric: str = MAIN, label: str = "", names: dict[str, str] | None = None
 ) -> Path:
     """The heat map of `metric` (heatmap_figure), saved in `folder`."""
     return save(heatmap_figure(df, metric, label, names), folder, f"heatmap_{metric}")
@@ -209,7 +211,7 @@ def colour_norm(finite: np.ndarray) -> Normalize:
 
 
 def heatmap_figure(
-    df: pd.DataFrame, metric: str = "e_align", label: str = "", names: dict[str, str] | None = None
+    df: pd.DataFrame, metric: str = MAIN, label: str = "", names: dict[str, str] | None = None
 ) -> plt.Figure:
     """Colour-coded error per method (rows) and run (columns: sequence at the top, direction and trial below);
     failed runs, runs without a value and runs never planned (a method with fewer trials or directions) each drawn

@@ -39,6 +39,7 @@ from slamrun.results.catalogue import (
     FIGURE_METRICS,
     KITTI,
     LABELS,
+    MAIN_METRICS,
     METRIC_TITLES,
     PROGRESS_METRICS,
     RPE,
@@ -566,7 +567,7 @@ def _trajectories(
 ) -> Section | None:
     """Per sequence, an interactive 3D view of each method's best, median and worst run over the ground truth
     (by ATE where the campaign has it, else e_align); a static top view (PNG, SVG) of the first `n_static`."""
-    metric = next((m for m in ("ate_rmse", "e_align") if m in df.columns and df[m].notna().any()), None)
+    metric = next((m for m in MAIN_METRICS[::-1] if m in df.columns and df[m].notna().any()), None)
     if "run_dir" not in df.columns or metric is None:
         return None
     parts = []

@@ -7,7 +7,7 @@ import pandas as pd
 
 from slamrun.analysis.load import counted
 from slamrun.analysis.stats import StudyStats, wilcoxon_rank_sum_p
-from slamrun.results.catalogue import RESOURCES_TABLE, column
+from slamrun.results.catalogue import MAIN_METRICS, RESOURCES_TABLE, column
 from slamrun.results.vocabulary import played
 
 LETTERS = " letters"  # the suffix of a medians column's letter groups
@@ -129,7 +129,7 @@ def _after_key(message) -> str:
     return text.split(": ", 1)[1] if ": " in text else text
 
 
-def motion_bias_table(df: pd.DataFrame, metric: str = "e_align") -> pd.DataFrame:
+def motion_bias_table(df: pd.DataFrame, metric: str = MAIN_METRICS[0]) -> pd.DataFrame:
     """Forward vs backward medians per method, with the Wilcoxon rank-sum p-value between directions, over the runs
     `counted` (done, with a figure, copies of a run once: identical trials are one sample, not several)."""
     rows = []
@@ -178,7 +178,7 @@ def reproduction_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def per_sequence_table(df: pd.DataFrame, metric: str = "e_align") -> pd.DataFrame:
+def per_sequence_table(df: pd.DataFrame, metric: str = MAIN_METRICS[0]) -> pd.DataFrame:
     """Median of a metric per method (rows) and sequence (columns), over the runs `counted` (done, copies once)."""
     d = counted(df, metric)
     if d.empty:
