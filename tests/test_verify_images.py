@@ -70,16 +70,29 @@ def test_a_run_that_ended_done_without_metrics_says_why():
     assert _why_not_ok({"failure": "lost", "status": "failed", "eval_status": "incomplete"}) == "lost"
 
 
-def test_a_run_with_poses_for_few_of_its_frames_is_not_ok():
-    """SVO lost early and relocalised at the loop's end: 23 poses of 300, an e_align of 3 % of the extent; it was
-    counted ok. A run is ok when done, evaluated and not marked low coverage."""
-    from slamrun.images.verify import _why_not_ok, run_ok
+def test_a_run_lost_for_most_of_its_frames_is_not_ok_a_keyframe_writer_is(tmp_path):
+    """SVO lost early and relocalised at the loop's end: 23 poses of 300 and an e_align of 3 % of the extent; it was
+    counted ok. A run is ok when done, evaluated and no stretch of over a tenth of its frames went without a pose:
+    LDSO, which writes its keyframes only (46 % of the frames, a pose every 2-3 frames), is."""
+    from slamrun.images.verify import _why_not_ok, pose_gap, run_ok
 
-    short = {"failure": None, "status": "done", "eval_status": "ok", "e_align": 0.05, "low_coverage": 1}
-    short["coverage"] = 23 / 300
-    assert not run_ok(short) and _why_not_ok(short) == "low coverage (8 % of its frames)"
-    assert run_ok(short | {"low_coverage": 0, "coverage": 0.99})
-    assert not run_ok(short | {"low_coverage": 0, "e_align": None})
+    seq = tmp_path / "seq"
+    seq.mkdir()
+    times = np.arange(300) / 30.0
+    np.savetxt(seq / "times.txt", np.column_stack([np.arange(300), times, np.ones(300)]), fmt="%d %.6f %.1f")
+
+    def gap(rows: np.ndarray) -> int:
+        path = tmp_path / "trajectory.txt"
+        np.savetxt(path, np.column_stack([times[rows], np.zeros((len(rows), 6)), np.ones(len(rows))]), fmt="%.6f")
+        return pose_gap(path, seq)
+
+    lost = gap(np.r_[0:10, 287:300])  # 23 poses: 10 at the start, 13 at the end
+    keyframes = gap(np.flatnonzero(np.arange(300) % 5 < 2))  # 40 % of the frames, evenly
+    assert (lost, keyframes, gap(np.arange(300))) == (277, 3, 0)
+    row = {"failure": None, "status": "done", "eval_status": "ok", "e_align": 0.05, "frames": 300}
+    assert not run_ok(row | {"gap": lost}) and run_ok(row | {"gap": keyframes})
+    assert _why_not_ok(row | {"gap": lost}) == "277 of 300 frames in a row without a pose"
+    assert not run_ok(row | {"gap": 0, "e_align": None})
 
 
 def test_segment_errors_are_taken_in_the_order_the_method_processed_them():

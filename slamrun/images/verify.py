@@ -129,6 +129,25 @@ def settled_error(trajectory: Path, sequence: Path, direction: str, fraction: fl
         return None
 
 
+MAX_GAP = 0.1  # a run is ok when no stretch of more than this share of its sequence's frames went without a pose
+
+
+def pose_gap(trajectory: Path, sequence: Path) -> int:
+    """The longest stretch of the sequence's frames (times.txt) without a pose of the run: a few frames for a method
+    that writes keyframes only, most of the loop for a run lost early that relocalised at its end."""
+    frames = np.loadtxt(sequence / "times.txt", ndmin=2)[:, 1]
+    try:
+        poses = read_tum(trajectory).timestamps
+    except (OSError, ValueError, SlamRunError):
+        return len(frames)
+    has = np.zeros(len(frames), bool)
+    i = np.clip(np.searchsorted(frames, poses), 0, len(frames) - 1)
+    for j in (i, np.maximum(i - 1, 0)):
+        has[j[np.abs(frames[j] - poses) <= 1e-3]] = True
+    edges = np.flatnonzero(np.diff(np.concatenate(([1], has.astype(int), [1]))))  # starts and ends of the stretches
+    return int(max((b - a for a, b in zip(edges[::2], edges[1::2], strict=True)), default=0))
+
+
 def scene_extent(sequence: Path) -> float:
     """Diagonal of the bounding box of the camera path (the full ground truth of a synthetic sequence, else
     the rows of groundtruthSync.txt that carry numbers)."""
@@ -290,6 +309,9 @@ def _campaign(
         done = [r for r in ledger.rows() if r["active"]]
     finally:
         ledger.close()
+    for r in done:  # the longest stretch of frames without a pose (a done run's)
+        r["gap"] = pose_gap(RunPaths.trajectory(Path(r["run_dir"])), data / r["sequence"]) if r["run_dir"] else None
+        r["frames"] = len(np.loadtxt(data / r["sequence"] / "times.txt", ndmin=2))
     ok = [r for r in done if run_ok(r)]
     row.runs, row.runs_ok = len(done), len(ok)
     rel = [r["e_align"] / extents[r["sequence"]] for r in ok]
@@ -315,17 +337,19 @@ def _campaign(
 
 
 def run_ok(row) -> bool:
-    """A verification run that counts: done and evaluated, with poses for at least the coverage mark of the frames
-    it was given (a run lost early that relocalised only at the loop's end is not ok, whatever its e_align)."""
-    return row["status"] == "done" and row["e_align"] is not None and not row.get("low_coverage")
+    """A verification run that counts: done and evaluated, and no stretch of over MAX_GAP of its sequence's frames
+    without a pose (a run lost early that relocalised only at the loop's end is not ok, whatever its e_align; a method
+    that writes its keyframes only is)."""
+    done = row["status"] == "done" and row["e_align"] is not None
+    return done and (row.get("gap") or 0) <= MAX_GAP * (row.get("frames") or 0)
 
 
 def _why_not_ok(row) -> str:
     """A run's failure kind, why a run that ended done has no e_align, or its low coverage."""
     if row["failure"]:
         return row["failure"]
-    if row["status"] == "done" and row.get("low_coverage"):
-        return f"low coverage ({row['coverage']:.0%} of its frames)".replace("%", " %")
+    if row["status"] == "done" and row.get("e_align") is not None and not run_ok(row):
+        return f"{row['gap']} of {row['frames']} frames in a row without a pose"
     if row["status"] == "done":
         return f"not evaluated ({row['eval_status'] or 'no metrics'})"
     return row["status"]
