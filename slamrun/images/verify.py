@@ -309,9 +309,10 @@ def _campaign(
         done = [r for r in ledger.rows() if r["active"]]
     finally:
         ledger.close()
+    frames = {seq: len(np.loadtxt(data / seq / "times.txt", ndmin=2)) for seq in sequences}
     for r in done:  # the longest stretch of frames without a pose (a done run's)
         r["gap"] = pose_gap(RunPaths.trajectory(Path(r["run_dir"])), data / r["sequence"]) if r["run_dir"] else None
-        r["frames"] = len(np.loadtxt(data / r["sequence"] / "times.txt", ndmin=2))
+        r["frames"] = frames[r["sequence"]]
     ok = [r for r in done if run_ok(r)]
     row.runs, row.runs_ok = len(done), len(ok)
     rel = [r["e_align"] / extents[r["sequence"]] for r in ok]
