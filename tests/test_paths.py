@@ -45,3 +45,18 @@ def test_a_views_caption_says_the_alignment_the_campaign_used(alignment, said):
     paths = SequencePaths("s", "ate_rmse", "m", "euroc", np.zeros((3, 3)), None, [], run_alignment(settings))
     assert paths.aligned_by() == said
     assert run_alignment(None) == run_alignment("not json") == "sim3"
+
+
+def test_a_path_that_cannot_be_aligned_says_why(shared_data):
+    """A first:N longer than the run: the live page said "under three of its poses meet the ground truth" where
+    every pose met it; the reason is the alignment's."""
+    from slamrun.errors import MetricError
+
+    evo = shared_data / "evo_test_data"
+    gt = read_trajectory(evo / "fr2_desk_groundtruth.txt", "tum")
+    est = read_trajectory(evo / "fr2_desk_ORB.txt", "tum")
+    with pytest.raises(MetricError, match="first 100000 poses, but 1204 pair"):
+        aligned(est, gt, "ate_rmse", "first:100000")
+    far = type(est)(est.timestamps + 1e6, est.positions, est.quaternions)
+    with pytest.raises(MetricError, match="0 of its poses meet the start segment"):
+        aligned(far, gt, "e_align")

@@ -12,7 +12,7 @@ import pandas as pd
 
 from slamrun.core.metrics import Alignment
 from slamrun.engine.paths import RunPaths
-from slamrun.errors import SlamRunError
+from slamrun.errors import MetricError, SlamRunError
 
 
 @dataclass(frozen=True)
@@ -96,11 +96,13 @@ def sequence_paths(df: pd.DataFrame, sequence: str, metric: str) -> SequencePath
             except (OSError, KeyError, ValueError, TypeError, SlamRunError):
                 continue
             alignment = run_alignment(row.get("eval_settings"))
-            positions = aligned(traj, gt, metric, alignment)
-            if positions is not None:
-                trial = str(row.trial) if "trial" in row.index else ""
-                direction = str(row.direction) if "direction" in row.index else ""
-                runs.append(RunPath(str(method), which, float(row[metric]), trial, direction, positions))
+            try:
+                positions = aligned(traj, gt, metric, alignment)
+            except MetricError:
+                continue  # its figure was made, so it aligns: a file changed since
+            trial = str(row.trial) if "trial" in row.index else ""
+            direction = str(row.direction) if "direction" in row.index else ""
+            runs.append(RunPath(str(method), which, float(row[metric]), trial, direction, positions))
     if gt is None or not runs:
         return None
     return SequencePaths(sequence, metric, units_of(layout), layout, gt.positions, full, runs, alignment)
@@ -122,25 +124,22 @@ def units_of(layout: str) -> str:
     return "ground-truth units" if layout == "tum-mono" else "m"
 
 
-def aligned(traj, gt, metric: str, alignment: str = "sim3") -> np.ndarray | None:
+def aligned(traj, gt, metric: str, alignment: str = "sim3") -> np.ndarray:
     """A run's positions in the ground truth's frame, as its metric aligned them: TUM-Mono's e_align by the start
     segment's Sim(3); ATE by the transform its ATE found (the campaign's `alignment`: sim3, se3, none, first:N, over
-    the poses it paired), so the drawn distance is the figure the tables give; None under three paired poses."""
+    the poses it paired), so the drawn distance is the figure the tables give. MetricError says why it cannot be
+    (nothing paired, a first:N longer than the run, under three poses in the start segment)."""
     from slamrun.core import metrics
     from slamrun.core.alignment import align_sim3
     from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S, ground_truth_rows
-    from slamrun.errors import MetricError
 
     if metric != "e_align":
-        try:
-            return metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).transform.apply(traj.positions)
-        except MetricError:  # nothing paired, or too few poses for its first:N
-            return None
+        return metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).transform.apply(traj.positions)
     valid = np.isfinite(gt.positions).all(axis=1)
     match = ground_truth_rows(gt.timestamps, traj.timestamps)
     use = (match >= 0) & valid[np.maximum(match, 0)] & (match < len(gt) // 2)
     if use.sum() < 3:
-        return None
+        raise MetricError(f"{int(use.sum())} of its poses meet the start segment's ground truth (3 needed)")
     return align_sim3(traj.positions[use], gt.positions[match[use]]).apply(traj.positions)
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.paths import RunPaths
-from slamrun.errors import SlamRunError
+from slamrun.errors import MetricError, SlamRunError
 from slamrun.results.catalogue import MAIN_METRICS
 from slamrun.serve.folders import LEDGER
 
@@ -83,9 +83,10 @@ def path_figure(results: Path, key: str) -> dict:
     gt, full, layout = sequence_truth(Path(json.loads(run_json.read_text()).get("sequence_dir")))
     metric = next((m for m in MAIN_METRICS if row.get(m) is not None), MAIN_METRICS[-1])
     alignment = run_alignment(row.get("eval_settings"))
-    positions = aligned(read_tum(RunPaths.trajectory(folder)), gt, metric, alignment)
-    if positions is None:
-        raise SlamRunError(f"run {key}: under three of its poses meet the ground truth")
+    try:
+        positions = aligned(read_tum(RunPaths.trajectory(folder)), gt, metric, alignment)
+    except MetricError as e:
+        raise SlamRunError(f"run {key}: its path cannot be aligned to the ground truth ({alignment}): {e}") from e
     value = row.get(metric)
     value = float(value) if value is not None else float("nan")
     run = RunPath(row["method"], "best", value, str(row["trial"]), str(row["direction"]), positions)
