@@ -10,7 +10,7 @@ from collections.abc import Iterable
 import numpy as np
 import pandas as pd
 
-from slamrun.results.catalogue import LABELS, TUM_MONO, metric_of
+from slamrun.results.catalogue import DIVERGED, LABELS, LOW_COVERAGE, TUM_MONO, metric_of
 from slamrun.results.marks import flags
 from slamrun.results.vocabulary import INFRA_FAILURES, UNDER_MIN_COVERAGE
 
@@ -109,6 +109,6 @@ def section_flags(section: pd.DataFrame, group: str = "method") -> dict:
     if group not in section.columns or section.empty:
         return {}
     status = section["status"] if "status" in section.columns else pd.Series("done", index=section.index)
-    cols = [c for c in ("low_coverage", "diverged", "eval_settings") if c in section.columns]
+    cols = [c for c in (LOW_COVERAGE, DIVERGED, "eval_settings") if c in section.columns]
     runs = section[cols].assign(method=section[group].astype(str).to_numpy(), done=status.eq("done").to_numpy())
     return flags(runs.to_dict("records"))

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 
 from slamrun.errors import SlamRunError
-from slamrun.results.catalogue import MAIN_METRICS, STUDY_METRICS, TRAJECTORY_STATS_METRICS
+from slamrun.results.catalogue import E_S, E_S_SYM, MAIN_METRICS, STUDY_METRICS, TRAJECTORY_STATS_METRICS
 from slamrun.results.files import CampaignFiles
 
 NO_DATASET = "all"  # the one dataset of a table without a dataset column (or the name of rows that have none)
@@ -89,8 +89,8 @@ def metrics_for(df: pd.DataFrame) -> list[str]:
     for m in STUDY_METRICS:
         if has(m):
             out.append(m)
-        elif m == "e_s_sym" and has("e_s"):
-            out.append("e_s")
+        elif m == E_S_SYM and has(E_S):
+            out.append(E_S)
     return out + [m for m in TRAJECTORY_STATS_METRICS if has(m)]
 
 

@@ -13,6 +13,7 @@ import pandas as pd
 from slamrun.core.metrics import Alignment
 from slamrun.engine.paths import RunPaths
 from slamrun.errors import MetricError, SlamRunError
+from slamrun.results.catalogue import E_ALIGN
 
 
 @dataclass(frozen=True)
@@ -60,7 +61,7 @@ class SequencePaths:
         return "ground truth" if finite.all() else "ground truth (start and end segments)"
 
     def aligned_by(self) -> str:
-        if self.metric == "e_align":
+        if self.metric == E_ALIGN:
             return "aligned by the start segment's Sim(3)"
         a = Alignment.parse(self.alignment)
         if a.kind == "none":
@@ -133,7 +134,7 @@ def aligned(traj, gt, metric: str, alignment: str = "sim3") -> np.ndarray:
     from slamrun.core.alignment import align_sim3
     from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S, ground_truth_rows
 
-    if metric != "e_align":
+    if metric != E_ALIGN:
         return metrics.ate(gt, traj, alignment, ASSOCIATION_TOLERANCE_S).transform.apply(traj.positions)
     valid = np.isfinite(gt.positions).all(axis=1)
     match = ground_truth_rows(gt.timestamps, traj.timestamps)

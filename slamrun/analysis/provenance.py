@@ -19,6 +19,7 @@ from slamrun.core.inputs import load_yaml_file, read_text_bounded
 from slamrun.engine.session import measurement_conditions
 from slamrun.engine.spec import RecordedSpec
 from slamrun.errors import SlamRunError
+from slamrun.results.catalogue import WALL_S
 from slamrun.results.files import SPEC, CampaignFiles
 
 IMAGES_FILE = "images.json"
@@ -260,8 +261,8 @@ def _runs(df: pd.DataFrame, session: dict | None) -> dict[str, str]:
     """How many runs in which state, their summed time and the campaign's last session's span."""
     status = df["status"].fillna("unknown").value_counts() if "status" in df.columns else pd.Series({"done": len(df)})
     out = {"runs": f"{len(df)} (" + ", ".join(f"{k} {v}" for k, v in status.items()) + ")"}
-    if "wall_s" in df.columns and df["wall_s"].notna().any():
-        out["total run time"] = f"{_duration(df['wall_s'].sum())} (the runs' wall-clock times summed)"
+    if WALL_S in df.columns and df[WALL_S].notna().any():
+        out["total run time"] = f"{_duration(df[WALL_S].sum())} (the runs' wall-clock times summed)"
     if session and session.get("runs_from") and session.get("runs_to"):
         lanes = session.get("lanes")
         span = _duration(session["runs_to"] - session["runs_from"])

@@ -36,6 +36,7 @@ from slamrun.core import jsonio
 from slamrun.engine.folders import REPORT, claim_output_folder
 from slamrun.results.catalogue import (
     ATE,
+    CPU_WAIT_PCT,
     FIGURE_METRICS,
     KITTI,
     LABELS,
@@ -381,7 +382,7 @@ def _resources(
         title = "Resources: means per run (Table 2 layout)"
         caption = "Means over each method's finished runs (done or failed) of the resources the runner measured"
         caption += f", taken under measurement {measurement}." if measurement else "."
-        if contention_pct is not None and "cpu_wait_pct" in finished.columns:
+        if contention_pct is not None and CPU_WAIT_PCT in finished.columns:
             caption += (
                 f" Runs whose threads waited for a CPU more than {contention_pct:g} % of their wall time beyond the "
                 "wait they cause themselves (cpu_wait_own_pct: a method with more busy threads than its CPUs) had "

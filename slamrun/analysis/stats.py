@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from slamrun.results.catalogue import NON_NEGATIVE
+from slamrun.results.catalogue import COVERAGE, DIVERGED, LOW_COVERAGE, NON_NEGATIVE
 
 ROUNDING = 1e-9  # a spread at most this, relative to the values' magnitude, is rounding: no spread
 # A figure whose magnitude is above LIMIT is no measurement but a numerical blow-up: in metres 7 astronomical units,
@@ -420,10 +420,10 @@ class StudyStats:
             "outlier_note": self.outlier_note or None,
             "counted": self.counted,
             "counting_note": self.counting_note() or None,
-            "coverage": self.coverage,
+            COVERAGE: self.coverage,
             "outlier_tests": self.outlier_tests,
             "marks": {
-                m: {"mark": f.symbol, "done": f.done, "low_coverage": f.low_coverage, "diverged": f.diverged}
+                m: {"mark": f.symbol, "done": f.done, LOW_COVERAGE: f.low_coverage, DIVERGED: f.diverged}
                 for m, f in self.marks.items()
                 if f.symbol
             },
@@ -506,8 +506,8 @@ def study_statistics(
     out = {metric: metric_statistics(kept, metric, group, adjust, alpha) for metric in metrics}
     d2_list = [] if outlier_note else [float(v) if np.isfinite(c) else None for v, c in zip(d2, cutoffs, strict=True)]
     coverage = {}
-    if "coverage" in kept.columns:
-        coverage = {str(g): float(v) for g, v in kept.groupby(group, sort=True)["coverage"].median().items() if v == v}
+    if COVERAGE in kept.columns:
+        coverage = {str(g): float(v) for g, v in kept.groupby(group, sort=True)[COVERAGE].median().items() if v == v}
     cutoff = chi2_cutoff(level, len(metrics)) if metrics else math.nan
     st = StudyStats(d2_list, cutoff, int(outlier.sum()), out, kept, counted, outlier_note, coverage)
     st.outlier_tests, st.excluded = tests, excluded

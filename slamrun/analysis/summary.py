@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 
 from slamrun.analysis.load import by_dataset, counted, main_metric
-from slamrun.results.catalogue import SUMMARY_METRICS
+from slamrun.results.catalogue import FPS, SUMMARY_METRICS
 from slamrun.results.summary import tally
 from slamrun.results.vocabulary import INFRA_FAILURES, METHOD_FAILURES
 
@@ -43,7 +43,7 @@ def method_summary(df: pd.DataFrame) -> pd.DataFrame:
         for m in SUMMARY_METRICS:  # over the runs the statistics count: done, with a figure, copies once
             values = counted(g, m)[m] if m in g.columns else pd.Series(dtype=float)
             row[f"median_{m}"] = values.median() if len(values) else np.nan
-        row["median_fps"] = g["fps"].median() if "fps" in g.columns and g["fps"].notna().any() else np.nan
+        row["median_fps"] = g[FPS].median() if FPS in g.columns and g[FPS].notna().any() else np.nan
         rows.append(row)
     return pd.DataFrame(rows)
 

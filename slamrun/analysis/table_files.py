@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 
 from slamrun.analysis.tables import KRUSKAL_ROWS, LETTERS
-from slamrun.results.catalogue import LABELS
+from slamrun.results.catalogue import COVERAGE, LABELS
 from slamrun.results.vocabulary import FAILURES
 
 ROOM_PT = 345.0  # \linewidth of a one-column article at 10 pt: the width a LaTeX table's parts are fitted to
@@ -238,13 +238,13 @@ def header(column: str) -> str:
     """A column's name in words, with its unit where it has one: a metric's label (LABELS), also among words
     ("median ate_rmse forward"); a failure kind's words; a closing unit in parentheses ("CPU mean (%)")."""
     name = str(column)
-    if name == "coverage":
+    if name == COVERAGE:
         return name
     if name in LABELS:
         return LABELS[name]
     if name in FAILURES:
         return name.replace("_", " ")
-    words = [LABELS.get(w, w) if w != "coverage" else w for w in name.split(" ")]
+    words = [LABELS.get(w, w) if w != COVERAGE else w for w in name.split(" ")]
     if len(words) > 1 and words[-1] in _UNITS and not words[-2].replace(".", "").isdigit():  # not "> 15 %"
         words[-1] = f"({words[-1]})"
     return " ".join(words)

@@ -7,7 +7,15 @@ import pandas as pd
 
 from slamrun.analysis.load import counted
 from slamrun.analysis.stats import StudyStats, wilcoxon_rank_sum_p
-from slamrun.results.catalogue import MAIN_METRICS, RESOURCES_TABLE, column
+from slamrun.results.catalogue import (
+    BUSY_THREADS,
+    COVERAGE,
+    CPU_WAIT_PCT,
+    MAIN_METRICS,
+    RESOURCES_TABLE,
+    RUNNABLE_THREADS,
+    column,
+)
 from slamrun.results.vocabulary import played
 
 LETTERS = " letters"  # the suffix of a medians column's letter groups
@@ -28,8 +36,8 @@ def medians_with_letters(st: StudyStats, metrics: list[str]) -> pd.DataFrame:
         runs = kept[kept["method"] == m] if "method" in kept.columns else kept.iloc[0:0]
         runs = runs[np.isfinite(runs[metrics].to_numpy(float)).any(axis=1)]
         row: dict = {"method": m, "runs": len(runs)}
-        if "coverage" in kept.columns:
-            row["coverage"] = float(runs["coverage"].median()) if runs["coverage"].notna().any() else np.nan
+        if COVERAGE in kept.columns:
+            row[COVERAGE] = float(runs[COVERAGE].median()) if runs[COVERAGE].notna().any() else np.nan
         for metric in metrics:
             s = st.metrics[metric]
             row[metric] = s.medians.get(m, np.nan)
@@ -92,9 +100,9 @@ def resources_table(df: pd.DataFrame, contention_pct: float | None = None) -> pd
     present = [c for c in cols if c in df.columns]
     out = df.groupby("method")[present].mean().reset_index().rename(columns=cols)
     out.insert(1, "runs", df.groupby("method").size().to_numpy())
-    if contention_pct is not None and "cpu_wait_pct" in df.columns:
+    if contention_pct is not None and CPU_WAIT_PCT in df.columns:
         own = df["cpu_wait_own_pct"].fillna(0.0) if "cpu_wait_own_pct" in df.columns else 0.0
-        over = (df["cpu_wait_pct"] - own > contention_pct).groupby(df["method"]).sum()
+        over = (df[CPU_WAIT_PCT] - own > contention_pct).groupby(df["method"]).sum()
         out[f"runs with CPU wait > {contention_pct:g} %"] = over.reindex(out["method"]).to_numpy()
     return out
 
@@ -189,12 +197,12 @@ def per_sequence_table(df: pd.DataFrame, metric: str = MAIN_METRICS[0]) -> pd.Da
 def more_threads_than_declared(df: pd.DataFrame, slack: float = 0.5) -> list[str]:
     """One line per method whose runs kept more threads runnable on average than it declares it keeps busy (by more
     than `slack`): its lanes were sized by the declaration, and its own wait beyond its CPUs counted as its own."""
-    if "runnable_threads" not in df.columns or "busy_threads" not in df.columns:
+    if RUNNABLE_THREADS not in df.columns or BUSY_THREADS not in df.columns:
         return []
     out = []
     for method, g in df.groupby("method", sort=True):
-        runnable = pd.to_numeric(g["runnable_threads"], errors="coerce").median()
-        declared = pd.to_numeric(g["busy_threads"], errors="coerce").median()
+        runnable = pd.to_numeric(g[RUNNABLE_THREADS], errors="coerce").median()
+        declared = pd.to_numeric(g[BUSY_THREADS], errors="coerce").median()
         if np.isfinite(runnable) and np.isfinite(declared) and runnable > declared + slack:
             out.append(
                 f"{method} kept {runnable:.1f} threads runnable on average, declared {declared:g}: its lanes were "

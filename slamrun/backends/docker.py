@@ -19,6 +19,7 @@ from slamrun.backends.logcap import CappedLog, Tap
 from slamrun.backends.monitor import Gpu, ResourceSeries, RunQueueWait, Sample, tree_pids
 from slamrun.datasets.view import PreparedView
 from slamrun.errors import DaemonUnreachable, InfraError
+from slamrun.results.catalogue import FPS, N_FRAMES, WALL_S
 
 DATA = Path("/data")
 WORK = Path("/work")
@@ -178,7 +179,7 @@ class DockerBackend(Defaults):
             wall_s=wall_s,
             oom=bool(state.get("OOMKilled")),
             log_truncated=log.truncated,
-            resources={"wall_s": wall_s, "fps": n_frames / wall_s if n_frames else None, "n_frames": n_frames},
+            resources={WALL_S: wall_s, FPS: n_frames / wall_s if n_frames else None, N_FRAMES: n_frames},
         )
 
     def process_paths(self, view: PreparedView, workdir: Path) -> tuple[PreparedView, Path]:

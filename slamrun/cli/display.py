@@ -19,7 +19,7 @@ from rich.text import Text
 from slamrun.engine.paths import RunPaths
 from slamrun.engine.progress import Figures, Tracker, duration, one_line
 from slamrun.engine.session import read_tracker
-from slamrun.results.catalogue import PROGRESS_METRICS, SUMMARY_METRICS, column
+from slamrun.results.catalogue import CPU_WAIT_PCT, PROGRESS_METRICS, SUMMARY_METRICS, WALL_S, column
 from slamrun.results.marks import marked
 from slamrun.results.marks import notes as mark_notes
 from slamrun.results.vocabulary import INFRA_FAILURES, played
@@ -55,7 +55,7 @@ def group_table(f: Figures) -> Table:
         t.add_column(c, justify="left" if c in ("method", "direction") else "right")
     for g in f.per_group:
         rate = "-" if g["success_pct"] is None else f"{g['success_pct']:.0f}"
-        wait = "-" if g.get("cpu_wait_pct") is None else f"{g['cpu_wait_pct']:.0f}"
+        wait = "-" if g.get(CPU_WAIT_PCT) is None else f"{g[CPU_WAIT_PCT]:.0f}"
         t.add_row(
             g["method"],
             g["direction"],
@@ -134,7 +134,7 @@ class LiveProgress:
             self._tracker.update(run.key.id, status="running", started_at=time.time())
         elif kind == "finished":
             self._tracker.update(
-                run.key.id, status=info.get("status"), failure=info.get("failure"), wall_s=info.get("wall_s")
+                run.key.id, status=info.get("status"), failure=info.get("failure"), wall_s=info.get(WALL_S)
             )
         elif kind in ("retry", "requeued"):
             self._tracker.update(run.key.id, status="pending")

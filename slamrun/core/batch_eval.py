@@ -29,6 +29,7 @@ from slamrun.core.metric_table import metric as metric_named
 from slamrun.core.metrics import DEFAULT_TOLERANCE_S
 from slamrun.core.trajectory import Trajectory, read_tum_many
 from slamrun.errors import TrajectoryFormatError
+from slamrun.results.catalogue import N_POSES
 from slamrun.results.vocabulary import EvalStatus
 
 GROUP = 32  # estimates of a metric with a batched form (TUM-Mono's) evaluated together (their arrays stay in cache)
@@ -94,13 +95,13 @@ def _campaign_fields(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     status = figures.get("eval_status", EvalStatus.ok.value)
     if status == EvalStatus.ok.value and all(v is None for v in fields.values()):
         status = "failed"
-    return {"status": status, "n_poses": len(traj), **fields} | ({"detail": detail} if detail else {})
+    return {"status": status, N_POSES: len(traj), **fields} | ({"detail": detail} if detail else {})
 
 
 def _merged(gt: Trajectory, traj: Trajectory, opts: Options) -> dict:
     """Several metrics of one estimate in one result: the first status that is not ok, every figure, each
     metric's reason."""
-    out: dict = {"status": "ok", "n_poses": len(traj)}
+    out: dict = {"status": "ok", N_POSES: len(traj)}
     details = []
     for metric in opts.metrics:
         d = _single(gt, traj, metric, opts)

@@ -14,7 +14,16 @@ from slamrun.core import metrics
 from slamrun.core.evaluation import ASSOCIATION_TOLERANCE_S, TumMonoResult, tum_mono, tum_mono_file, tum_mono_many
 from slamrun.core.trajectory import Trajectory
 from slamrun.errors import MetricError
-from slamrun.results.catalogue import ATE, KITTI, METRIC_NAMES, RPE, TUM_MONO, TUM_MONO_METRICS, columns_of
+from slamrun.results.catalogue import (
+    ATE,
+    KITTI,
+    METRIC_NAMES,
+    N_POSES,
+    RPE,
+    TUM_MONO,
+    TUM_MONO_METRICS,
+    columns_of,
+)
 from slamrun.results.vocabulary import EvalStatus
 
 NO_PAIRS = "no_pairs"  # a metric the path is too short for (RPE's interval, KITTI's 100 m): among others, only noted
@@ -71,8 +80,8 @@ class Metric:
             res = self.result(gt, traj, ctx)
         except MetricError as exc:
             status = NO_PAIRS if isinstance(exc, metrics.NoPairs) else "failed"
-            return {"status": status, "n_poses": len(traj), "detail": str(exc)}
-        return {"status": "ok", "n_poses": len(traj), **res.to_dict()}
+            return {"status": status, N_POSES: len(traj), "detail": str(exc)}
+        return {"status": "ok", N_POSES: len(traj), **res.to_dict()}
 
     def file_dict(self, res) -> dict:
         """A `file_result` as `slamrun evaluate` prints it: its status, `file_fields`, why not where not ok."""
@@ -98,7 +107,7 @@ METRICS: dict[str, Metric] = {
             lambda r: {k: getattr(r, k) for k in TUM_MONO_METRICS} | {"e_s_sym": r.e_s_sym},
             file_result=tum_mono_file,  # a file that holds a NaN row fails, as the benchmark judges it
             many=tum_mono_many,
-            file_fields=(*TUM_MONO_METRICS, "n_poses"),
+            file_fields=(*TUM_MONO_METRICS, N_POSES),
         ),
         Metric(
             ATE,

@@ -22,6 +22,7 @@ from slamrun.engine.progress import eta, overhead_per_run, run_group, wall_times
 from slamrun.engine.reevaluate import stale
 from slamrun.engine.spec import CampaignSpec
 from slamrun.errors import DatasetError
+from slamrun.results.catalogue import WALL_S
 from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import IMPORTED, is_infra
 
@@ -146,7 +147,7 @@ def last_session_overhead(rows: list[dict], session: dict) -> float:
     if not start or not end:
         return 0.0
     mine = [
-        float(r["wall_s"] or 0.0)
+        float(r[WALL_S] or 0.0)
         for r in rows
         if r.get("started_at") and start <= r["started_at"] <= end and r["status"] in ("done", "failed")
     ]

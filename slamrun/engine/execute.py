@@ -40,6 +40,7 @@ from slamrun.errors import (
     storage_problem,
 )
 from slamrun.methods.base import Method
+from slamrun.results.catalogue import BUSY_THREADS, CPU_WAIT_PCT, FPS, RUNNABLE_THREADS
 from slamrun.results.vocabulary import CONTENDABLE, OWN_WAIT_PER_THREAD_PCT
 
 METHOD_ERROR = "method_error"  # in Launched.extra: (kind, message) of a method that failed before its process started
@@ -185,7 +186,7 @@ def finish_attempt(
         values["eval_settings"] = run.evaluation.text()
         detail = ""
         if traj is None or not len(traj):
-            values["fps"] = None  # frames per second of processing: nothing was processed to a pose
+            values[FPS] = None  # frames per second of processing: nothing was processed to a pose
         else:
             write_tum(RunPaths.trajectory(stage), traj)
             figures, detail = evaluate_trajectory(traj, groundtruth, run_frames_of(run, method, view), run.evaluation)
@@ -269,7 +270,7 @@ def own_wait_pct(method: Method, cpus: list[int] | None, values: dict | None = N
             values["message"] = "; ".join(filter(None, [values.get("message"), note]))
         return measured
     if values is not None:
-        values["busy_threads"] = busy
+        values[BUSY_THREADS] = busy
     return max(OWN_WAIT_PER_THREAD_PCT * max(0, (busy or 0) - n), measured)
 
 
@@ -278,7 +279,7 @@ def tree_excess_pct(values: dict, cpus: int) -> float:
     monitor's: its CPU time and its wait, over its wall time) beyond the `cpus` of its lane cannot all run at once,
     whatever else the machine runs; that excess, in % of the wall time, is its own (its CPUs were busy with its own
     work), never the machine's load."""
-    runnable = values.get("runnable_threads")
+    runnable = values.get(RUNNABLE_THREADS)
     if runnable is None:
         return 0.0
     return max(0.0, 100.0 * (runnable - cpus))
@@ -290,7 +291,7 @@ def _not_contended(
     """A loss while the run's threads waited for a CPU longer than `contention_pct` of its wall time beyond the wait
     it causes itself (`own_pct`: own_wait_pct) is raised as Contended (its attempt removed), to be retried; a loss
     with less wait stays the method's."""
-    wait = values.get("cpu_wait_pct")
+    wait = values.get(CPU_WAIT_PCT)
     if contention_pct is None or values["failure"] not in CONTENDABLE or wait is None:
         return
     if wait - own_pct <= contention_pct:

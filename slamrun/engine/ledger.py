@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from slamrun.errors import LedgerLockedError, LedgerLostError, SlamRunError, StorageError
-from slamrun.results.catalogue import CATALOGUE, METRIC_COLUMNS, RESOURCE_COLUMNS
+from slamrun.results.catalogue import CATALOGUE, CPU_WAIT_PCT, METRIC_COLUMNS, RESOURCE_COLUMNS, WALL_S
 from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import IMPORTED, STATES
 
@@ -469,8 +469,8 @@ class Ledger:
             return []
 
     PROGRESS_COLUMNS = (
-        "key", "method", "dataset", "sequence", "direction", "perturbation", "level", "status", "failure", "wall_s",
-        "started_at", "cpu_wait_pct",
+        "key", "method", "dataset", "sequence", "direction", "perturbation", "level", "status", "failure", WALL_S,
+        "started_at", CPU_WAIT_PCT,
     )  # fmt: skip
 
     def progress_rows(self) -> list[dict]:

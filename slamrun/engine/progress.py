@@ -12,6 +12,7 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 
+from slamrun.results.catalogue import CPU_WAIT_PCT, WALL_S
 from slamrun.results.vocabulary import METHOD_FAILURES, is_infra, played
 
 
@@ -134,8 +135,8 @@ def wall_times(rows: Iterable[dict]) -> dict[RunGroup, list[float]]:
     failures)."""
     walls: dict[RunGroup, list[float]] = defaultdict(list)
     for r in rows:
-        if r["status"] in ("done", "failed") and not is_infra(r["status"], r.get("failure")) and r.get("wall_s"):
-            walls[run_group(r)].append(float(r["wall_s"]))
+        if r["status"] in ("done", "failed") and not is_infra(r["status"], r.get("failure")) and r.get(WALL_S):
+            walls[run_group(r)].append(float(r[WALL_S]))
     return walls
 
 
@@ -203,8 +204,8 @@ class Tracker:
         self.session_runs = 0
         self.unknown = 0
         for i, r in enumerate(rows):
-            row = {k: r.get(k) for k in ("method", "direction", "status", "failure", "wall_s", "started_at")}
-            row["cpu_wait_pct"] = r.get("cpu_wait_pct")
+            row = {k: r.get(k) for k in ("method", "direction", "status", "failure", WALL_S, "started_at")}
+            row[CPU_WAIT_PCT] = r.get(CPU_WAIT_PCT)
             row["direction"] = played(row["direction"], r.get("perturbation"), r.get("level"))
             row["group"], row["key"] = run_group(r), r.get("key", i)
             self.rows[row["key"]] = row
@@ -227,9 +228,9 @@ class Tracker:
         self.groups[(row["method"], row["direction"])][cat] += sign
         if cat == "failed":
             self.failures[row["failure"]] += sign
-        if cat in ("done", "failed") and row.get("cpu_wait_pct") is not None:
+        if cat in ("done", "failed") and row.get(CPU_WAIT_PCT) is not None:
             wait = self.waits[(row["method"], row["direction"])]
-            wait[0] += sign * float(row["cpu_wait_pct"])
+            wait[0] += sign * float(row[CPU_WAIT_PCT])
             wait[1] += sign
         group = row["group"]
         if cat in ("pending", "running", "infra"):
@@ -239,14 +240,14 @@ class Tracker:
                 self.running[row["key"]] = (group, row["started_at"])
             else:
                 self.running.pop(row["key"], None)
-        if cat in ("done", "failed") and row["wall_s"]:
+        if cat in ("done", "failed") and row[WALL_S]:
             if sign > 0:
-                self.walls.add(group, float(row["wall_s"]))
+                self.walls.add(group, float(row[WALL_S]))
             else:
-                self.walls.remove(group, float(row["wall_s"]))
+                self.walls.remove(group, float(row[WALL_S]))
         finished = cat in ("done", "failed", "infra")
         if finished and self.started and row["started_at"] and row["started_at"] >= self.started:
-            self.busy += sign * float(row["wall_s"] or 0.0)
+            self.busy += sign * float(row[WALL_S] or 0.0)
             self.session_runs += sign
 
     def _mean_wait(self, label: str, direction: str) -> float | None:
@@ -272,7 +273,7 @@ class Tracker:
                     "failed": c["failed"],
                     "infra": c["infra"],
                     "success_pct": 100.0 * c["done"] / results if results else None,
-                    "cpu_wait_pct": self._mean_wait(label, direction),
+                    CPU_WAIT_PCT: self._mean_wait(label, direction),
                 }
             )
         ended = self.session.get("runs_to") or self.session.get("ended_at")

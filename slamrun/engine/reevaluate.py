@@ -21,12 +21,12 @@ from slamrun.engine.paths import RunPaths
 from slamrun.engine.run_evaluation import EvalSettings, evaluate_trajectory, run_frames, settle
 from slamrun.engine.spec import CampaignSpec
 from slamrun.errors import MethodFailure, SlamRunError, TrajectoryFormatError
-from slamrun.results.catalogue import METRIC_COLUMNS
+from slamrun.results.catalogue import METRIC_COLUMNS, N_POSES
 from slamrun.results.files import CampaignFiles
 from slamrun.results.vocabulary import DIVERGED, IMPORTED, INFRA_FAILURES, UNDER_MIN_COVERAGE
 
 LOST_BY_LOG = "the method reported it was lost"  # execute._classify's message of a loss it may recover from
-FIGURES = tuple(c for c in METRIC_COLUMNS if c != "n_poses")  # cleared before the new ones are written
+FIGURES = tuple(c for c in METRIC_COLUMNS if c != N_POSES)  # cleared before the new ones are written
 
 
 @dataclass(frozen=True)

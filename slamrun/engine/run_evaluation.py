@@ -17,6 +17,7 @@ from slamrun.core.metrics import RpeInterval
 from slamrun.core.trajectory import Trajectory
 from slamrun.datasets.perturb import BASELINE, Perturbation, kept_frames
 from slamrun.datasets.view import Direction
+from slamrun.results import catalogue as col
 from slamrun.results.vocabulary import (
     DIVERGED,
     DIVERGED_FLAG_REL,
@@ -81,8 +82,8 @@ def evaluate_trajectory(
     """A trajectory's figures and why a metric has none: poses, coverage of the frames given and of the sequence, the
     dataset's metrics (without ground truth: none), the flags (diverged, low_coverage) and the settings used."""
     values: dict = {
-        "n_poses": len(traj),
-        "coverage": metrics.coverage(traj, frames.given),
+        col.N_POSES: len(traj),
+        col.COVERAGE: metrics.coverage(traj, frames.given),
         "coverage_of_sequence": metrics.coverage(traj, frames.sequence),
         "eval_settings": settings.text(),
     }
@@ -94,10 +95,12 @@ def evaluate_trajectory(
             groundtruth, traj, settings.metrics, settings.alignment, settings.rpe, frames.view
         )
         values.update(figures)
-    rel = values.get("ate_rel")
+    rel = values.get(col.ATE_REL)
     flag_at = settings.max_ate_rel or DIVERGED_FLAG_REL
-    values["diverged"] = int(rel > flag_at) if _finite(rel) else None
-    values["low_coverage"] = int(values["coverage"] < settings.coverage_mark) if _finite(values["coverage"]) else None
+    values[col.DIVERGED] = int(rel > flag_at) if _finite(rel) else None
+    values[col.LOW_COVERAGE] = (
+        int(values[col.COVERAGE] < settings.coverage_mark) if _finite(values[col.COVERAGE]) else None
+    )
     return values, detail
 
 
@@ -116,15 +119,15 @@ def settle(values: dict, failure: str | None, message: str | None, detail: str, 
         message = f"its poses give no figure ({message})"
     if failure == "lost?":  # lost, then relocalised: only a failure when the result cannot be evaluated
         failure = None if values.get("eval_status") == EvalStatus.ok.value else "lost"
-    share = values.get("coverage")
+    share = values.get(col.COVERAGE)
     if failure is None and settings.min_coverage and _finite(share) and share < settings.min_coverage:
         failure = "lost"  # it tracked too little of what it was given for its accuracy to be compared
         message = f"poses for {100 * share:.0f} % of its frames, {UNDER_MIN_COVERAGE} {settings.min_coverage:g}"
-    rel = values.get("ate_rel")
+    rel = values.get(col.ATE_REL)
     if failure is None and settings.max_ate_rel and _finite(rel) and rel > settings.max_ate_rel:
         failure = DIVERGED  # its path bears no likeness to the ground truth's: a tracking failure
         message = (
-            f"ATE {values['ate_rmse']:.4g} is {rel:.2f} of the ground truth's spread, over the dataset's max_ate_rel "
+            f"ATE {values[col.ATE_RMSE]:.4g} is {rel:.2f} of the ground truth's spread, over the dataset's max_ate_rel "
             f"{settings.max_ate_rel:g}"
         )
     values.update(failure=failure, message=message)

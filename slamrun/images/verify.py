@@ -33,6 +33,7 @@ from slamrun.errors import MetricError, SlamRunError
 from slamrun.images.build import BuildOptions, build, buildable, last_record
 from slamrun.methods.base import Method
 from slamrun.methods.declare import VerifyScope, declared
+from slamrun.results.catalogue import E_ALIGN
 from slamrun.results.files import CampaignFiles
 
 DEFAULT_RESULTS = Path(".cache") / "verify"  # under the current directory: where the user works
@@ -315,7 +316,7 @@ def _campaign(
         r["frames"] = frames[r["sequence"]]
     ok = [r for r in done if run_ok(r)]
     row.runs, row.runs_ok = len(done), len(ok)
-    rel = [r["e_align"] / extents[r["sequence"]] for r in ok]
+    rel = [r[E_ALIGN] / extents[r["sequence"]] for r in ok]
     if rel:
         row.e_align_rel_median = statistics.median(rel)
         row.e_align_rel_max = max(rel)
@@ -341,7 +342,7 @@ def run_ok(row) -> bool:
     """A verification run that counts: done and evaluated, and no stretch of over MAX_GAP of its sequence's frames
     without a pose (a run lost early that relocalised only at the loop's end is not ok, whatever its e_align; a method
     that writes its keyframes only is)."""
-    done = row["status"] == "done" and row["e_align"] is not None
+    done = row["status"] == "done" and row[E_ALIGN] is not None
     return done and (row.get("gap") or 0) <= MAX_GAP * (row.get("frames") or 0)
 
 
@@ -349,7 +350,7 @@ def _why_not_ok(row) -> str:
     """A run's failure kind, why a run that ended done has no e_align, or its low coverage."""
     if row["failure"]:
         return row["failure"]
-    if row["status"] == "done" and row.get("e_align") is not None and not run_ok(row):
+    if row["status"] == "done" and row.get(E_ALIGN) is not None and not run_ok(row):
         return f"{row['gap']} of {row['frames']} frames in a row without a pose"
     if row["status"] == "done":
         return f"not evaluated ({row['eval_status'] or 'no metrics'})"

@@ -48,24 +48,30 @@ METRIC_NAMES = (TUM_MONO, ATE, RPE, KITTI)
 METRIC_TITLES = {TUM_MONO: "TUM-Mono's errors", ATE: "ATE", RPE: "RPE", KITTI: "KITTI's segment errors"}
 RPE_UNITS = ("frames", "s", "m", "evo-f", "evo-m")  # RPE's interval: the sequence's frames, seconds, metres; evo's
 
+# The columns code names one by one (the others it reaches through the roles and tuples below)
+E_ALIGN, E_S, E_S_SYM, N_POSES = "e_align", "e_s", "e_s_sym", "n_poses"
+ATE_RMSE, ATE_REL, COVERAGE, LOW_COVERAGE, DIVERGED = "ate_rmse", "ate_rel", "coverage", "low_coverage", "diverged"
+WALL_S, FPS, N_FRAMES, CPU_WAIT_PCT = "wall_s", "fps", "n_frames", "cpu_wait_pct"
+RUNNABLE_THREADS, BUSY_THREADS = "runnable_threads", "busy_threads"
+
 # TUM-Mono's ground truth has an arbitrary scale, shared by its two segments: its lengths are in its units
 _GT = "(GT units)"
 METRIC_CATALOGUE = (
     _c("e_t", f"translation drift e_t {_GT}", SUMMARY, STUDY, FIGURE, metric=TUM_MONO),
     _c("e_r", "rotation drift e_r (deg)", SUMMARY, STUDY, FIGURE, metric=TUM_MONO, unit="deg"),
-    _c("e_s", "scale drift e_s (factor)", metric=TUM_MONO),
-    _c("e_s_sym", "scale drift e_s' (factor)", SUMMARY, STUDY, FIGURE, DERIVED, metric=TUM_MONO),
-    _c("e_align", f"alignment error e_align {_GT}", SUMMARY, MAIN, PROGRESS, metric=TUM_MONO),
+    _c(E_S, "scale drift e_s (factor)", metric=TUM_MONO),
+    _c(E_S_SYM, "scale drift e_s' (factor)", SUMMARY, STUDY, FIGURE, DERIVED, metric=TUM_MONO),
+    _c(E_ALIGN, f"alignment error e_align {_GT}", SUMMARY, MAIN, PROGRESS, metric=TUM_MONO),
     _c("e_start", f"start-segment RMSE {_GT}", STUDY, FIGURE, metric=TUM_MONO),
     _c("e_end", f"end-segment RMSE {_GT}", STUDY, FIGURE, metric=TUM_MONO),
     _c("e_rmse", f"RMSE, both segments {_GT}", SUMMARY, STUDY, metric=TUM_MONO),
-    _c("n_poses", type="INTEGER"),
-    _c("ate_rmse", "ATE RMSE (m)", SUMMARY, MAIN, PROGRESS, STATISTICS, FIGURE, metric=ATE, unit="m"),
+    _c(N_POSES, type="INTEGER"),
+    _c(ATE_RMSE, "ATE RMSE (m)", SUMMARY, MAIN, PROGRESS, STATISTICS, FIGURE, metric=ATE, unit="m"),
     _c("ate_mean", "ATE mean (m)", metric=ATE, unit="m"),
     _c("ate_median", "ATE median (m)", metric=ATE, unit="m"),
     _c("ate_max", "ATE max (m)", metric=ATE, unit="m"),
     # RMSE / the ground truth's RMS spread: README, Metrics, Divergence
-    _c("ate_rel", "ATE / path spread", metric=ATE),
+    _c(ATE_REL, "ATE / path spread", metric=ATE),
     _c("rpe_t_rmse", "RPE translation RMSE (m)", SUMMARY, PROGRESS, STATISTICS, FIGURE, metric=RPE, unit="m"),
     _c("rpe_r_rmse", "RPE rotation RMSE (deg)", STATISTICS, metric=RPE, unit="deg"),
     _c("rpe_pairs", "RPE pose pairs", metric=RPE, type="INTEGER"),
@@ -73,28 +79,28 @@ METRIC_CATALOGUE = (
     _c("kitti_t_pct", "KITTI translation error (%)", PROGRESS, STATISTICS, metric=KITTI, unit="%"),
     _c("kitti_r_deg_m", "KITTI rotation error (deg/m)", STATISTICS, metric=KITTI, unit="deg/m"),
     # share of the frames the method was given (its stride over the view) with a pose
-    _c("coverage", "coverage (share of its frames)"),
+    _c(COVERAGE, "coverage (share of its frames)"),
     _c("coverage_of_sequence", "share of the sequence's frames"),  # of the sequence's frames
-    _c("low_coverage", "", FLAG, type="INTEGER"),  # 1: coverage under the dataset's coverage_mark
+    _c(LOW_COVERAGE, "", FLAG, type="INTEGER"),  # 1: coverage under the dataset's coverage_mark
     # 1: ate_rel over the dataset's max_ate_rel, or over DIVERGED_FLAG_REL where it sets none
-    _c("diverged", "", FLAG, type="INTEGER"),
+    _c(DIVERGED, "", FLAG, type="INTEGER"),
 )
 RESOURCE_CATALOGUE = (
-    _c("wall_s", "", RESOURCE, heading="time (s)"),
-    _c("fps", "", RESOURCE, heading="FPS"),
+    _c(WALL_S, "", RESOURCE, heading="time (s)"),
+    _c(FPS, "", RESOURCE, heading="FPS"),
     _c("cpu_mean_pct", "", RESOURCE, heading="CPU mean %"),
     _c("cpu_peak_pct", "", RESOURCE, heading="CPU peak %"),
     _c("ram_peak_mb", "", RESOURCE, heading="RAM peak MB"),
     _c("gpu_mem_peak_mb", "", RESOURCE, heading="GPU mem MB"),
     _c("gpu_util_mean_pct", "", RESOURCE, heading="GPU %"),
-    _c("n_frames", "", RESOURCE, type="INTEGER"),
+    _c(N_FRAMES, "", RESOURCE, type="INTEGER"),
     # the run's threads' time runnable but waiting for a CPU, % of wall time (100 % = one thread)
-    _c("cpu_wait_pct", "waiting for a CPU (% of wall time)", RESOURCE, heading="CPU wait %"),
+    _c(CPU_WAIT_PCT, "waiting for a CPU (% of wall time)", RESOURCE, heading="CPU wait %"),
     # the share of the run's wall time in which some task on the machine waited for a CPU
     _c("host_cpu_pressure_pct", "machine's CPU pressure (%)", RESOURCE, heading="machine CPU pressure %"),
     _c("cpu_wait_own_pct", "", RESOURCE),  # of cpu_wait_pct, the run's own: per declared thread beyond its CPUs
-    _c("runnable_threads", "", RESOURCE, heading="runnable threads"),  # (CPU time + CPU wait) / wall time
-    _c("busy_threads", "", RESOURCE, heading="declared threads"),  # the threads its method declares it keeps busy
+    _c(RUNNABLE_THREADS, "", RESOURCE, heading="runnable threads"),  # (CPU time + CPU wait) / wall time
+    _c(BUSY_THREADS, "", RESOURCE, heading="declared threads"),  # the threads its method declares it keeps busy
 )
 CATALOGUE = {c.name: c for c in (*METRIC_CATALOGUE, *RESOURCE_CATALOGUE)}
 # Table 2's order (the study's: CPU, GPU, memory, time, FPS), then the contention figures

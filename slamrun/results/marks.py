@@ -10,6 +10,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
+from slamrun.results import catalogue as col
 from slamrun.results.vocabulary import DIVERGED_FLAG_REL
 
 LOW_COVERAGE = "†"
@@ -40,7 +41,7 @@ def flags(runs: Iterable[dict]) -> dict[str, Flags]:
             continue
         f = out.setdefault(str(r["method"]), Flags())
         f.done += 1
-        low, div = _one(r.get("low_coverage")), _one(r.get("diverged"))
+        low, div = _one(r.get(col.LOW_COVERAGE)), _one(r.get(col.DIVERGED))
         f.low_coverage += low
         f.diverged += div
         settings = _settings(r.get("eval_settings"))

@@ -19,7 +19,7 @@ from slamrun.core.ticks import log_ticks
 from slamrun.engine.ledger import Ledger
 from slamrun.engine.progress import Tracker, duration
 from slamrun.engine.session import current_session, measurement_conditions
-from slamrun.results.catalogue import FLAG_COLUMNS, MAIN_METRICS, SUMMARY_METRICS
+from slamrun.results.catalogue import COVERAGE, FLAG_COLUMNS, MAIN_METRICS, SUMMARY_METRICS
 from slamrun.results.catalogue import label as column_label
 from slamrun.results.marks import flags, marked, notes
 from slamrun.results.vocabulary import NONE
@@ -33,7 +33,7 @@ FIGURE_SUFFIXES = (".png", ".svg")
 RUN_COLUMNS = ("key", "method", "dataset", "sequence", "direction", "trial", "attempts", "started_at", "ended_at")
 # a metric's name on the page, with its unit, as the report names it (TUM-Mono's lengths are in its ground truth's
 # units: the benchmark's ground truth has no metric scale)
-LABELS = {"coverage": "coverage (median, share of frames)"} | {m: column_label(m) for m in SUMMARY_METRICS}
+LABELS = {COVERAGE: "coverage (median, share of frames)"} | {m: column_label(m) for m in SUMMARY_METRICS}
 
 
 @dataclass(frozen=True)
@@ -139,7 +139,7 @@ def _failed(rows: list[dict]) -> dict:
 
 
 MEDIAN_COLUMNS = (
-    "method", "dataset", "sequence", "direction", "perturbation", "coverage", *SUMMARY_METRICS, *FLAG_COLUMNS,
+    "method", "dataset", "sequence", "direction", "perturbation", COVERAGE, *SUMMARY_METRICS, *FLAG_COLUMNS,
     "eval_settings",
 )  # fmt: skip
 
@@ -162,7 +162,7 @@ def medians(done: list[dict]) -> dict:
         else:
             perturbed[dataset] = perturbed.get(dataset, 0) + 1
     for dataset, rows in sorted(by_dataset.items()):
-        metrics = [m for m in ("coverage", *SUMMARY_METRICS) if any(_finite(r.get(m)) for r in rows)]
+        metrics = [m for m in (COVERAGE, *SUMMARY_METRICS) if any(_finite(r.get(m)) for r in rows)]
         main = next((m for m in MAIN_METRICS if m in metrics), None)
         found = flags({**r, "done": True} for r in rows)
         methods, values = [], {}
