@@ -20,6 +20,7 @@ from slamrun.engine.campaign import run_campaign
 from slamrun.engine.dryrun import dry_run
 from slamrun.engine.session import read_figures
 from slamrun.engine.spec_file import load_spec
+from slamrun.results.vocabulary import level_text
 
 AXIS = [{"kind": "gaussian_noise", "sigma": [4, 40]}, {"kind": "resolution", "scale": [0.5, 0.2]}]
 
@@ -172,3 +173,127 @@ def test_the_live_pages_medians_are_the_baselines_and_the_perturbed_runs_are_sai
         assert len(live["values"][name]) <= len(mine)
     perturbed = int((df.status == "done").sum() - len(base))
     assert any(f"{perturbed} done run(s) on perturbed views" in n for n in live["notes"]), live["notes"]
+
+
+# ------------------------------------------------------------------ paired against each method's own baseline
+
+
+def _room(method: str, sequence: str, kind: str, level: float | None, values: list[float | None]) -> list[dict]:
+    """One run per trial: a value, or None for the method's failure (lost)."""
+    row = {"method": method, "perturbation": kind, "level": level, "sequence": sequence, "direction": "forward"}
+    out = []
+    for trial, v in enumerate(values):
+        done = v is not None
+        out.append(
+            row
+            | {
+                "trial": trial,
+                "status": "done" if done else "failed",
+                "failure": None if done else "lost",
+                "eval_status": "ok" if done else None,
+                "ate_rmse": v,
+            }
+        )
+    return out
+
+
+def _one_room_lost() -> pd.DataFrame:
+    """`fragile` keeps its accuracy on room_a under noise and is lost on room_b; `steady` gets twice as bad on both."""
+    rows = []
+    for m in ("fragile", "steady"):
+        for seq in ("room_a", "room_b"):
+            rows += _room(m, seq, "none", None, [0.10, 0.12])
+    rows += _room("fragile", "room_a", "gaussian_noise", 10.0, [0.11, 0.12])
+    rows += _room("fragile", "room_b", "gaussian_noise", 10.0, [None, None])
+    for seq in ("room_a", "room_b"):
+        rows += _room("steady", seq, "gaussian_noise", 10.0, [0.20, 0.24])
+    # an infrastructure failure is no result: left out of the pairs, as of the success rate
+    rows.append(rows[-1] | {"trial": 2, "status": "failed", "failure": "infra", "eval_status": None, "ate_rmse": None})
+    return pd.DataFrame(rows)
+
+
+def test_a_method_lost_on_one_room_is_counted_in_its_paired_figures_not_hidden_by_its_survivors():
+    """The survivors' median made `fragile` look unharmed (0.115 against its baseline's 0.11) where it was lost on
+    half its runs; paired with its own baseline, run by run, its failures count at infinity."""
+    from slamrun.analysis.robustness import AREA_BOUND, area, paired_table, pairs, spread
+
+    df = _one_room_lost()
+    survivors = spread(df, "gaussian_noise", "ate_rmse").set_index(["method", "level"])["median"]
+    assert survivors["fragile", "10"] == pytest.approx(0.115)  # what the absolute figure shows
+
+    p = pairs(df, "gaussian_noise", "ate_rmse")
+    fragile = p[p.method == "fragile"].sort_values(["sequence", "trial"])
+    assert list(fragile.ratio) == pytest.approx([1.1, 1.0, np.inf, np.inf])
+    assert len(p[p.method == "steady"]) == 4  # the infra run made no pair
+
+    table = paired_table(df, "ate_rmse").set_index(["perturbation", "level", "method"])
+    f, s = table.loc["gaussian_noise", "10", "fragile"], table.loc["gaussian_noise", "10", "steady"]
+    assert (f.pairs, f.failed, s.pairs, s.failed) == (4, 2, 4, 0)
+    assert f["median ratio"] == np.inf  # half its pairs failed: its median is a failure
+    assert s["median ratio"] == pytest.approx(2.0)
+    # the area under the cumulative curve of ratios 1..AREA_BOUND (log), failures never reached, over all pairs
+    one_point_one = 1 - np.log(1.1) / np.log(AREA_BOUND)
+    assert f.area == pytest.approx((one_point_one + 1.0 + 0 + 0) / 4)
+    assert s.area == pytest.approx(1 - np.log(2.0) / np.log(AREA_BOUND))
+    assert area(np.array([0.5, 1.0, AREA_BOUND, 20.0, np.inf])) == pytest.approx(2 / 5)
+
+
+def test_a_pair_needs_its_baseline_and_says_so():
+    """A perturbed run whose baseline run failed has nothing to be compared with: no pair, counted apart."""
+    from slamrun.analysis.robustness import paired_table, pairs
+
+    rows = _room("m", "room_a", "none", None, [None, 0.1]) + _room("m", "room_a", "gaussian_noise", 4.0, [0.1, 0.3])
+    df = pd.DataFrame(rows)
+    p = pairs(df, "gaussian_noise", "ate_rmse")
+    assert np.isnan(p.ratio.iloc[0]) and p.ratio.iloc[1] == pytest.approx(3.0)
+    row = paired_table(df, "ate_rmse").iloc[0]
+    assert (row.pairs, row["without baseline"]) == (1, 1)
+
+
+def test_the_summary_gives_each_kinds_area_and_breakdown_per_method():
+    from slamrun.analysis.robustness import summary_table
+
+    df = _one_room_lost()
+    summary = summary_table(df, "ate_rmse").set_index("method")
+    assert list(summary.columns) == ["gaussian_noise area", "gaussian_noise breakdown"]
+    assert summary.loc["fragile", "gaussian_noise breakdown"] == "never"  # 50 % success is not under 50 %
+    assert summary.loc["steady", "gaussian_noise area"] > summary.loc["fragile", "gaussian_noise area"]
+
+
+def _without_baseline_failed(df: pd.DataFrame, runs: pd.DataFrame) -> int:
+    """Of `runs`, the method's failures whose baseline run has no figure (no pair: not among the pairs' failures)."""
+    base = df[(df.perturbation == "none") & (df.status == "done") & df.e_align.notna()]
+    keys = set(zip(base.method, base.sequence, base.direction, base.trial, strict=True))
+    failed = runs[(runs.status == "failed") & ~runs.failure.isin(["infra", "contended"])]
+    return sum(k not in keys for k in zip(failed.method, failed.sequence, failed.direction, failed.trial, strict=True))
+
+
+def test_the_report_pairs_each_run_with_its_baseline_and_writes_robustness_csv(campaign):
+    """The real campaign: every perturbed run with a result is in its level's pairs or counted without a baseline,
+    results/robustness.csv holds each dataset's levels, and the curves figure is drawn per kind."""
+    _, results = campaign
+    index = write_report(results)
+    df = pd.read_csv(results / "results.csv")
+    robust = pd.read_csv(results / "robustness.csv", keep_default_na=False, na_values=[""])
+    perturbed = robust[robust.level != "none"]
+    assert set(perturbed.perturbation) == {"gaussian_noise", "resolution"}
+    assert set(robust.metric) == {"e_align"} and set(robust.dataset) == {"synth"}
+    for _, row in perturbed.iterrows():
+        runs = df[(df.perturbation == row.perturbation) & (df.method == row.method)]
+        runs = runs[runs.level.map(level_text) == row.level]
+        figure = (runs.status == "done") & runs.e_align.notna()
+        own_failure = (runs.status == "failed") & ~runs.failure.isin(["infra", "contended"])
+        assert row["pairs"] + row["without baseline"] == (figure | own_failure).sum()
+        assert row["failed"] == own_failure.sum() - _without_baseline_failed(df, runs)
+    tables = index.parent / "tables"
+    summary = pd.read_csv(tables / "robustness_summary.csv")
+    assert list(summary.columns) == [
+        "method",
+        "gaussian_noise area",
+        "gaussian_noise breakdown",
+        "resolution area",
+        "resolution breakdown",
+    ]
+    assert summary[["gaussian_noise area", "resolution area"]].stack().between(0, 1).all()
+    for kind in ("gaussian_noise", "resolution"):
+        assert (index.parent / "figures" / f"robustness_curves_{kind}.png").stat().st_size > 10_000

@@ -381,31 +381,38 @@ def robustness(
     return save(robustness_figure(df, kind, metrics, label, colours), folder, f"robustness_{kind}")
 
 
+ROBUST_FONT = 10  # points: at the report's width (1180 px) a robustness figure is shown about 1:1, 15 px text
+
+
 def robustness_figure(
     df: pd.DataFrame, kind: str, metrics: list[str], label: str = "", colours: dict[str, str] | None = None
 ) -> plt.Figure:
-    """Against the level of `kind` (baseline first, mildest to most severe), one panel for the success rate and
-    one per metric: per method the median of its evaluated runs, with the band between the first and third
+    """Against the level of `kind` (baseline first, mildest to most severe): the success rate; paired against each
+    method's own baseline on its main metric, the area and the median ratio (failures at infinity, drawn on the
+    panel's top edge); then per metric the median of its evaluated runs, with the band between the first and third
     quartiles (the spread over trials, sequences and directions); a level where a method has no evaluated run has
     no point (its success rate says why)."""
-    from slamrun.analysis.robustness import spread, success_rates
+    from slamrun.analysis.load import main_metric
+    from slamrun.analysis.robustness import paired_table, spread, success_rates
     from slamrun.datasets.perturb import KINDS
 
     rates = success_rates(df)
     rates = rates[rates.perturbation == kind]
     names = list(dict.fromkeys(rates.level)) or ["none"]
-    panels = ["success", *metrics]
-    cols = min(len(panels), 4)
+    metric = main_metric(df)
+    paired = paired_table(df, metric) if metric else pd.DataFrame(columns=["perturbation"])
+    paired = paired[paired.perturbation == kind]
+    panels = ["success", *(["area", "ratio"] if not paired.empty else []), *metrics]
+    cols = min(len(panels), 3)
     rows = math.ceil(len(panels) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.3 * cols + 1.6, 2.7 * rows), layout="constrained", squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.0 * cols + 1.8, 2.6 * rows), layout="constrained", squeeze=False)
     methods = sorted(df.method.unique())
     colors = {**method_colours(methods), **(colours or {})}
     x = np.arange(len(names))
     for ax, panel in zip(axes.flat, panels, strict=False):
         for m in methods:
-            if panel == "success":
-                r = rates[rates.method == m]
-                ax.plot([names.index(v) for v in r.level], r["success %"], "o-", color=colors[m], lw=1.6, ms=4, label=m)
+            if panel in ("success", "area", "ratio"):
+                _robustness_line(ax, panel, rates[rates.method == m], paired[paired.method == m], names, colors[m], m)
                 continue
             s = spread(df, kind, panel)
             s = s[s.method == m]
@@ -415,23 +422,122 @@ def robustness_figure(
             ax.plot(s.position, s["median"], "o-", color=colors[m], lw=1.6, ms=4)
         if panel == "success":
             ax.set_ylim(-3, 103)
-            ax.set_ylabel("success rate (%)")
+            ax.set_ylabel("success rate (%)", fontsize=ROBUST_FONT)
             ax.axhline(50, color="0.5", lw=0.8, ls=":")
+        elif panel == "area":
+            ax.set_ylim(-0.03, 1.03)
+            ax.set_ylabel("area, paired (0-1)", fontsize=ROBUST_FONT)
+        elif panel == "ratio":
+            _ratio_axis(ax, paired["median ratio"].to_numpy(float))
         else:
             values = spread(df, kind, panel)[["q1", "q3"]].to_numpy(float).ravel()
             if use_log_scale(values):
                 ax.set_yscale("log")
-            ax.set_ylabel(LABELS.get(panel, panel), fontsize=8)
-        ax.set_xticks(x, names, fontsize=8)
+            ax.set_ylabel(LABELS.get(panel, panel), fontsize=ROBUST_FONT)
+        ax.set_xticks(x, names, fontsize=ROBUST_FONT)
+        ax.tick_params(axis="y", labelsize=ROBUST_FONT)
         ax.set_xlim(-0.3, len(names) - 0.7)
         ax.grid(True, alpha=0.3)
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     k = KINDS[kind]
-    fig.supxlabel(f"{kind.replace('_', ' ')}: {k.parameter} ({k.unit}), mildest to most severe", fontsize=9)
-    title = f"robustness to {kind.replace('_', ' ')}: median and quartiles per level"
-    fig.suptitle(_labelled(label, title), fontsize=9)
+    fig.supxlabel(f"{kind.replace('_', ' ')}: {k.parameter} ({k.unit}), mildest to most severe", fontsize=ROBUST_FONT)
+    title = f"robustness to {kind.replace('_', ' ')}"
+    fig.suptitle(_labelled(label, title), fontsize=ROBUST_FONT + 1)
     handles, labels = axes.flat[0].get_legend_handles_labels()
     if handles:
-        fig.legend(handles, labels, fontsize=8, loc="outside right upper", frameon=False)
+        fig.legend(handles, labels, fontsize=ROBUST_FONT, loc="outside right upper", frameon=False)
+    return fig
+
+
+def _robustness_line(ax, panel: str, rates: pd.DataFrame, paired: pd.DataFrame, names: list[str], colour, m) -> None:
+    """One method's line on the success, area or median-ratio panel (the baseline is ratio 1, area 1 by definition:
+    the paired panels start at the first perturbed level)."""
+    if panel == "success":
+        ax.plot([names.index(v) for v in rates.level], rates["success %"], "o-", color=colour, lw=1.6, ms=4, label=m)
+        return
+    if paired.empty:
+        return
+    at = [names.index(v) for v in paired.level]
+    if panel == "area":
+        ax.plot(at, paired["area"], "o-", color=colour, lw=1.6, ms=4)
+        return
+    r = paired["median ratio"].to_numpy(float)
+    ax.plot(at, np.where(np.isinf(r), np.nan, r), "o-", color=colour, lw=1.6, ms=4)
+    failed = [a for a, v in zip(at, r, strict=True) if np.isinf(v)]
+    if failed:  # placed on the top edge once the axis is set (_ratio_axis)
+        ax.plot(failed, [np.nan] * len(failed), "x", color=colour, ms=7, mew=2, gid="failed")
+
+
+def _ratio_axis(ax, ratios: np.ndarray) -> None:
+    """The median-ratio panel's log axis from the values drawn, and failures (inf) on its top edge."""
+    finite = ratios[np.isfinite(ratios) & (ratios > 0)]
+    lo = min(0.5, float(finite.min()) * 0.9) if finite.size else 0.5  # 0.5 to 5 at least: four labelled ticks
+    hi = max(5.0, float(finite.max()) * 1.3) if finite.size else 5.0
+    ax.set_yscale("log")
+    ax.set_ylim(lo, hi)
+    readable_log_ticks(ax.yaxis, lo, hi)
+    ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
+    for line in ax.get_lines():
+        if line.get_gid() == "failed":
+            line.set_ydata([hi] * len(line.get_xdata()))
+            line.set_clip_on(False)
+    ax.set_ylabel("median ratio to baseline\n(x on top: failed)", fontsize=ROBUST_FONT)
+
+
+def robustness_curves(
+    df: pd.DataFrame, kind: str, folder: Path, label: str = "", colours: dict[str, str] | None = None
+) -> Path | None:
+    """The cumulative curves of one kind's paired ratios (robustness_curves_figure), saved; None without pairs."""
+    fig = robustness_curves_figure(df, kind, label, colours)
+    return None if fig is None else save(fig, folder, f"robustness_curves_{kind}")
+
+
+def robustness_curves_figure(
+    df: pd.DataFrame, kind: str, label: str = "", colours: dict[str, str] | None = None
+) -> plt.Figure | None:
+    """Per level of `kind`, each method's share of pairs whose ratio to its baseline is at most x, for x from 1 to
+    AREA_BOUND on a log axis: failures are never counted, so a curve ends under 1 by its failures; its area over the
+    axis' width is the paired table's area."""
+    from slamrun.analysis.load import main_metric
+    from slamrun.analysis.robustness import AREA_BOUND, pairs, series
+    from slamrun.datasets.perturb import KINDS
+
+    metric = main_metric(df)
+    if metric is None:
+        return None
+    p = pairs(df, kind, metric).dropna(subset=["ratio"])
+    levels = [name for name, _ in series(df, kind)[1:] if (p.level == name).any()]
+    if not levels:
+        return None
+    cols = min(len(levels), 3)
+    rows = math.ceil(len(levels) / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.0 * cols + 1.8, 2.6 * rows), layout="constrained", squeeze=False)
+    methods = sorted(df.method.unique())
+    colors = {**method_colours(methods), **(colours or {})}
+    grid = np.geomspace(1.0, AREA_BOUND, 200)
+    for ax, name in zip(axes.flat, levels, strict=False):
+        at = p[p.level == name]
+        for m in methods:
+            r = at.loc[at.method == m, "ratio"].to_numpy(float)
+            if r.size == 0:
+                continue
+            share = (r[None, :] <= grid[:, None]).mean(axis=1)
+            ax.step(grid, share, where="post", color=colors[m], lw=1.6, label=m)
+        ax.set_xscale("log")
+        ax.set_xlim(1.0, AREA_BOUND)
+        ax.set_ylim(-0.03, 1.03)
+        readable_log_ticks(ax.xaxis, 1.0, AREA_BOUND)
+        ax.set_title(f"{KINDS[kind].parameter} {name}", fontsize=ROBUST_FONT)
+        ax.tick_params(labelsize=ROBUST_FONT)
+        ax.grid(True, alpha=0.3)
+    for ax in axes[:, 0]:
+        ax.set_ylabel("share of pairs", fontsize=ROBUST_FONT)
+    for ax in list(axes.flat)[len(levels) :]:
+        ax.set_visible(False)
+    fig.supxlabel(f"x: {LABELS.get(metric, metric)} over the method's own baseline's (log)", fontsize=ROBUST_FONT)
+    fig.suptitle(_labelled(label, f"robustness to {kind.replace('_', ' ')}: pairs within x"), fontsize=ROBUST_FONT + 1)
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, fontsize=ROBUST_FONT, loc="outside right upper", frameon=False)
     return fig

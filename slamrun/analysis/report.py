@@ -22,13 +22,17 @@ from slamrun.analysis.load import NO_DATASET, by_dataset, counted, evaluated, lo
 from slamrun.analysis.paths import sequence_paths
 from slamrun.analysis.provenance import provenance
 from slamrun.analysis.robustness import (
+    AREA_BOUND,
     BREAKDOWN_PCT,
     baseline,
     breakdown_table,
     kinds,
     level_statistics,
+    long_table,
+    paired_table,
     perturbed,
     success_rates,
+    summary_table,
 )
 from slamrun.analysis.stats import screen, study_statistics
 from slamrun.analysis.summary import method_summary, pooled_summary, ranked_by, sequence_ranks
@@ -48,6 +52,7 @@ from slamrun.results.catalogue import (
     columns_of,
     metric_of,
 )
+from slamrun.results.files import CampaignFiles
 from slamrun.results.marks import marked
 from slamrun.results.vocabulary import METHOD_FAILURES, UNDER_MIN_COVERAGE
 
@@ -146,6 +151,9 @@ def _write_report(
             body = dataset_report(groups[name], out / "datasets" / folder, out, name, **options)
             body += robustness_report(everything[name], out / "datasets" / folder, out, name, **stats_options)
             sections.append(Section(f"Dataset {name}", "", body))
+    robust = robustness_csv(everything)
+    if not robust.empty:
+        robust.to_csv(CampaignFiles(results).robustness_csv, index=False)
     views = any(page.has_view(s.html) for s in _walk(sections))
     if views:
         interactive.write_library(out)
@@ -309,9 +317,13 @@ def dataset_report(
 ROBUSTNESS_INTRO = (
     "Each sequence was also played with its frames made worse (README, Robustness), every level a prepared view of "
     "its own, forward and backward as the baseline; the baseline (level none) is the ordinary view, the runs every "
-    "other table of this report is made of. Success rates are over the method's results (infrastructure failures "
-    "and unfinished runs left out); a level's accuracy is of its evaluated runs only, so read it beside its success "
-    "rate: a method that fails the hard runs keeps a good median."
+    "other table of this report is made of. Each run on a perturbed view is paired with the same method's run of "
+    "the same sequence, direction and trial on the baseline: the ratio of their figures says how much worse the "
+    "method got, a failure of its own counts as a ratio at infinity (never dropped), and the area under the "
+    f"cumulative curve of the ratios from 1 to {AREA_BOUND:g} (log scale) sums a level up: 1 unharmed, 0 failed or "
+    f"{AREA_BOUND:g} times worse on every pair. Success rates are over the method's results (infrastructure "
+    "failures and unfinished runs left out). The figures' medians and quartiles are of evaluated runs only: read them "
+    "beside the success rate and the paired figures, for a method that fails the hard runs keeps a good median."
 )
 
 
@@ -335,6 +347,9 @@ def robustness_report(
     metrics = metrics_for(df)
     rates = success_rates(df)
     parts = [Section("Robustness", f"<p>{page.esc(ROBUSTNESS_INTRO)}</p>")]
+    metric = main_metric(df)
+    if metric is not None:
+        parts += _paired_sections(df, metric, tab_dir, root, where)
     title = f"Level at which the success rate falls under {BREAKDOWN_PCT:g} %"
     caption = (
         "Per method and perturbation, the mildest level whose success rate is under "
@@ -352,8 +367,20 @@ def robustness_report(
         html = page.table(contended, tab_dir, root, "robustness_contended_runs", title + where, CONTENDED_CAPTION)
         parts.append(Section(title, html))
     figs = [figures.robustness(df, k, metrics, fig_dir, label=dataset, colours=colours) for k in kinds(df)]
-    caption = "Median (line) and first to third quartile (band) of the evaluated runs per level, and the success rate."
-    parts.append(Section("Robustness figures", "".join(page.figure(f, root, caption) for f in figs)))
+    caption = (
+        "Per level: the success rate; paired against each method's own baseline, the area and the median ratio "
+        "(x on the top edge: half or more of the pairs failed); then the median (line) and first to third quartile "
+        "(band) of the evaluated runs alone."
+    )
+    html = "".join(page.figure(f, root, caption) for f in figs)
+    curves = [figures.robustness_curves(df, k, fig_dir, label=dataset, colours=colours) for k in kinds(df)]
+    caption = (
+        f"Per level, each method's share of pairs whose figure is at most x times its baseline's, x from 1 to "
+        f"{AREA_BOUND:g}: a failure is never reached, so the curve ends under 1 by the share failed; the area under "
+        "the curve over the axis' width is the paired table's area."
+    )
+    html += "".join(page.figure(f, root, caption) for f in curves if f is not None)
+    parts.append(Section("Robustness figures", html))
     table, full = level_statistics(df, metrics, level=level, adjust=adjust, alpha=alpha)
     if not table.empty:
         out.mkdir(parents=True, exist_ok=True)
@@ -369,6 +396,40 @@ def robustness_report(
         none = "<p>No level has two methods with evaluated runs: no group comparison.</p>"
         parts.append(Section("Statistics within each perturbation level", none))
     return [Section("Robustness", parts[0].html, parts[1:])]
+
+
+def _paired_sections(df: pd.DataFrame, metric: str, tab_dir: Path, root: Path, where: str) -> list[Section]:
+    """The summary across kinds (area and breakdown per kind and method) and the paired figures per level."""
+    name = LABELS.get(metric, metric)
+    title = "Robustness summary: area and breakdown level per perturbation"
+    caption = (
+        f"Per method and perturbation kind: the area of its paired {name} ratios (the mean of its levels' areas; "
+        f"1 unharmed, 0 failed or {AREA_BOUND:g} times worse on every pair) and the mildest level whose success rate "
+        f"is under {BREAKDOWN_PCT:g} % (never: at no level tested; baseline: already on the ordinary view)."
+    )
+    html = page.table(summary_table(df, metric).round(3), tab_dir, root, "robustness_summary", title + where, caption)
+    sections = [Section(title, html)]
+    title = f"Paired against each method's own baseline ({name})"
+    caption = (
+        "Per perturbation level and method: pairs (a run on the perturbed view with a result, and its baseline run "
+        "of the same sequence, direction and trial with a figure), how many the method failed (ratio at infinity), "
+        "runs whose baseline run has no figure (no pair), the median ratio of the perturbed figure to the baseline's "
+        "over all pairs (failed where half or more failed: failures count at infinity) and the area."
+    )
+    shown = paired_table(df, metric).round({"median ratio": 3, "area": 3})
+    shown["median ratio"] = [("failed" if v == float("inf") else v) for v in shown["median ratio"]]
+    sections.append(Section(title, page.table(shown, tab_dir, root, "robustness_paired", title + where, caption)))
+    return sections
+
+
+def robustness_csv(everything: dict[str, pd.DataFrame]) -> pd.DataFrame:
+    """results/robustness.csv: every dataset's long robustness table (long_table), on its main metric."""
+    parts = []
+    for name, part in everything.items():
+        metric = main_metric(part)
+        if perturbed(part) and metric is not None:
+            parts.append(long_table(part, metric, name if name != NO_DATASET else ""))
+    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
 
 
 def _resources(

@@ -1,6 +1,12 @@
 """Robustness: how each method's success rate and accuracy change with a perturbation's level (a campaign with
-`perturbations:`). Pure tables from a results table; the figure is in slamrun.analysis.figures. Within one
-dataset, as every other table: the baseline (the ordinary view) is each kind's first level."""
+`perturbations:`). Pure tables from a results table; the figures are in slamrun.analysis.figures. Within one
+dataset, as every other table: the baseline (the ordinary view) is each kind's first level.
+
+Paired against each method's own baseline: every perturbed run beside the same method's run of the same sequence,
+direction and trial on the ordinary view; its figure over the baseline's is the pair's ratio, a failure of the
+method's own is a ratio at infinity (counted, never dropped), and the area under the cumulative curve of the ratios
+from 1 to AREA_BOUND (log scale) sums a level up in [0, 1], as ETH3D's SLAM benchmark ranks methods by the area
+under their cumulative error curves."""
 
 from __future__ import annotations
 
@@ -16,6 +22,8 @@ from slamrun.results.summary import tally
 from slamrun.results.vocabulary import NONE, level_text
 
 BREAKDOWN_PCT = 50.0  # the success rate under which a method is said to break down at a level
+AREA_BOUND = 10.0  # the area is over paired ratios 1..AREA_BOUND: 1 unharmed (or better), 0 failed or 10x worse
+PAIR_KEY = ("method", "sequence", "direction", "trial")  # what a perturbed run shares with its baseline run
 
 
 def baseline(df: pd.DataFrame) -> pd.DataFrame:
@@ -141,3 +149,98 @@ def level_statistics(
             tables.append(table)
             full[f"{kind}-{name}"] = st.to_json()
     return (pd.concat(tables, ignore_index=True) if tables else pd.DataFrame()), full
+
+
+def run_errors(df: pd.DataFrame, metric: str) -> pd.Series:
+    """Per run: its `metric`, inf for a failure of the method's own (it ran and failed), NaN for no result
+    (an infrastructure failure, an unfinished run, a done run without this figure)."""
+    from slamrun.results.vocabulary import INFRA_FAILURES
+
+    value = pd.to_numeric(df[metric], errors="coerce") if metric in df.columns else pd.Series(np.nan, df.index)
+    value = value.where(np.isfinite(value))
+    failed = (df["status"] == "failed") & ~df["failure"].isin(INFRA_FAILURES)
+    return value.where(df["status"] == "done", np.where(failed, np.inf, np.nan))
+
+
+def pairs(df: pd.DataFrame, kind: str, metric: str) -> pd.DataFrame:
+    """Each run on a view of `kind` with a result, beside its baseline run (PAIR_KEY): level (text), the key,
+    baseline, value (inf: the method failed) and ratio; baseline and ratio NaN where the baseline run has no figure
+    (it failed, or is missing): such a run makes no pair."""
+    cols = ["level", *PAIR_KEY, "baseline", "value", "ratio"]
+    base = baseline(df)
+    base = base.assign(baseline=run_errors(base, metric))
+    base = base[np.isfinite(base["baseline"])].drop_duplicates(list(PAIR_KEY))[[*PAIR_KEY, "baseline"]]
+    part = df[df["perturbation"] == kind]
+    part = part.assign(value=run_errors(part, metric), level=part["level"].astype(float).map(level_text))
+    part = part[part["value"].notna()]
+    if part.empty:
+        return pd.DataFrame(columns=cols)
+    joined = part[["level", *PAIR_KEY, "value"]].merge(base, on=list(PAIR_KEY), how="left")
+    joined["ratio"] = joined["value"] / joined["baseline"]
+    return joined[cols]
+
+
+def area(ratios: np.ndarray, bound: float = AREA_BOUND) -> float:
+    """The area under the cumulative curve of paired ratios from 1 to `bound` on a log axis, over its width: the
+    mean over pairs of the share of [1, bound] in which the pair is counted (1 for a ratio at most 1, 0 for one at
+    `bound` or beyond, a failure's inf included). NaN for no pairs."""
+    r = np.asarray(ratios, float)
+    if r.size == 0:
+        return math.nan
+    share = 1.0 - np.log(np.maximum(r, 1.0)) / math.log(bound)
+    return float(np.clip(share, 0.0, 1.0).mean())
+
+
+PAIRED_COLUMNS = ["perturbation", "level", "method", "pairs", "failed", "without baseline", "median ratio", "area"]
+
+
+def paired_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """Per kind, level (mildest first) and method: the pairs, how many the method failed, the runs without a
+    baseline figure, the median ratio (failures at infinity: inf when half or more failed) and the area."""
+    rows = []
+    for kind in kinds(df):
+        p = pairs(df, kind, metric)
+        for name, _ in series(df, kind)[1:]:
+            at = p[p["level"] == name]
+            for method, runs in at.groupby("method", sort=True):
+                r = runs["ratio"].to_numpy(float)
+                ok = r[~np.isnan(r)]
+                rows.append(
+                    {
+                        "perturbation": kind,
+                        "level": name,
+                        "method": method,
+                        "pairs": len(ok),
+                        "failed": int(np.isinf(ok).sum()),
+                        "without baseline": int(np.isnan(r).sum()),
+                        "median ratio": float(np.median(ok)) if len(ok) else math.nan,
+                        "area": area(ok),
+                    }
+                )
+    return pd.DataFrame(rows, columns=PAIRED_COLUMNS)
+
+
+def summary_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """Per method, for each kind: its area (the mean of its levels' areas, each level weighing alike) and the
+    level at which it breaks down (breakdown_table)."""
+    paired, rates = paired_table(df, metric), success_rates(df)
+    broken = breakdown_table(rates).set_index("method") if not rates.empty else pd.DataFrame()
+    out: dict[str, dict] = {}
+    for kind in kinds(df):
+        areas = paired[paired["perturbation"] == kind].groupby("method")["area"].mean()
+        for method in sorted(set(df["method"])):
+            row = out.setdefault(method, {"method": method})
+            row[f"{kind} area"] = float(areas.get(method, math.nan))
+            row[f"{kind} breakdown"] = broken[_column(kind)].get(method, "") if _column(kind) in broken else ""
+    return pd.DataFrame(list(out.values()))
+
+
+def long_table(df: pd.DataFrame, metric: str, dataset: str = "") -> pd.DataFrame:
+    """One row per kind, level and method of one dataset (the baseline as level `none` of each kind): its success
+    rate with its counts, and its paired figures against the baseline on `metric`: results/robustness.csv."""
+    rates = success_rates(df)
+    paired = paired_table(df, metric)
+    out = rates.merge(paired, on=["perturbation", "level", "method"], how="left")
+    out.insert(0, "dataset", dataset)
+    out["metric"] = metric
+    return out

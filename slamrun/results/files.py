@@ -9,6 +9,7 @@ from pathlib import Path
 LEDGER = "ledger.sqlite"
 RESULTS_CSV = "results.csv"
 RESULTS_PARQUET = "results.parquet"
+ROBUSTNESS_CSV = "robustness.csv"  # the report's robustness figures of every dataset, one row a level
 SPEC = "spec.resolved.yaml"  # the spec as run
 LOCK = "runner.lock"
 MARKER = ".slamrun-results"  # says the folder is slamrun's
@@ -37,6 +38,10 @@ class CampaignFiles:
     @property
     def results_parquet(self) -> Path:
         return Path(self.root) / RESULTS_PARQUET
+
+    @property
+    def robustness_csv(self) -> Path:
+        return Path(self.root) / ROBUSTNESS_CSV
 
     @property
     def spec(self) -> Path:
