@@ -227,3 +227,70 @@ def test_the_robustness_config_plans_its_120_runs():
     assert {p.kind for p in spec.perturbations} == {"gaussian_noise", "resolution"}
     d = dry_run(spec)
     assert d.total == 120 and d.perturbed_runs == 96
+
+
+# ------------------------------------------------------------------ perturbations that come and go (schedules)
+
+
+def test_a_burst_schedule_perturbs_exactly_its_frames_forward_and_backward(room, tmp_path):
+    """Bursts of 3 frames every 10 (frames 7-9, 17-19, 27-29 of the sequence): those frames are the static view's,
+    every other frame the baseline's, and the backward view holds the same frames in reverse."""
+    burst = Perturbation("gaussian_noise", 20.0, schedule="burst:3/10")
+    static = prepare(room, FORWARD, Profile.native, tmp_path, perturbation=Perturbation("gaussian_noise", 20.0))
+    base = prepare(room, FORWARD, Profile.native, tmp_path)
+    fw = prepare(room, FORWARD, Profile.native, tmp_path, perturbation=burst)
+    bw = prepare(room, BACKWARD, Profile.native, tmp_path, perturbation=burst)
+    n = fw.n_frames
+    assert "gaussian_noise-20-burst3of10" in fw.root.name and n == 31
+    hit = [i for i in range(n) if not np.array_equal(_frame(fw, i), _frame(base, i))]
+    assert hit == [7, 8, 9, 17, 18, 19, 27, 28, 29]
+    for i in range(n):
+        expected = _frame(static, i) if i in hit else _frame(base, i)
+        assert np.array_equal(_frame(fw, i), expected)
+        assert np.array_equal(_frame(bw, n - 1 - i), expected)
+
+
+def test_a_ramp_grows_from_the_ordinary_frame_to_the_level(room, tmp_path):
+    """A ramp over the sequence's frames: the first is untouched, the last is the static level's, in between the
+    level's share grows (exposure: the gain's log), the same frames backward."""
+    ramp = Perturbation("exposure", 0.25, schedule="ramp")
+    base = prepare(room, FORWARD, Profile.native, tmp_path)
+    fw = prepare(room, FORWARD, Profile.native, tmp_path, perturbation=ramp)
+    bw = prepare(room, BACKWARD, Profile.native, tmp_path, perturbation=ramp)
+    n = fw.n_frames
+    assert np.array_equal(_frame(fw, 0), _frame(base, 0))
+    for i in (n // 2, n - 1):
+        gain = 0.25 ** (i / (n - 1))
+        assert np.abs(_frame(fw, i).astype(float) - np.rint(_frame(base, i) * gain)).max() <= 1
+        assert np.array_equal(_frame(bw, n - 1 - i), _frame(fw, i))
+    means = [_frame(fw, i).mean() / _frame(base, i).mean() for i in range(n)]
+    assert all(a >= b - 1e-3 for a, b in zip(means, means[1:], strict=False))  # ever darker
+
+
+@pytest.mark.parametrize(
+    ("entry", "expected"),
+    [
+        ({"kind": "resolution", "scale": [0.5], "schedule": "ramp"}, "resolution: a view has one camera"),
+        ({"kind": "frame_drop", "every": [2], "schedule": "burst:3/10"}, "frame_drop: a view has one frame rate"),
+        ({"kind": "jpeg", "quality": [30], "schedule": "burst:10/5"}, "burst:N/M with 1 <= N < M"),
+        ({"kind": "jpeg", "quality": [30], "schedule": "bursts"}, "expected all, burst:N/M or ramp"),
+    ],
+)
+def test_a_wrong_schedule_is_named_before_anything_runs(tmp_path, entry, expected):
+    with pytest.raises(SlamRunError) as err:
+        load_spec(_spec(tmp_path, perturbations=[entry]))
+    assert "perturbations[0]" in str(err.value) and expected in str(err.value)
+
+
+def test_a_scheduled_perturbation_is_its_own_condition_in_the_plan_and_the_results(tmp_path):
+    axis = [
+        {"kind": "gaussian_noise", "sigma": [20]},
+        {"kind": "gaussian_noise", "sigma": [20], "schedule": "burst:3/10"},
+    ]
+    runs = plan(load_spec(_spec(tmp_path, perturbations=axis)))
+    names = {r.perturbation.name for r in runs}
+    assert names == {"none", "gaussian_noise", "gaussian_noise@burst:3/10"}
+    keys = {r.key.perturbation for r in runs}
+    assert {"gaussian_noise-20", "gaussian_noise-20-burst3of10"} <= keys
+    back = Perturbation.named("gaussian_noise@burst:3/10", 20.0, 0)
+    assert back == Perturbation("gaussian_noise", 20.0, schedule="burst:3/10")

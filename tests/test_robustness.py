@@ -297,3 +297,20 @@ def test_the_report_pairs_each_run_with_its_baseline_and_writes_robustness_csv(c
     assert summary[["gaussian_noise area", "resolution area"]].stack().between(0, 1).all()
     for kind in ("gaussian_noise", "resolution"):
         assert (index.parent / "figures" / f"robustness_curves_{kind}.png").stat().st_size > 10_000
+
+
+def test_a_scheduled_perturbation_is_a_condition_of_its_own_in_the_section(tmp_path):
+    """Static noise and the same noise in bursts, side by side: two conditions, each with its tables and figures
+    (file names without the schedule's ':' and '/')."""
+    from slamrun.analysis.report import robustness_report
+    from slamrun.analysis.robustness import kinds, summary_table
+
+    static = _one_room_lost()
+    burst = static[static.perturbation != "none"].assign(perturbation="gaussian_noise@burst:3/10")
+    df = pd.concat([static, burst], ignore_index=True)
+    assert kinds(df) == ["gaussian_noise", "gaussian_noise@burst:3/10"]
+    summary = summary_table(df, "ate_rmse")
+    assert "gaussian_noise@burst:3/10 area" in summary.columns
+    sections = robustness_report(df, tmp_path, tmp_path, "synth")
+    assert sections and (tmp_path / "figures" / "robustness_gaussian_noise-burst3of10.png").is_file()
+    assert (tmp_path / "figures" / "robustness_curves_gaussian_noise-burst3of10.png").is_file()

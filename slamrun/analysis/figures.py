@@ -378,7 +378,9 @@ def robustness(
     colours: dict[str, str] | None = None,
 ) -> Path:
     """The robustness figure of one perturbation kind (robustness_figure), saved in `folder`."""
-    return save(robustness_figure(df, kind, metrics, label, colours), folder, f"robustness_{kind}")
+    from slamrun.datasets.perturb import file_tag
+
+    return save(robustness_figure(df, kind, metrics, label, colours), folder, f"robustness_{file_tag(kind)}")
 
 
 ROBUST_FONT = 10  # points: at the report's width (1180 px) a robustness figure is shown about 1:1, 15 px text
@@ -394,7 +396,7 @@ def robustness_figure(
     no point (its success rate says why)."""
     from slamrun.analysis.load import main_metric
     from slamrun.analysis.robustness import paired_table, spread, success_rates
-    from slamrun.datasets.perturb import KINDS
+    from slamrun.datasets.perturb import kind_of, title_of
 
     rates = success_rates(df)
     rates = rates[rates.perturbation == kind]
@@ -440,9 +442,9 @@ def robustness_figure(
         ax.grid(True, alpha=0.3)
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
-    k = KINDS[kind]
-    fig.supxlabel(f"{kind.replace('_', ' ')}: {k.parameter} ({k.unit}), mildest to most severe", fontsize=ROBUST_FONT)
-    title = f"robustness to {kind.replace('_', ' ')}"
+    k = kind_of(kind)
+    fig.supxlabel(f"{k.name.replace('_', ' ')}: {k.parameter} ({k.unit}), mildest to most severe", fontsize=ROBUST_FONT)
+    title = f"robustness to {title_of(kind)}"
     fig.suptitle(_labelled(label, title), fontsize=ROBUST_FONT + 1)
     handles, labels = axes.flat[0].get_legend_handles_labels()
     if handles:
@@ -490,7 +492,9 @@ def robustness_curves(
 ) -> Path | None:
     """The cumulative curves of one kind's paired ratios (robustness_curves_figure), saved; None without pairs."""
     fig = robustness_curves_figure(df, kind, label, colours)
-    return None if fig is None else save(fig, folder, f"robustness_curves_{kind}")
+    from slamrun.datasets.perturb import file_tag
+
+    return None if fig is None else save(fig, folder, f"robustness_curves_{file_tag(kind)}")
 
 
 def robustness_curves_figure(
@@ -501,7 +505,7 @@ def robustness_curves_figure(
     axis' width is the paired table's area."""
     from slamrun.analysis.load import main_metric
     from slamrun.analysis.robustness import AREA_BOUND, pairs, series
-    from slamrun.datasets.perturb import KINDS
+    from slamrun.datasets.perturb import kind_of, title_of
 
     metric = main_metric(df)
     if metric is None:
@@ -528,7 +532,7 @@ def robustness_curves_figure(
         ax.set_xlim(1.0, AREA_BOUND)
         ax.set_ylim(-0.03, 1.03)
         readable_log_ticks(ax.xaxis, 1.0, AREA_BOUND)
-        ax.set_title(f"{KINDS[kind].parameter} {name}", fontsize=ROBUST_FONT)
+        ax.set_title(f"{kind_of(kind).parameter} {name}", fontsize=ROBUST_FONT)
         ax.tick_params(labelsize=ROBUST_FONT)
         ax.grid(True, alpha=0.3)
     for ax in axes[:, 0]:
@@ -536,7 +540,7 @@ def robustness_curves_figure(
     for ax in list(axes.flat)[len(levels) :]:
         ax.set_visible(False)
     fig.supxlabel(f"x: {LABELS.get(metric, metric)} over the method's own baseline's (log)", fontsize=ROBUST_FONT)
-    fig.suptitle(_labelled(label, f"robustness to {kind.replace('_', ' ')}: pairs within x"), fontsize=ROBUST_FONT + 1)
+    fig.suptitle(_labelled(label, f"robustness to {title_of(kind)}: pairs within x"), fontsize=ROBUST_FONT + 1)
     handles, labels = axes.flat[0].get_legend_handles_labels()
     if handles:
         fig.legend(handles, labels, fontsize=ROBUST_FONT, loc="outside right upper", frameon=False)

@@ -39,19 +39,22 @@ def perturbed(df: pd.DataFrame) -> bool:
 
 
 def kinds(df: pd.DataFrame) -> list[str]:
-    """The perturbation kinds of the table, in the order of slamrun.datasets.perturb.KINDS."""
+    """The perturbations of the table (a kind, or a kind with its schedule: `gaussian_noise@burst:3/10`), in the
+    order of slamrun.datasets.perturb.KINDS, each kind's static form first."""
     from slamrun.datasets.perturb import KINDS
 
     found = set(df["perturbation"].dropna()) - {NONE} if "perturbation" in df.columns else set()
-    return [k for k in KINDS if k in found]
+    order = list(KINDS)
+    known = [f for f in found if f.partition("@")[0] in KINDS]
+    return sorted(known, key=lambda f: (order.index(f.partition("@")[0]), f))
 
 
 def levels(df: pd.DataFrame, kind: str) -> list[float]:
     """The kind's levels in the table, mildest first (by the kind's severity)."""
-    from slamrun.datasets.perturb import KINDS
+    from slamrun.datasets.perturb import kind_of
 
     found = {float(v) for v in df.loc[df["perturbation"] == kind, "level"].dropna()}
-    return sorted(found, key=lambda v: (KINDS[kind].severity_of(v), v))
+    return sorted(found, key=lambda v: (kind_of(kind).severity_of(v), v))
 
 
 def series(df: pd.DataFrame, kind: str) -> list[tuple[str, pd.DataFrame]]:
@@ -102,9 +105,9 @@ def breakdown_table(rates: pd.DataFrame) -> pd.DataFrame:
 
 
 def _column(kind: str) -> str:
-    from slamrun.datasets.perturb import KINDS
+    from slamrun.datasets.perturb import kind_of
 
-    return f"{kind} ({KINDS[kind].parameter})"
+    return f"{kind} ({kind_of(kind).parameter})"
 
 
 def spread(df: pd.DataFrame, kind: str, metric: str) -> pd.DataFrame:

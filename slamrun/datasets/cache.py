@@ -352,7 +352,7 @@ class _FrameWriter:
             list(pool.map(one, enumerate(self.seq.read_bytes())))
 
     def _perturbed(self, name: str, img: np.ndarray) -> np.ndarray:
-        return perturb_frame(img, self.perturbation, self.seq.name, self.index[name])
+        return perturb_frame(img, self.perturbation, self.seq.name, self.index[name], self.seq.n_frames)
 
     def native(self) -> tuple[list[str], int, int, None]:
         """The original frames, each checked to decode, and the sequence's calibration files; perturbed frames are

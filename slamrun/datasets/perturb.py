@@ -5,11 +5,18 @@ views hold the same perturbed frames (the noise of frame i does not depend on th
 
 `none` is the baseline: the ordinary view. Methods see ordinary frames; the view's camera follows a change of
 resolution; a dropped frame is absent from the view (its time too), never repeated.
+
+A schedule makes a perturbation come and go over the sequence's frames (by their index in the sequence, so both
+directions hold the same frames): `all` (every frame, the default), `burst:N/M` (the last N frames of every M: a
+method starts on ordinary frames, meets N bad ones, then M - N good ones), `ramp` (from the ordinary frame at the
+first to the level at the last). A burst frame is the static view's frame; a scheduled perturbation is a condition of
+its own in the results (`perturbation` `gaussian_noise@burst:3/10`).
 """
 
 from __future__ import annotations
 
 import math
+import re
 import zlib
 from dataclasses import dataclass
 
@@ -116,13 +123,73 @@ KINDS: dict[str, Kind] = {
 }
 
 
+ALL = "all"
+_BURST = re.compile(r"burst:(\d+)/(\d+)$")
+UNSCHEDULED = {"resolution": "a view has one camera", "frame_drop": "a view has one frame rate"}
+
+
+def schedule_problem(kind: str, schedule: str) -> str | None:
+    """Why `schedule` cannot apply to `kind`, or None."""
+    if schedule == ALL:
+        return None
+    if kind in UNSCHEDULED:
+        return f"{kind}: {UNSCHEDULED[kind]}, so it applies to every frame (no schedule {schedule!r})"
+    m = _BURST.match(schedule)
+    if m and not 1 <= int(m.group(1)) < int(m.group(2)):
+        return f"schedule {schedule!r}: expected burst:N/M with 1 <= N < M (N bad frames of every M)"
+    if not m and schedule != "ramp":
+        return f"schedule {schedule!r}: expected all, burst:N/M or ramp (burst:N/M: the last N frames of every M)"
+    return None
+
+
+def kind_of(name: str) -> Kind:
+    """The kind of a condition a results row names (`gaussian_noise@burst:3/10`: gaussian_noise's)."""
+    return KINDS[name.partition("@")[0]]
+
+
+def file_tag(name: str) -> str:
+    """A condition's name in file names: `gaussian_noise-burst3of10`."""
+    return name.replace("@", "-").replace("burst:", "burst").replace("/", "of")
+
+
+def title_of(name: str) -> str:
+    """A condition as a heading says it: `gaussian noise`, `gaussian noise in bursts of 3 frames every 10`."""
+    kind, _, schedule = name.partition("@")
+    return kind.replace("_", " ") + _schedule_words(schedule or ALL).replace(",", "", 1)
+
+
+def strength(schedule: str, index: int, n_frames: int) -> float:
+    """The share of its level frame `index` of the sequence (of `n_frames`) is perturbed with: 0 or 1, or a ramp's
+    share from 0 at the first frame to 1 at the last."""
+    if schedule == ALL:
+        return 1.0
+    if schedule == "ramp":
+        return index / (n_frames - 1) if n_frames > 1 else 1.0
+    n, m = (int(v) for v in _BURST.match(schedule).groups())
+    return 1.0 if index % m >= m - n else 0.0
+
+
 @dataclass(frozen=True)
 class Perturbation:
-    """A kind at a level (`none` at no level), with the spec's seed."""
+    """A kind at a level (`none` at no level), with the spec's seed and the schedule it comes and goes by."""
 
     kind: str = NONE
     level: float | None = None
     seed: int = 0
+    schedule: str = ALL
+
+    @property
+    def name(self) -> str:
+        """The condition's name in the ledger and results: the kind, with its schedule where it has one."""
+        return self.kind if self.schedule == ALL else f"{self.kind}@{self.schedule}"
+
+    @classmethod
+    def named(cls, name: str, level: float | None, seed: int = 0) -> Perturbation:
+        """The perturbation a results row names (`name`: Perturbation.name)."""
+        if name == NONE:
+            return cls()
+        kind, _, schedule = name.partition("@")
+        return cls(kind, level, seed, schedule or ALL)
 
     @property
     def is_none(self) -> bool:
@@ -134,7 +201,8 @@ class Perturbation:
         levels one name: results.vocabulary.level_text); `-s7` with a seed other than 0."""
         if self.is_none:
             return NONE
-        return f"{self.kind}-{level_text(self.level)}" + (f"-s{self.seed}" if self.seed else "")
+        label = f"{self.kind}-{level_text(self.level)}" + (f"-s{self.seed}" if self.seed else "")
+        return label + file_tag(self.name)[len(self.kind) :]
 
     @property
     def changes_pixels(self) -> bool:
@@ -167,31 +235,47 @@ def _rng(p: Perturbation, sequence: str, index: int) -> np.random.Generator:
     return np.random.default_rng([p.seed, tag, index])
 
 
-def perturb_frame(img: np.ndarray, p: Perturbation, sequence: str, index: int) -> np.ndarray:
-    """Frame `index` (of the sequence, not of the view) perturbed; the same dtype (8 or 16 bit, grey or colour)."""
+def perturb_frame(img: np.ndarray, p: Perturbation, sequence: str, index: int, n_frames: int = 0) -> np.ndarray:
+    """Frame `index` (of the sequence of `n_frames`, not of the view) perturbed as its schedule says; the same dtype
+    (8 or 16 bit, grey or colour)."""
     if not p.changes_pixels:
+        return img
+    share = strength(p.schedule, index, n_frames)
+    level = float(p.level) if share >= 1.0 else _at_share(p.kind, float(p.level), share)  # a ramp: its share
+    if share <= 0.0 or level == KINDS[p.kind].baseline:
         return img
     import cv2
 
     top = float(np.iinfo(img.dtype).max) if img.dtype.kind in "ui" else 1.0
-    if p.kind == "gaussian_noise":
-        noise = _rng(p, sequence, index).standard_normal(img.shape, dtype=np.float32) * (p.level * top / 255.0)
+    if p.kind == "gaussian_noise":  # the random parts are the static level's (p's), whatever the share
+        noise = _rng(p, sequence, index).standard_normal(img.shape, dtype=np.float32) * (level * top / 255.0)
         return _clipped(img.astype(np.float32) + noise, img.dtype, top)
     if p.kind == "exposure":
-        return _clipped(img.astype(np.float32) * p.level, img.dtype, top)
+        return _clipped(img.astype(np.float32) * level, img.dtype, top)
     if p.kind == "motion_blur":
-        return cv2.filter2D(img, -1, _line_kernel(int(p.level), _rng(p, sequence, index).uniform(0.0, 180.0)))
+        return cv2.filter2D(img, -1, _line_kernel(int(level), _rng(p, sequence, index).uniform(0.0, 180.0)))
     if p.kind == "resolution":
         h, w = img.shape[:2]
         return cv2.resize(img, scaled_size(w, h, p), interpolation=cv2.INTER_AREA)
     if p.kind == "jpeg":
         eight = img if img.dtype == np.uint8 else (img.astype(np.float32) * (255.0 / top)).round().astype(np.uint8)
-        ok, data = cv2.imencode(".jpg", eight, [cv2.IMWRITE_JPEG_QUALITY, int(p.level)])
+        ok, data = cv2.imencode(".jpg", eight, [cv2.IMWRITE_JPEG_QUALITY, int(level)])
         if not ok:
             raise ValueError(f"frame {index}: JPEG encoding failed")
         back = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
         return back if img.dtype == np.uint8 else (back.astype(np.float32) * (top / 255.0)).round().astype(img.dtype)
     raise ValueError(f"unknown perturbation {p.kind!r}")
+
+
+def _at_share(kind: str, level: float, share: float) -> float:
+    """The level `share` of the way from the kind's baseline to `level`: linear in sigma and blur length (whole
+    pixels), in the log of a gain, in JPEG quality from 100 (whole steps)."""
+    base = KINDS[kind].baseline
+    if kind == "exposure":
+        return level**share
+    if kind in ("motion_blur", "jpeg"):
+        return float(round(base + (level - base) * share))
+    return base + (level - base) * share
 
 
 def _clipped(values: np.ndarray, dtype: np.dtype, top: float) -> np.ndarray:
@@ -220,4 +304,14 @@ def describe(p: Perturbation) -> str:
     if p.is_none:
         return "none (the baseline)"
     kind = KINDS[p.kind]
-    return f"{p.kind.replace('_', ' ')}, {kind.parameter} {level_text(p.level)}"
+    return f"{p.kind.replace('_', ' ')}, {kind.parameter} {level_text(p.level)}" + _schedule_words(p.schedule)
+
+
+def _schedule_words(schedule: str) -> str:
+    """A schedule as a caption says it: `, bursts of 3 frames every 10`, `, ramped up over the sequence`."""
+    if schedule == ALL:
+        return ""
+    if schedule == "ramp":
+        return ", ramped up from none over the sequence's frames"
+    n, m = _BURST.match(schedule).groups()
+    return f", in bursts of {n} frames every {m}"

@@ -327,7 +327,7 @@ def _record(
         "sequence": run.key.sequence,
         "data": run.key.data,
         "direction": run.key.direction.value,
-        "perturbation": run.perturbation.kind,  # how the view's frames were made worse (none: the baseline)
+        "perturbation": run.perturbation.name,  # how the view's frames were made worse (none: the baseline)
         "level": run.perturbation.level,
         "perturbation_seed": run.perturbation.seed,
         "trial": run.key.trial,

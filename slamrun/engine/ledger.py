@@ -346,7 +346,7 @@ class Ledger:
                 r.key.direction.value,
                 r.key.trial,
                 r.key.settings,
-                r.perturbation.kind,
+                r.perturbation.name,
                 r.perturbation.level,
             )
             for r in runs

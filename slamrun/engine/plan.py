@@ -122,7 +122,7 @@ def seed_warnings(spec: CampaignSpec) -> list[str]:
 def perturbations(spec: CampaignSpec, ds: DatasetSpec) -> list[Perturbation]:
     """The baseline, then each level of the dataset's perturbations (the campaign's unless it names its own)."""
     chosen = spec.perturbations if ds.perturbations is None else ds.perturbations
-    levels = [Perturbation(p.kind, level, spec.perturbation_seed) for p in chosen for level in p.levels]
+    levels = [Perturbation(p.kind, lv, spec.perturbation_seed, p.schedule) for p in chosen for lv in p.levels]
     return [BASELINE, *dict.fromkeys(levels)]
 
 

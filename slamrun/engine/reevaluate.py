@@ -53,9 +53,9 @@ def target_of(row: dict, spec: CampaignSpec) -> Target | None:
         if m is None:
             return None
         given = slamrun.methods.get(m.name)(m.params).frames_given
-    kind = row.get("perturbation") or NONE
+    name = row.get("perturbation") or NONE
     level = float(row["level"]) if row.get("level") is not None else 0.0
-    pert = Perturbation(kind, level, spec.perturbation_seed) if kind != NONE else Perturbation()
+    pert = Perturbation.named(name, level, spec.perturbation_seed)
     return Target(ds.evaluation, ds.path / str(row["sequence"]), pert, Direction(row["direction"]), given)
 
 

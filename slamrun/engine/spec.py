@@ -96,6 +96,11 @@ class PerturbationSpec(Strict):
     every: list[int] | None = Field(None, description="frame_drop: every N-th frame is absent (2: half the rate).")
     scale: list[float] | None = Field(None, description="resolution: frames and camera scaled by this (< 1).")
     quality: list[int] | None = Field(None, description="jpeg: JPEG quality (1-95).")
+    schedule: str = Field(
+        "all",
+        description="Which frames: all; burst:N/M (the last N of every M frames of the sequence); ramp (from none "
+        "at the first frame to the level at the last). Not for resolution or frame_drop. README, Robustness.",
+    )
 
     @field_validator("sigma", "length_px", "gain", "every", "scale", "quality", mode="before")
     @classmethod
@@ -124,6 +129,10 @@ class PerturbationSpec(Strict):
                 raise ValueError(f"{self.kind}: {kind.parameter} {level}: {why}")
         if len(set(levels)) != len(levels):
             raise ValueError(f"{self.kind}: the levels of {kind.parameter} repeat")
+        from slamrun.datasets.perturb import schedule_problem
+
+        if (why := schedule_problem(self.kind, self.schedule)) is not None:
+            raise ValueError(why)
         return self
 
     @property
