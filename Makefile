@@ -12,10 +12,13 @@ install: $(VENV)/.installed
 
 install-dev: $(VENV)/.installed-dev
 
+# imagecorruptions without its dependencies: slamrun reads its frost pictures (ImageNet-C's frost); its code, which
+# wants opencv-python and scikit-image, runs only in the tests, as the reference slamrun's corruptions are checked on
 $(VENV)/.installed: pyproject.toml setup.py slamrun/core/_tumparse.c
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install -q --upgrade pip
 	$(BIN)/python -m pip install -q -e .
+	$(BIN)/python -m pip install -q --no-deps imagecorruptions==1.1.2
 	touch $@
 
 $(VENV)/.installed-dev: $(VENV)/.installed

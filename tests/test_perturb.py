@@ -171,7 +171,11 @@ def _spec(tmp_path: Path, **kw) -> Path:
 
 
 def test_the_spec_names_each_kind_the_schema_knows():
-    assert set(PERTURBATION_KINDS.__args__) == set(KINDS)
+    from slamrun.datasets.perturb import IMAGENET_C, IMAGENET_C_MODELS
+
+    own = {k for k in KINDS if not k.startswith(IMAGENET_C)}
+    assert set(PERTURBATION_KINDS.__args__) == own | set(IMAGENET_C_MODELS)
+    assert {k for k in KINDS if k.startswith(IMAGENET_C)} == {IMAGENET_C + n for n in IMAGENET_C_MODELS}
 
 
 @pytest.mark.parametrize(
@@ -294,3 +298,69 @@ def test_a_scheduled_perturbation_is_its_own_condition_in_the_plan_and_the_resul
     assert {"gaussian_noise-20", "gaussian_noise-20-burst3of10"} <= keys
     back = Perturbation.named("gaussian_noise@burst:3/10", 20.0, 0)
     assert back == Perturbation("gaussian_noise", 20.0, schedule="burst:3/10")
+
+
+# ------------------------------------------------------------------ ImageNet-C's corruptions by name
+
+
+def test_imagenet_c_kinds_are_named_as_the_field_names_them(tmp_path):
+    axis = [{"kind": "fog", "severity": [1, 3, 5]}, {"kind": "gaussian_noise", "severity": 3}]
+    runs = plan(load_spec(_spec(tmp_path, perturbations=axis)))
+    found = {(r.perturbation.kind, r.perturbation.level) for r in runs if not r.perturbation.is_none}
+    assert found == {
+        ("imagenet_c.fog", 1.0),
+        ("imagenet_c.fog", 3.0),
+        ("imagenet_c.fog", 5.0),
+        ("imagenet_c.gaussian_noise", 3.0),
+    }
+    assert "imagenet_c.fog-3" in {r.key.perturbation for r in runs}
+
+
+@pytest.mark.parametrize(
+    ("entry", "expected"),
+    [
+        ({"kind": "fog"}, "fog is ImageNet-C's: give its severities, e.g. {kind: fog, severity: [1, 3, 5]}"),
+        ({"kind": "fog", "sigma": [2]}, "fog is ImageNet-C's: give its severities"),
+        ({"kind": "exposure", "severity": [2]}, "exposure takes `gain`, not severity"),
+        ({"kind": "snow", "severity": [6]}, "snow: severity 6: expected 1 to 5"),
+        ({"kind": "snow", "severity": [0]}, "snow: severity 0: the baseline"),
+        ({"kind": "gaussian_noise", "severity": [2], "sigma": [3]}, "gaussian_noise takes `severity`, not sigma"),
+    ],
+)
+def test_a_wrong_imagenet_c_entry_is_named_before_anything_runs(tmp_path, entry, expected):
+    with pytest.raises(SlamRunError) as err:
+        load_spec(_spec(tmp_path, perturbations=[entry]))
+    assert "perturbations[0]" in str(err.value) and expected in str(err.value)
+
+
+@pytest.mark.parametrize("profile", [Profile.native, Profile.rectified])
+def test_an_imagenet_c_view_holds_the_corrupted_frames_forward_and_backward(room, tmp_path, profile):
+    """Each frame of the view is the ordinary frame corrupted as slamrun.datasets.corruptions says, with the draws
+    of its index in the sequence (a rectified view rectifies the corrupted frame); backward the same in reverse."""
+    from slamrun.datasets.corruptions import corrupt, draws
+
+    fog = Perturbation("imagenet_c.fog", 3.0)
+    fw = prepare(room, FORWARD, profile, tmp_path, perturbation=fog)
+    bw = prepare(room, BACKWARD, profile, tmp_path, perturbation=fog)
+    n = fw.n_frames
+    if profile is Profile.native:
+        base = prepare(room, FORWARD, profile, tmp_path)
+        for i in (0, 17, n - 1):
+            assert np.array_equal(_frame(fw, i), corrupt(_frame(base, i), "fog", 3, draws(0, "room", "fog", 3, i)))
+    for i in (0, n // 2, n - 1):
+        assert np.array_equal(_frame(fw, i), _frame(bw, n - 1 - i))
+    assert not np.array_equal(_frame(fw, 0), _frame(fw, 1))  # each frame its own haze
+
+
+def test_the_plan_states_what_corrupting_the_frames_costs(tmp_path, capsys):
+    """Glass blur's pixel loop is slow (about 0.7 s a 640x480 frame): the plan says the CPU time of the views."""
+    from slamrun.cli import main
+    from slamrun.datasets.corruptions import SECONDS_PER_MEGAPIXEL
+    from slamrun.engine.dryrun import dry_run
+
+    spec = _spec(tmp_path, perturbations=[{"kind": "glass_blur", "severity": [3]}])
+    d = dry_run(load_spec(spec))
+    one_view = 30 * 160 * 120 / 1e6 * SECONDS_PER_MEGAPIXEL["glass_blur"]  # seq_a: 30 frames of 160x120
+    assert d.perturbed_cpu_s == pytest.approx(one_view)  # the backward view links the forward's frames
+    assert main(["plan", str(spec)]) == 0
+    assert "CPU-minutes to corrupt their frames" in capsys.readouterr().out

@@ -443,7 +443,7 @@ def robustness_figure(
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     k = kind_of(kind)
-    fig.supxlabel(f"{k.name.replace('_', ' ')}: {k.parameter} ({k.unit}), mildest to most severe", fontsize=ROBUST_FONT)
+    fig.supxlabel(f"{title_of(k.name)}: {k.parameter} ({k.unit}), mildest to most severe", fontsize=ROBUST_FONT)
     title = f"robustness to {title_of(kind)}"
     fig.suptitle(_labelled(label, title), fontsize=ROBUST_FONT + 1)
     handles, labels = axes.flat[0].get_legend_handles_labels()

@@ -165,6 +165,7 @@ def _print_dry_run(spec) -> int:
         console.print(
             f"robustness: {d.perturbed_runs} of the {d.total} runs are on perturbed views (README, Robustness); "
             f"{d.perturbed_views} of the views to prepare, about {d.perturbed_bytes / 2**30:.2f} GB"
+            + (f", about {d.perturbed_cpu_s / 60:.1f} CPU-minutes to corrupt their frames" if d.perturbed_cpu_s else "")
         )
     for warning in cpu_warnings(spec) + seed_warnings(spec):
         console.print(f"warning: {warning}", markup=False, highlight=False)

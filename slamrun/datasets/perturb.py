@@ -58,6 +58,26 @@ class Kind:
         return None
 
 
+IMAGENET_C = "imagenet_c."  # the prefix of ImageNet-C's kinds: imagenet_c.fog at severity 1-5
+# ImageNet-C's fifteen (slamrun.datasets.corruptions.CORRUPTIONS), what each models (Hendrycks and Dietterich 2019)
+IMAGENET_C_MODELS = {
+    "gaussian_noise": "sensor noise in low light: Gaussian noise per pixel and channel",
+    "shot_noise": "photon (Poisson) noise",
+    "impulse_noise": "salt-and-pepper noise (bit errors)",
+    "defocus_blur": "an out-of-focus lens: a disk kernel",
+    "glass_blur": "frosted glass: blur, pixels displaced locally, blur again",
+    "motion_blur": "camera shake: a directional blur at an angle drawn per frame",
+    "zoom_blur": "a camera moving fast towards the scene: zoomed copies averaged",
+    "snow": "falling snow: a blurred flake layer over a brightened frame",
+    "frost": "frost on the lens: a frost picture blended in",
+    "fog": "fog: a fractal haze added, contrast reduced",
+    "brightness": "daylight: value raised in HSV",
+    "contrast": "low contrast: values drawn towards the frame's mean",
+    "elastic_transform": "local elastic distortion of the frame",
+    "pixelate": "a low-resolution upsampled camera: box down, nearest up",
+    "jpeg_compression": "lossy compression at low JPEG quality",
+}
+
 _RANGES = {  # (lowest, highest, whole numbers only)
     "gaussian_noise": (0.1, 128.0, False),
     "motion_blur": (2, 101, True),
@@ -65,7 +85,7 @@ _RANGES = {  # (lowest, highest, whole numbers only)
     "frame_drop": (2, 1000, True),
     "resolution": (0.05, 0.95, False),
     "jpeg": (1, 95, True),
-}
+} | {IMAGENET_C + name: (1, 5, True) for name in IMAGENET_C_MODELS}
 
 KINDS: dict[str, Kind] = {
     k.name: k
@@ -119,6 +139,10 @@ KINDS: dict[str, Kind] = {
             100.0,
             "down",
         ),
+        *(
+            Kind(IMAGENET_C + name, "severity", "ImageNet-C severity", f"ImageNet-C's {name}: {models}", 0.0, "up")
+            for name, models in IMAGENET_C_MODELS.items()
+        ),
     )
 }
 
@@ -153,9 +177,11 @@ def file_tag(name: str) -> str:
 
 
 def title_of(name: str) -> str:
-    """A condition as a heading says it: `gaussian noise`, `gaussian noise in bursts of 3 frames every 10`."""
+    """A condition as a heading says it: `gaussian noise`, `fog (ImageNet-C)`, `gaussian noise in bursts of 3
+    frames every 10`."""
     kind, _, schedule = name.partition("@")
-    return kind.replace("_", " ") + _schedule_words(schedule or ALL).replace(",", "", 1)
+    words = kind.removeprefix(IMAGENET_C).replace("_", " ") + (" (ImageNet-C)" if kind.startswith(IMAGENET_C) else "")
+    return words + _schedule_words(schedule or ALL).replace(",", "", 1)
 
 
 def strength(schedule: str, index: int, n_frames: int) -> float:
@@ -246,6 +272,11 @@ def perturb_frame(img: np.ndarray, p: Perturbation, sequence: str, index: int, n
         return img
     import cv2
 
+    if p.kind.startswith(IMAGENET_C):
+        from slamrun.datasets.corruptions import corrupt, draws
+
+        name = p.kind[len(IMAGENET_C) :]
+        return corrupt(img, name, int(level), draws(p.seed, sequence, name, int(level), index))
     top = float(np.iinfo(img.dtype).max) if img.dtype.kind in "ui" else 1.0
     if p.kind == "gaussian_noise":  # the random parts are the static level's (p's), whatever the share
         noise = _rng(p, sequence, index).standard_normal(img.shape, dtype=np.float32) * (level * top / 255.0)
@@ -273,7 +304,7 @@ def _at_share(kind: str, level: float, share: float) -> float:
     base = KINDS[kind].baseline
     if kind == "exposure":
         return level**share
-    if kind in ("motion_blur", "jpeg"):
+    if kind in ("motion_blur", "jpeg") or kind.startswith(IMAGENET_C):
         return float(round(base + (level - base) * share))
     return base + (level - base) * share
 
@@ -304,7 +335,7 @@ def describe(p: Perturbation) -> str:
     if p.is_none:
         return "none (the baseline)"
     kind = KINDS[p.kind]
-    return f"{p.kind.replace('_', ' ')}, {kind.parameter} {level_text(p.level)}" + _schedule_words(p.schedule)
+    return f"{title_of(p.kind)}, {kind.parameter} {level_text(p.level)}" + _schedule_words(p.schedule)
 
 
 def _schedule_words(schedule: str) -> str:

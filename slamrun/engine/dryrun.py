@@ -50,7 +50,11 @@ class DryRun:
     perturbed_runs: int = 0  # of `total`: runs on perturbed views (the robustness axis)
     perturbed_views: int = 0  # of `views_to_prepare`
     perturbed_bytes: int = 0  # of `view_bytes`
+    perturbed_cpu_s: float = 0.0  # CPU time to corrupt their frames (ImageNet-C's kinds: glass blur is slow)
     to_reevaluate: int = 0  # finished runs whose evaluation settings changed: evaluated again, not run again
+
+
+NOISE = ("gaussian_noise", "imagenet_c.gaussian_noise", "imagenet_c.shot_noise", "imagenet_c.impulse_noise")
 
 
 def dry_run(spec: CampaignSpec) -> DryRun:
@@ -137,8 +141,26 @@ def _count_views(out: DryRun, todo_views: set[tuple], spec: CampaignSpec) -> Non
             if not perturbation.is_none:
                 out.perturbed_views += 1
                 out.perturbed_bytes += bytes_
+                out.perturbed_cpu_s += _corrupting_s(seq_dir, perturbation) if bytes_ else 0.0
             frames_counted.add((seq_dir, profile, perturbation))
     out.sequences_unknown = len(ungenerated)
+
+
+def _corrupting_s(seq_dir: Path, perturbation: Perturbation) -> float:
+    """The CPU seconds to corrupt a view's frames with an ImageNet-C kind (corruptions.SECONDS_PER_MEGAPIXEL); 0 for
+    slamrun's own kinds (a few milliseconds a frame)."""
+    from slamrun.datasets.corruptions import SECONDS_PER_MEGAPIXEL
+    from slamrun.datasets.perturb import IMAGENET_C
+
+    if not perturbation.kind.startswith(IMAGENET_C):
+        return 0.0
+    seq = open_sequence(seq_dir)
+    megapixels = seq.camera.out_width * seq.camera.out_height / 1e6
+    return (
+        len(kept_frames(seq.n_frames, perturbation))
+        * megapixels
+        * SECONDS_PER_MEGAPIXEL[perturbation.kind.removeprefix(IMAGENET_C)]
+    )
 
 
 def last_session_overhead(rows: list[dict], session: dict) -> float:
@@ -172,7 +194,7 @@ def _view_bytes_if_missing(
         return 1  # its frames are links to the other direction's: a few small files
     frames = len(kept_frames(seq.n_frames, perturbation))
     pixels = seq.camera.out_width * seq.camera.out_height * perturbation.scale**2
-    if perturbation.kind == "gaussian_noise":  # noise does not compress: PNG keeps every byte, and its framing
+    if perturbation.kind in NOISE:  # noise does not compress: PNG keeps every byte, and its framing
         return int(frames * pixels * 1.02)
     if profile is Profile.rectified or not seq.fov or perturbation.changes_pixels:  # written as PNG (or PGM)
         per_pixel = 1.0 if spec.frame_format == "pgm" and profile is Profile.rectified else PNG_BYTES_PER_PIXEL

@@ -122,7 +122,8 @@ def seed_warnings(spec: CampaignSpec) -> list[str]:
 def perturbations(spec: CampaignSpec, ds: DatasetSpec) -> list[Perturbation]:
     """The baseline, then each level of the dataset's perturbations (the campaign's unless it names its own)."""
     chosen = spec.perturbations if ds.perturbations is None else ds.perturbations
-    levels = [Perturbation(p.kind, lv, spec.perturbation_seed, p.schedule) for p in chosen for lv in p.levels]
+    seed = spec.perturbation_seed
+    levels = [Perturbation(p.perturbation_kind, lv, seed, p.schedule) for p in chosen for lv in p.levels]
     return [BASELINE, *dict.fromkeys(levels)]
 
 

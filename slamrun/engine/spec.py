@@ -81,8 +81,26 @@ class RpeSpec(Strict):
 
 
 PERTURBATION_KINDS = Literal[
-    "gaussian_noise", "motion_blur", "exposure", "frame_drop", "resolution", "jpeg"
-]  # slamrun.datasets.perturb.KINDS (checked there)
+    "gaussian_noise",
+    "motion_blur",
+    "exposure",
+    "frame_drop",
+    "resolution",
+    "jpeg",
+    "shot_noise",
+    "impulse_noise",
+    "defocus_blur",
+    "glass_blur",
+    "zoom_blur",
+    "snow",
+    "frost",
+    "fog",
+    "brightness",
+    "contrast",
+    "elastic_transform",
+    "pixelate",
+    "jpeg_compression",
+]  # slamrun.datasets.perturb.KINDS and ImageNet-C's fifteen by their names (with `severity`; checked there)
 
 
 class PerturbationSpec(Strict):
@@ -96,13 +114,16 @@ class PerturbationSpec(Strict):
     every: list[int] | None = Field(None, description="frame_drop: every N-th frame is absent (2: half the rate).")
     scale: list[float] | None = Field(None, description="resolution: frames and camera scaled by this (< 1).")
     quality: list[int] | None = Field(None, description="jpeg: JPEG quality (1-95).")
+    severity: list[int] | None = Field(
+        None, description="ImageNet-C's corruptions (fog, snow, ..., gaussian_noise, motion_blur): severity 1-5."
+    )
     schedule: str = Field(
         "all",
         description="Which frames: all; burst:N/M (the last N of every M frames of the sequence); ramp (from none "
         "at the first frame to the level at the last). Not for resolution or frame_drop. README, Robustness.",
     )
 
-    @field_validator("sigma", "length_px", "gain", "every", "scale", "quality", mode="before")
+    @field_validator("sigma", "length_px", "gain", "every", "scale", "quality", "severity", mode="before")
     @classmethod
     def _one_level_is_a_list(cls, v: Any) -> Any:
         if v is None:
@@ -114,10 +135,19 @@ class PerturbationSpec(Strict):
 
     @model_validator(mode="after")
     def _its_own_levels(self):
-        from slamrun.datasets.perturb import KINDS
+        from slamrun.datasets.perturb import IMAGENET_C, IMAGENET_C_MODELS, KINDS, schedule_problem
 
-        kind = KINDS[self.kind]
-        given = [f for f in ("sigma", "length_px", "gain", "every", "scale", "quality") if getattr(self, f) is not None]
+        if self.severity is None and self.kind not in KINDS:
+            raise ValueError(
+                f"{self.kind} is ImageNet-C's: give its severities, e.g. {{kind: {self.kind}, severity: [1, 3, 5]}}"
+            )
+        if self.severity is not None and self.kind not in IMAGENET_C_MODELS:
+            raise ValueError(
+                f"{self.kind} takes `{KINDS[self.kind].parameter}`, not severity (ImageNet-C's kinds: "
+                f"{', '.join(IMAGENET_C_MODELS)})"
+            )
+        kind = KINDS[self.perturbation_kind]
+        given = [f for f in LEVEL_FIELDS if getattr(self, f) is not None]
         others = [f for f in given if f != kind.parameter]
         if others:
             raise ValueError(f"{self.kind} takes `{kind.parameter}`, not {', '.join(others)}")
@@ -129,17 +159,33 @@ class PerturbationSpec(Strict):
                 raise ValueError(f"{self.kind}: {kind.parameter} {level}: {why}")
         if len(set(levels)) != len(levels):
             raise ValueError(f"{self.kind}: the levels of {kind.parameter} repeat")
-        from slamrun.datasets.perturb import schedule_problem
-
         if (why := schedule_problem(self.kind, self.schedule)) is not None:
             raise ValueError(why)
+        if self.perturbation_kind == IMAGENET_C + "frost":
+            from slamrun.datasets.corruptions import frost_pictures
+
+            if frost_pictures() is None:
+                raise ValueError(
+                    "frost blends in the frost pictures of the imagecorruptions package, which is not installed: "
+                    "pip install --no-deps imagecorruptions==1.1.2 (its pictures are read, its code is not run)"
+                )
         return self
+
+    @property
+    def perturbation_kind(self) -> str:
+        """The kind as slamrun.datasets.perturb.KINDS names it: ImageNet-C's prefixed (imagenet_c.fog)."""
+        from slamrun.datasets.perturb import IMAGENET_C
+
+        return IMAGENET_C + self.kind if self.severity is not None else self.kind
 
     @property
     def levels(self) -> list[float]:
         from slamrun.datasets.perturb import KINDS
 
-        return [float(v) for v in getattr(self, KINDS[self.kind].parameter)]
+        return [float(v) for v in getattr(self, KINDS[self.perturbation_kind].parameter)]
+
+
+LEVEL_FIELDS = ("sigma", "length_px", "gain", "every", "scale", "quality", "severity")
 
 
 class DatasetSpec(Strict):
