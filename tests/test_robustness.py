@@ -278,6 +278,10 @@ def test_the_report_pairs_each_run_with_its_baseline_and_writes_robustness_csv(c
     perturbed = robust[robust.level != "none"]
     assert set(perturbed.perturbation) == {"gaussian_noise", "resolution"}
     assert set(robust.metric) == {"e_align"} and set(robust.dataset) == {"synth"}
+    summary_at = robust.drop_duplicates(["perturbation", "method"]).set_index(["method", "perturbation"])["breakdown"]
+    breakdown = pd.read_csv(index.parent / "tables" / "robustness_breakdown.csv", dtype=str).set_index("method")
+    for (method, kind), level in summary_at.items():
+        assert str(level) == breakdown.at[method, f"{kind} ({'sigma' if kind == 'gaussian_noise' else 'scale'})"]
     for _, row in perturbed.iterrows():
         runs = df[(df.perturbation == row.perturbation) & (df.method == row.method)]
         runs = runs[runs.level.map(level_text) == row.level]

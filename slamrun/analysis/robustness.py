@@ -240,10 +240,16 @@ def summary_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
 
 def long_table(df: pd.DataFrame, metric: str, dataset: str = "") -> pd.DataFrame:
     """One row per kind, level and method of one dataset (the baseline as level `none` of each kind): its success
-    rate with its counts, and its paired figures against the baseline on `metric`: results/robustness.csv."""
+    rate with its counts, its paired figures against the baseline on `metric`, and the method's breakdown level of
+    the kind: results/robustness.csv."""
     rates = success_rates(df)
     paired = paired_table(df, metric)
     out = rates.merge(paired, on=["perturbation", "level", "method"], how="left")
     out.insert(0, "dataset", dataset)
     out["metric"] = metric
+    broken = breakdown_table(rates).set_index("method") if not rates.empty else pd.DataFrame()
+    out["breakdown"] = [
+        broken.at[m, _column(k)] if m in broken.index and _column(k) in broken else ""
+        for k, m in zip(out["perturbation"], out["method"], strict=True)
+    ]  # the method's breakdown level of the kind, on each of its rows
     return out
