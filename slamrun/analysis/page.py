@@ -166,7 +166,7 @@ def provenance_html(p: Provenance, root: Path, results: Path) -> str:
         *((esc(k), esc(v)) for k, v in p.dates.items()),
         *((esc(k), esc(v)) for k, v in p.runs.items()),
     ]
-    out = '<dl class="prov">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>"
+    out = '<dl class="prov">' + "".join(f"<dt>{k}</dt><dd>{v}</dd>" for k, v in items) + "</dl>" + note_lines(p.notes)
     if p.packages:
         out += "<h3>Python packages of the native runs</h3>" + '<dl class="prov">'
         out += "".join(f"<dt>{esc(k)}</dt><dd>{esc(v)}</dd>" for k, v in p.packages.items()) + "</dl>"

@@ -45,6 +45,7 @@ class Provenance:
     measurement: str = ""  # under which measurement the resources were taken (parallel with N lanes, exclusive)
     contention_pct: float | None = None  # the spec's threshold of cpu_wait_pct for `contended` runs
     run_commits: str = ""  # the code that ran the runs: each commit and how many runs it made
+    published: list[str] = field(default_factory=list)  # the spec's files of published figures (besides built-ins)
 
 
 def provenance(results: Path, df: pd.DataFrame) -> Provenance:
@@ -74,6 +75,7 @@ def provenance(results: Path, df: pd.DataFrame) -> Provenance:
         measurement=measurement_conditions(recorded),
         contention_pct=spec.contention_pct if spec else None,
         run_commits=run_commits(df),
+        published=list(spec.published) if spec else [],
     )
 
 

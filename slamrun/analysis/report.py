@@ -21,6 +21,8 @@ from slamrun.analysis.left_out import left_out, section_flags, shown_in
 from slamrun.analysis.load import NO_DATASET, by_dataset, counted, evaluated, load_results, main_metric, metrics_for
 from slamrun.analysis.paths import sequence_paths
 from slamrun.analysis.provenance import provenance
+from slamrun.analysis.published import beside
+from slamrun.analysis.published import figures as published_figures
 from slamrun.analysis.robustness import (
     AREA_BOUND,
     BREAKDOWN_PCT,
@@ -136,12 +138,15 @@ def _write_report(
     options["colours"] = method_colours(df.method) if "method" in df.columns else None
     prov = provenance(results, df)
     options |= {"measurement": prov.measurement, "contention_pct": prov.contention_pct}
+    published, unread = published_figures(prov.published)
+    prov.notes += [f"published figures left out: {why}" for why in unread]
     stats_options = {k: options[k] for k in ("level", "adjust", "alpha", "colours")}
     sections = [Section("Provenance", page.provenance_html(prov, out, results))]
     if len(groups) == 1:
         name, part = next(iter(groups.items()))
         label = name if name != NO_DATASET else ""
         body = dataset_report(part, out, out, label, **options)
+        body += published_section(part, published, out, out, label)
         body += robustness_report(everything[name], out, out, label, **stats_options)
         intro = Section(f"Dataset {name}" if label else "Results", "", body)
         sections.append(intro)
@@ -149,6 +154,7 @@ def _write_report(
         sections.append(Section("All datasets (pooled)", "", pooled_report(baseline(df), out)))
         for name, folder in _folders(groups).items():
             body = dataset_report(groups[name], out / "datasets" / folder, out, name, **options)
+            body += published_section(groups[name], published, out / "datasets" / folder, out, name)
             body += robustness_report(everything[name], out / "datasets" / folder, out, name, **stats_options)
             sections.append(Section(f"Dataset {name}", "", body))
     robust = robustness_csv(everything)
@@ -396,6 +402,24 @@ def robustness_report(
         none = "<p>No level has two methods with evaluated runs: no group comparison.</p>"
         parts.append(Section("Statistics within each perturbation level", none))
     return [Section("Robustness", parts[0].html, parts[1:])]
+
+
+PUBLISHED_CAPTION = (
+    "Each method's median over its evaluated runs of a sequence beside the figure its authors published for it (the "
+    "same method, sequence and metric), with how it was published and where the protocols differ; published "
+    "figures are only shown, never tested against this campaign's runs (README, Published figures)."
+)
+
+
+def published_section(df: pd.DataFrame, published, out: Path, root: Path, dataset: str = "") -> list[Section]:
+    """The published figures matching this dataset's runs, beside the campaign's medians; none where none match."""
+    table = beside(df, published)
+    if table.empty:
+        return []
+    title = "Published figures beside this campaign's"
+    where = f" ({dataset})" if dataset else ""
+    html = page.table(table, out / "tables", root, "published", title + where, PUBLISHED_CAPTION)
+    return [Section(title, html)]
 
 
 def _paired_sections(df: pd.DataFrame, metric: str, tab_dir: Path, root: Path, where: str) -> list[Section]:

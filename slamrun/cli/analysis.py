@@ -27,6 +27,14 @@ def add_commands(sub) -> None:
     st.add_argument(
         "--dataset", help="only this dataset's runs (the spec's dataset name; default: each dataset on its own)"
     )
+    st.add_argument(
+        "--published",
+        type=Path,
+        action="append",
+        default=[],
+        help="a CSV of published figures to print beside the medians (README, Published figures; repeatable; the "
+        "built-in ones and the spec's `published:` are always read)",
+    )
     st.set_defaults(func=cmd_stats)
     rp = sub.add_parser("report", help="write report/index.html with tables and figures")
     rp.add_argument("results", type=Path, help="a results directory")
@@ -73,7 +81,33 @@ def cmd_stats(args) -> int:
     if len(per) > 1:
         for line in pooled_lines(pooled):
             console.print(line, markup=False, highlight=False)
+    for line in _published_lines(df, args.results, args.published):
+        console.print(line, markup=False, highlight=False)
     return 0
+
+
+def _published_lines(df, results: Path, extra: list[Path]) -> list[str]:
+    """Published figures beside the campaign's medians, one line each: never part of the statistics above."""
+    from slamrun.analysis.load import by_dataset
+    from slamrun.analysis.published import beside, figures, spec_files
+    from slamrun.results.published import read_table
+
+    for f in extra:  # a file named on the command line is checked as the spec's are: an error, not a note
+        read_table(f)
+    published, unread = figures([*spec_files(results), *extra])
+    lines = [f"published figures left out: {why}" for why in unread]
+    for name, part in by_dataset(df).items():
+        table = beside(part, published)
+        if table.empty:
+            continue
+        lines.append(f"published figures beside this campaign's ({name}; shown, never tested):")
+        for r in table.to_dict("records"):
+            lines.append(
+                f"  {r['method']} {r['sequence']} {r['metric']}: median {r['this campaign, median']:.4g} over "
+                f"{r['runs']} run(s); {r['published as']}: {r['published']:.4g} [{r['source']}]"
+                + ("" if r["protocol differs"] == "-" else f"; differs: {r['protocol differs']}")
+            )
+    return lines
 
 
 def cmd_report(args) -> int:

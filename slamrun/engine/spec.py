@@ -354,6 +354,7 @@ class RecordedSpec(BaseModel):
     lanes: int = 1
     cpus_per_lane: int | None = None
     contention_pct: float | None = None
+    published: list[str] = []
 
     @classmethod
     def read(cls, recorded: object) -> RecordedSpec | None:
@@ -371,6 +372,11 @@ class CampaignSpec(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Campaign name.")
     results: Path | None = Field(None, description="Results directory (default: results/<name>).")
     cache: Path | None = Field(None, description="Prepared-view cache (default: .cache/views beside results).")
+    published: list[Path] = Field(
+        [],
+        description="CSV files of published figures to print beside this campaign's medians (README, Published "
+        "figures); the built-in ones (DPVO's, DPV-SLAM's logs) are always read.",
+    )
     datasets: list[DatasetSpec] = Field(min_length=1)
     methods: list[MethodSpec] = Field(min_length=1)
     directions: list[Direction] = Field(default_factory=lambda: [Direction.forward, Direction.backward])

@@ -127,6 +127,8 @@ def validate_spec(
             problems += cpu_fit(spec)[0]
         if check_files and not _name_problems(raw):
             problems += _file_problems(spec, "--results" if results is not None else "results")
+        if check_files:
+            problems += _published_problems(spec)
     if problems:
         raise SpecError(source, problems)
     assert spec is not None
@@ -261,6 +263,19 @@ class GpuHere:
         return not self._gpus
 
 
+def _published_problems(spec: CampaignSpec) -> list[str]:
+    """Each `published:` file that cannot be read as published figures, said before anything runs."""
+    from slamrun.results.published import read_table
+
+    problems = []
+    for i, path in enumerate(spec.published):
+        try:
+            read_table(path)
+        except SlamRunError as exc:
+            problems.append(f"published[{i}]: {exc}")
+    return problems
+
+
 def _resolve(spec: CampaignSpec, base: Path, results_flag: Path | None = None) -> CampaignSpec:
     """Absolute paths; `results_flag` (--results, relative to the working directory) replaces the results folder
     (the default cache stays beside the spec's own results)."""
@@ -274,7 +289,8 @@ def _resolve(spec: CampaignSpec, base: Path, results_flag: Path | None = None) -
     if results_flag is not None:
         results = Path(os.path.expanduser(str(results_flag))).resolve()
     datasets = [ds.model_copy(update={"path": res(ds.path)}) for ds in spec.datasets]
-    return spec.model_copy(update={"results": results, "cache": cache, "datasets": datasets})
+    published = [res(f) for f in spec.published]
+    return spec.model_copy(update={"results": results, "cache": cache, "datasets": datasets, "published": published})
 
 
 def output_problems(spec: CampaignSpec, results_source: str = "results") -> list[str]:

@@ -1,0 +1,76 @@
+"""Published figures beside a campaign's own medians: the report's table and `slamrun stats`' lines. The
+campaign's figures are its evaluated runs on ordinary views, per method (its registry name), sequence and metric;
+a published figure is matched by method, sequence (slamrun.results.published.same_sequence) and metric, shown with
+its protocol and where it differs from the campaign's, and never enters a test."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from slamrun.analysis.load import evaluated
+from slamrun.analysis.robustness import baseline
+from slamrun.errors import SlamRunError
+from slamrun.results.published import Beside, Published, built_in, read_table, same_sequence
+
+
+def figures(files: list[Path] | list[str] = ()) -> tuple[list[Published], list[str]]:
+    """The built-in published figures and those of `files` (a lab's CSVs), and why a file could not be read (a
+    file named by the spec when it ran and moved since: the rest are still shown)."""
+    out, problems = built_in(), []
+    for f in files:
+        try:
+            out += read_table(Path(f))
+        except SlamRunError as exc:
+            problems.append(str(exc))
+    return out, problems
+
+
+def _alignment(settings) -> str:
+    try:
+        found = json.loads(settings).get("alignment") if isinstance(settings, str) else None
+    except (ValueError, AttributeError):
+        found = None
+    return found if isinstance(found, str) and found else "sim3"
+
+
+def beside(df: pd.DataFrame, published: list[Published]) -> pd.DataFrame:
+    """One row per published figure a method of the campaign has runs for (same method, sequence, metric): the
+    campaign's median over its evaluated runs and their count beside the published value, its protocol and what
+    differs (the alignment). Empty where nothing matches."""
+    if df.empty or "sequence" not in df.columns:
+        return pd.DataFrame()
+    runs = evaluated(baseline(df), [])
+    names = runs["method_name"] if "method_name" in runs.columns else runs["method"]
+    rows = []
+    for p in published:
+        if p.metric not in runs.columns:
+            continue
+        hit = runs[(names == p.method) & runs["sequence"].astype(str).map(lambda s, p=p: same_sequence(s, p.sequence))]
+        for (method, sequence), g in hit.groupby(["method", "sequence"], sort=True):
+            values = pd.to_numeric(g[p.metric], errors="coerce").to_numpy(float)
+            values = values[np.isfinite(values)]
+            if not values.size:
+                continue
+            alignment = _alignment(g["eval_settings"].iloc[0]) if "eval_settings" in g.columns else "sim3"
+            rows.append(Beside(str(method), str(sequence), p.metric, float(np.median(values)), values.size,
+                               alignment, p).row())  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def spec_files(results: Path) -> list[str]:
+    """The `published:` files the spec a results folder ran had (none where the folder has no spec)."""
+    import yaml
+
+    from slamrun.engine.spec import RecordedSpec
+    from slamrun.results.files import CampaignFiles
+
+    path = CampaignFiles(Path(results) if Path(results).is_dir() else Path(results).parent).spec
+    try:
+        spec = RecordedSpec.read(yaml.safe_load(path.read_text()))
+    except (OSError, yaml.YAMLError):
+        return []
+    return list(spec.published) if spec else []
