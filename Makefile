@@ -22,7 +22,7 @@ $(VENV)/.installed: pyproject.toml setup.py slamrun/core/_tumparse.c
 	touch $@
 
 $(VENV)/.installed-dev: $(VENV)/.installed
-	$(BIN)/python -m pip install -q -e '.[dev]'
+	$(BIN)/python -m pip install -q --no-warn-conflicts -e '.[dev]'  # imagecorruptions is there without its deps
 	touch $@
 
 campaign: install

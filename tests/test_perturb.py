@@ -364,3 +364,19 @@ def test_the_plan_states_what_corrupting_the_frames_costs(tmp_path, capsys):
     assert d.perturbed_cpu_s == pytest.approx(one_view)  # the backward view links the forward's frames
     assert main(["plan", str(spec)]) == 0
     assert "CPU-minutes to corrupt their frames" in capsys.readouterr().out
+
+
+def test_imagenet_c_on_frames_under_32_pixels_is_refused_before_anything_runs(tmp_path):
+    """The published corruptions are defined on frames of 32 pixels a side or more: a campaign on smaller frames
+    was refused by every view's preparation (each run an infrastructure failure); now before it starts."""
+    from slamrun.engine.campaign import check_sequences
+    from slamrun.errors import DatasetError
+
+    generate(tmp_path / "data" / "tiny", frames=12, seed=1, size=(40, 24))
+    spec = {"name": "p", "results": str(tmp_path / "results"), "cache": str(tmp_path / "cache"),
+            "datasets": [{"name": "synth", "path": str(tmp_path / "data"), "sequences": ["tiny"]}],
+            "methods": [{"name": "reference_vo"}], "perturbations": [{"kind": "fog", "severity": [1]}]}  # fmt: skip
+    path = tmp_path / "spec.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    with pytest.raises(DatasetError, match=r"tiny: ImageNet-C's fog is defined on frames of 32 pixels a side or more"):
+        check_sequences(load_spec(path))

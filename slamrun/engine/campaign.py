@@ -111,6 +111,7 @@ def check_sequences(spec: CampaignSpec, skip_ungenerated: bool = False) -> list[
             try:
                 sequence = open_sequence(folder, ds.layout)
                 warnings += _drops_nothing(spec, ds, seq, sequence.n_frames)
+                problems += _too_small(spec, ds, folder, sequence)
                 if spec.evaluate:
                     if sequence.groundtruth_path is None:
                         warnings.append(
@@ -125,6 +126,21 @@ def check_sequences(spec: CampaignSpec, skip_ungenerated: bool = False) -> list[
     if problems:
         raise DatasetError(f"{len(problems)} sequence(s) cannot be used:\n" + "\n".join(problems))
     return warnings
+
+
+def _too_small(spec: CampaignSpec, ds, folder, sequence) -> list[str]:
+    """ImageNet-C's corruptions on frames under 32 pixels a side (where the published code refuses them)."""
+    from slamrun.datasets.perturb import IMAGENET_C
+
+    width, height = sequence.camera.camera.width, sequence.camera.camera.height  # the decoded frame's
+    if min(width, height) >= 32:
+        return []
+    names = sorted({p.kind.removeprefix(IMAGENET_C) for p in perturbations(spec, ds) if p.kind.startswith(IMAGENET_C)})
+    return [
+        f"{folder}: ImageNet-C's {name} is defined on frames of 32 pixels a side or more, and its frames are "
+        f"{width}x{height}: leave it out of this dataset's perturbations"
+        for name in names
+    ]
 
 
 def _drops_nothing(spec: CampaignSpec, ds, name: str, n_frames: int) -> list[str]:
