@@ -44,12 +44,15 @@ def beside(df: pd.DataFrame, published: list[Published]) -> pd.DataFrame:
     if df.empty or "sequence" not in df.columns:
         return pd.DataFrame()
     runs = evaluated(baseline(df), [])
+    if runs.empty:
+        return pd.DataFrame()
     names = runs["method_name"] if "method_name" in runs.columns else runs["method"]
     rows = []
     for p in published:
         if p.metric not in runs.columns:
             continue
-        hit = runs[(names == p.method) & runs["sequence"].astype(str).map(lambda s, p=p: same_sequence(s, p.sequence))]
+        same = np.array([same_sequence(str(s), p.sequence) for s in runs["sequence"]], dtype=bool)
+        hit = runs[(names == p.method).to_numpy(bool) & same]
         for (method, sequence), g in hit.groupby(["method", "sequence"], sort=True):
             values = pd.to_numeric(g[p.metric], errors="coerce").to_numpy(float)
             values = values[np.isfinite(values)]
