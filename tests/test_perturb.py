@@ -380,3 +380,35 @@ def test_imagenet_c_on_frames_under_32_pixels_is_refused_before_anything_runs(tm
     path.write_text(yaml.safe_dump(spec))
     with pytest.raises(DatasetError, match=r"tiny: ImageNet-C's fog is defined on frames of 32 pixels a side or more"):
         check_sequences(load_spec(path))
+
+
+def test_fixed_draws_give_every_frame_the_first_frames_random_parts(room, tmp_path):
+    """`draws: fixed`: a fog that stays (the first frame's haze on every frame), the same noise pattern; per frame by
+    default. A condition of its own (`imagenet_c.fog@fixed`, folders `-fixed`)."""
+    from slamrun.datasets.corruptions import corrupt, draws
+
+    fixed = Perturbation("imagenet_c.fog", 3.0, fixed=True)
+    base = prepare(room, FORWARD, Profile.native, tmp_path)
+    fw = prepare(room, FORWARD, Profile.native, tmp_path, perturbation=fixed)
+    bw = prepare(room, BACKWARD, Profile.native, tmp_path, perturbation=fixed)
+    assert fw.root.name.split("-imagenet_c.fog-3-fixed-")[0].endswith("native")
+    n = fw.n_frames
+    for i in (0, 9, n - 1):
+        assert np.array_equal(_frame(fw, i), corrupt(_frame(base, i), "fog", 3, draws(0, "room", "fog", 3, 0)))
+        assert np.array_equal(_frame(bw, n - 1 - i), _frame(fw, i))
+    noise = Perturbation("gaussian_noise", 20.0, fixed=True)
+    flat = np.full_like(_frame(base, 5), 128)
+    assert np.array_equal(perturb_frame(flat, noise, "room", 3), perturb_frame(flat, noise, "room", 17))
+    per_frame = Perturbation("gaussian_noise", 20.0)
+    assert not np.array_equal(perturb_frame(flat, per_frame, "room", 3), perturb_frame(flat, per_frame, "room", 17))
+    assert Perturbation.named("imagenet_c.fog@burst:3/10@fixed", 3.0) == Perturbation(
+        "imagenet_c.fog", 3.0, schedule="burst:3/10", fixed=True
+    )
+
+
+def test_fixed_draws_need_a_random_part(tmp_path):
+    with pytest.raises(SlamRunError, match="contrast has no random part: `draws: fixed` changes nothing"):
+        load_spec(_spec(tmp_path, perturbations=[{"kind": "contrast", "severity": [2], "draws": "fixed"}]))
+    spec = load_spec(_spec(tmp_path, perturbations=[{"kind": "fog", "severity": [2], "draws": "fixed"}]))
+    names = {r.perturbation.name for r in plan(spec)}
+    assert names == {"none", "imagenet_c.fog@fixed"}

@@ -10,7 +10,9 @@ A schedule makes a perturbation come and go over the sequence's frames (by their
 directions hold the same frames): `all` (every frame, the default), `burst:N/M` (the last N frames of every M: a
 method starts on ordinary frames, meets N bad ones, then M - N good ones), `ramp` (from the ordinary frame at the
 first to the level at the last). A burst frame is the static view's frame; a scheduled perturbation is a condition of
-its own in the results (`perturbation` `gaussian_noise@burst:3/10`).
+its own in the results (`perturbation` `gaussian_noise@burst:3/10`). The random parts (noise, a blur's angle,
+ImageNet-C's haze, flakes, frost crop, displacements) are drawn per frame, or `fixed`: the draws of the sequence's
+first frame on every frame (a fog that stays; `fog@fixed`).
 """
 
 from __future__ import annotations
@@ -152,6 +154,14 @@ _BURST = re.compile(r"burst:(\d+)/(\d+)$")
 UNSCHEDULED = {"resolution": "a view has one camera", "frame_drop": "a view has one frame rate"}
 
 
+FIXED = "fixed"
+RANDOM = ("gaussian_noise", "motion_blur") + tuple(
+    IMAGENET_C + n
+    for n in ("gaussian_noise", "shot_noise", "impulse_noise", "glass_blur", "motion_blur", "snow", "frost", "fog",
+              "elastic_transform")
+)  # fmt: skip  # the kinds with random parts: what `draws: fixed` applies to
+
+
 def schedule_problem(kind: str, schedule: str) -> str | None:
     """Why `schedule` cannot apply to `kind`, or None."""
     if schedule == ALL:
@@ -178,10 +188,14 @@ def file_tag(name: str) -> str:
 
 def title_of(name: str) -> str:
     """A condition as a heading says it: `gaussian noise`, `fog (ImageNet-C)`, `gaussian noise in bursts of 3
-    frames every 10`."""
-    kind, _, schedule = name.partition("@")
-    words = kind.removeprefix(IMAGENET_C).replace("_", " ") + (" (ImageNet-C)" if kind.startswith(IMAGENET_C) else "")
-    return words + _schedule_words(schedule or ALL).replace(",", "", 1)
+    frames every 10`, `fog (ImageNet-C), the same draws on every frame`."""
+    p = Perturbation.named(name, None)
+    words = p.kind.removeprefix(IMAGENET_C).replace("_", " ") + (
+        " (ImageNet-C)" if p.kind.startswith(IMAGENET_C) else ""
+    )
+    return (
+        words + _schedule_words(p.schedule).replace(",", "", 1) + (", the same draws on every frame" if p.fixed else "")
+    )
 
 
 def strength(schedule: str, index: int, n_frames: int) -> float:
@@ -203,19 +217,24 @@ class Perturbation:
     level: float | None = None
     seed: int = 0
     schedule: str = ALL
+    fixed: bool = False  # the first frame's random draws on every frame
 
     @property
     def name(self) -> str:
-        """The condition's name in the ledger and results: the kind, with its schedule where it has one."""
-        return self.kind if self.schedule == ALL else f"{self.kind}@{self.schedule}"
+        """The condition's name in the ledger and results: the kind, with its schedule and `fixed` where it has them
+        (`gaussian_noise@burst:3/10@fixed`)."""
+        return "@".join(
+            [self.kind] + ([self.schedule] if self.schedule != ALL else []) + ([FIXED] if self.fixed else [])
+        )
 
     @classmethod
     def named(cls, name: str, level: float | None, seed: int = 0) -> Perturbation:
         """The perturbation a results row names (`name`: Perturbation.name)."""
         if name == NONE:
             return cls()
-        kind, _, schedule = name.partition("@")
-        return cls(kind, level, seed, schedule or ALL)
+        kind, *parts = name.split("@")
+        schedule = next((x for x in parts if x != FIXED), ALL)
+        return cls(kind, level, seed, schedule, FIXED in parts)
 
     @property
     def is_none(self) -> bool:
@@ -276,15 +295,17 @@ def perturb_frame(img: np.ndarray, p: Perturbation, sequence: str, index: int, n
         from slamrun.datasets.corruptions import corrupt, draws
 
         name = p.kind[len(IMAGENET_C) :]
-        return corrupt(img, name, int(level), draws(p.seed, sequence, name, int(level), index))
+        return corrupt(img, name, int(level), draws(p.seed, sequence, name, int(level), 0 if p.fixed else index))
     top = float(np.iinfo(img.dtype).max) if img.dtype.kind in "ui" else 1.0
     if p.kind == "gaussian_noise":  # the random parts are the static level's (p's), whatever the share
-        noise = _rng(p, sequence, index).standard_normal(img.shape, dtype=np.float32) * (level * top / 255.0)
+        noise = _rng(p, sequence, 0 if p.fixed else index).standard_normal(img.shape, dtype=np.float32)
+        noise *= level * top / 255.0
         return _clipped(img.astype(np.float32) + noise, img.dtype, top)
     if p.kind == "exposure":
         return _clipped(img.astype(np.float32) * level, img.dtype, top)
     if p.kind == "motion_blur":
-        return cv2.filter2D(img, -1, _line_kernel(int(level), _rng(p, sequence, index).uniform(0.0, 180.0)))
+        angle = _rng(p, sequence, 0 if p.fixed else index).uniform(0.0, 180.0)
+        return cv2.filter2D(img, -1, _line_kernel(int(level), angle))
     if p.kind == "resolution":
         h, w = img.shape[:2]
         return cv2.resize(img, scaled_size(w, h, p), interpolation=cv2.INTER_AREA)
@@ -335,7 +356,8 @@ def describe(p: Perturbation) -> str:
     if p.is_none:
         return "none (the baseline)"
     kind = KINDS[p.kind]
-    return f"{title_of(p.kind)}, {kind.parameter} {level_text(p.level)}" + _schedule_words(p.schedule)
+    fixed = ", the same draws on every frame" if p.fixed else ""
+    return f"{title_of(p.kind)}, {kind.parameter} {level_text(p.level)}" + _schedule_words(p.schedule) + fixed
 
 
 def _schedule_words(schedule: str) -> str:

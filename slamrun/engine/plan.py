@@ -123,7 +123,9 @@ def perturbations(spec: CampaignSpec, ds: DatasetSpec) -> list[Perturbation]:
     """The baseline, then each level of the dataset's perturbations (the campaign's unless it names its own)."""
     chosen = spec.perturbations if ds.perturbations is None else ds.perturbations
     seed = spec.perturbation_seed
-    levels = [Perturbation(p.perturbation_kind, lv, seed, p.schedule) for p in chosen for lv in p.levels]
+    levels = [
+        Perturbation(p.perturbation_kind, lv, seed, p.schedule, p.draws == "fixed") for p in chosen for lv in p.levels
+    ]
     return [BASELINE, *dict.fromkeys(levels)]
 
 

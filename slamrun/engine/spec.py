@@ -117,6 +117,11 @@ class PerturbationSpec(Strict):
     severity: list[int] | None = Field(
         None, description="ImageNet-C's corruptions (fog, snow, ..., gaussian_noise, motion_blur): severity 1-5."
     )
+    draws: Literal["per_frame", "fixed"] = Field(
+        "per_frame",
+        description="The random parts (noise, a blur's angle, ImageNet-C's haze, flakes, frost): drawn per frame, or "
+        "fixed (the first frame's on every frame: a fog that stays). README, Robustness.",
+    )
     schedule: str = Field(
         "all",
         description="Which frames: all; burst:N/M (the last N of every M frames of the sequence); ramp (from none "
@@ -161,6 +166,10 @@ class PerturbationSpec(Strict):
             raise ValueError(f"{self.kind}: the levels of {kind.parameter} repeat")
         if (why := schedule_problem(self.kind, self.schedule)) is not None:
             raise ValueError(why)
+        from slamrun.datasets.perturb import RANDOM
+
+        if self.draws == "fixed" and self.perturbation_kind not in RANDOM:
+            raise ValueError(f"{self.kind} has no random part: `draws: fixed` changes nothing (leave it out)")
         if self.perturbation_kind == IMAGENET_C + "frost":
             from slamrun.datasets.corruptions import frost_pictures
 
