@@ -5,13 +5,13 @@ its protocol and where it differs from the campaign's, and never enters a test."
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
 from slamrun.analysis.load import evaluated
+from slamrun.analysis.paths import run_alignment
 from slamrun.analysis.robustness import baseline
 from slamrun.errors import SlamRunError
 from slamrun.results.published import Beside, Published, built_in, read_table, same_sequence
@@ -27,14 +27,6 @@ def figures(files: list[Path] | list[str] = ()) -> tuple[list[Published], list[s
         except SlamRunError as exc:
             problems.append(str(exc))
     return out, problems
-
-
-def _alignment(settings) -> str:
-    try:
-        found = json.loads(settings).get("alignment") if isinstance(settings, str) else None
-    except (ValueError, AttributeError):
-        found = None
-    return found if isinstance(found, str) and found else "sim3"
 
 
 def beside(df: pd.DataFrame, published: list[Published]) -> pd.DataFrame:
@@ -58,7 +50,7 @@ def beside(df: pd.DataFrame, published: list[Published]) -> pd.DataFrame:
             values = values[np.isfinite(values)]
             if not values.size:
                 continue
-            alignment = _alignment(g["eval_settings"].iloc[0]) if "eval_settings" in g.columns else "sim3"
+            alignment = run_alignment(g["eval_settings"].iloc[0]) if "eval_settings" in g.columns else "sim3"
             rows.append(Beside(str(method), str(sequence), p.metric, float(np.median(values)), values.size,
                                alignment, p).row())  # fmt: skip
     return pd.DataFrame(rows)
