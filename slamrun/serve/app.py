@@ -137,6 +137,11 @@ class Hub:
         return figure
 
 
+HUB = web.AppKey("hub", Hub)  # the application's state, typed (aiohttp's AppKey)
+STREAMS = web.AppKey("streams", int)  # event streams open now
+CLOSING = web.AppKey("closing", asyncio.Event)  # set at shutdown: every event stream ends at once
+
+
 def make_app(
     root: Path,
     token: str | None = None,
@@ -151,12 +156,12 @@ def make_app(
     hub = Hub(Path(root), interval_s)
     middlewares = [_guard(token, port, host), _one_line_errors] + ([_answering(watch)] if watch is not None else [])
     app = web.Application(middlewares=middlewares, client_max_size=1024)
-    app["hub"] = hub
-    app["streams"] = 0
-    app["closing"] = asyncio.Event()  # set at shutdown: every event stream ends at once
+    app[HUB] = hub
+    app[STREAMS] = 0
+    app[CLOSING] = asyncio.Event()
 
     async def closing(app: web.Application) -> None:
-        app["closing"].set()
+        app[CLOSING].set()
 
     app.on_shutdown.append(closing)
     app.on_response_prepare.append(_secure)
@@ -273,14 +278,14 @@ def _html(title: str, body_attrs: str, main: str = "<p>loading...</p>", data: st
 
 
 async def index(request: web.Request) -> web.Response:
-    found = request.app["hub"].campaigns()
-    if len(found) == 1 and CampaignFiles(request.app["hub"].root).ledger.is_file():
+    found = request.app[HUB].campaigns()
+    if len(found) == 1 and CampaignFiles(request.app[HUB].root).ledger.is_file():
         raise web.HTTPFound(f"/c/{next(iter(found))}/")
     return web.Response(text=_html("slamrun: campaigns", "data-view=campaigns"), content_type="text/html")
 
 
 async def list_campaigns(request: web.Request) -> web.Response:
-    hub: Hub = request.app["hub"]
+    hub: Hub = request.app[HUB]
     listed = []
     for name in hub.campaigns():
         try:
@@ -324,10 +329,10 @@ async def page(request: web.Request) -> web.Response:
     """The campaign's page with its state rendered on the server (curl and a screenshot see it) and embedded for
     the script, whose first render then needs no request."""
     name = request.match_info["name"]
-    request.app["hub"].folder(name)
+    request.app[HUB].folder(name)
     attrs = f'data-view=campaign data-campaign="{html.escape(name)}"'
     try:
-        body, _ = await request.app["hub"].state(name)
+        body, _ = await request.app[HUB].state(name)
     except SlamRunError as exc:  # a damaged ledger, one being replaced: said, and the script tries again
         main = f'<p class="problem">{html.escape(str(exc))}</p><p>loading...</p>'
         return web.Response(text=_html(f"slamrun: {name}", attrs, main), content_type="text/html")
@@ -344,7 +349,7 @@ async def state(request: web.Request) -> web.Response:
 
 async def _state_or_error(request: web.Request) -> tuple[bytes, int]:
     try:
-        return await request.app["hub"].state(request.match_info["name"])
+        return await request.app[HUB].state(request.match_info["name"])
     except SlamRunError as exc:  # a damaged ledger, one being replaced
         raise web.HTTPServiceUnavailable(text=f"{exc}\n") from None
 
@@ -352,12 +357,12 @@ async def _state_or_error(request: web.Request) -> tuple[bytes, int]:
 async def events(request: web.Request) -> web.StreamResponse:
     """Server-sent events: `state` with the snapshot whenever it changes, a comment line as a heartbeat."""
     app = request.app
-    if app["streams"] >= MAX_STREAMS:
+    if app[STREAMS] >= MAX_STREAMS:
         raise web.HTTPServiceUnavailable(text=f"over {MAX_STREAMS} viewers stream now; poll api/state instead\n")
-    hub: Hub = app["hub"]
+    hub: Hub = app[HUB]
     hub.folder(request.match_info["name"])
     response = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-cache"})
-    app["streams"] += 1
+    app[STREAMS] += 1
     try:
         await response.prepare(request)
         sent, quiet_since = -1, time.monotonic()
@@ -374,13 +379,13 @@ async def events(request: web.Request) -> web.StreamResponse:
                 await response.write(b": still here\n\n")
                 quiet_since = time.monotonic()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(app["closing"].wait(), timeout=hub.interval_s)
-            if app["closing"].is_set():
+                await asyncio.wait_for(app[CLOSING].wait(), timeout=hub.interval_s)
+            if app[CLOSING].is_set():
                 break
     except ConnectionResetError:  # the viewer went away
         pass
     finally:
-        app["streams"] -= 1
+        app[STREAMS] -= 1
     return response
 
 
@@ -389,7 +394,7 @@ async def runs(request: web.Request) -> web.Response:
     sequence; at most MAX_RUNS_LISTED."""
     from slamrun.engine.ledger import Ledger
 
-    folder = request.app["hub"].folder(request.match_info["name"])
+    folder = request.app[HUB].folder(request.match_info["name"])
     sequence = request.query.get("sequence")
     cols = ("key", "method", "dataset", "sequence", "direction", "trial", *MAIN_METRICS)
 
@@ -412,14 +417,14 @@ async def runs(request: web.Request) -> web.Response:
 async def path(request: web.Request) -> web.Response:
     key = request.query.get("key", "")
     try:
-        figure = await request.app["hub"].path(request.match_info["name"], key)
+        figure = await request.app[HUB].path(request.match_info["name"], key)
     except (SlamRunError, OSError, ValueError) as exc:
         raise web.HTTPNotFound(text=f"{exc}\n") from None
     return web.json_response(figure, dumps=jsonio.dumps)
 
 
 async def log(request: web.Request) -> web.Response:
-    folder = request.app["hub"].folder(request.match_info["name"])
+    folder = request.app[HUB].folder(request.match_info["name"])
     key = request.query.get("key", "")
     text = await asyncio.to_thread(runview.log_tail, folder, key)
     if text is None:
@@ -431,7 +436,7 @@ async def files(request: web.Request) -> web.StreamResponse:
     """A file of the campaign's folder, opened without a check-then-open gap (folders.open_served). What slamrun
     wrote (report/, results, the resolved spec) is served with its type; what a method wrote (anything under
     runs/) as plain text when it is text and as a download otherwise, never as a page of this server's origin."""
-    folder = request.app["hub"].folder(request.match_info["name"])
+    folder = request.app[HUB].folder(request.match_info["name"])
     tail = request.match_info["tail"]
     if tail.split("/", 1)[0] not in SERVED_TOP:
         raise web.HTTPNotFound(text="no such file here\n")
