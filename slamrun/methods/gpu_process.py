@@ -1,11 +1,13 @@
 """What the GPU methods' own processes (DPVO's, DROID-SLAM's) share: their settings read over their defaults, the
-view's frames and pinhole intrinsics, the network's note, the TUM output. The standard library and NumPy only: each
-image copies this module beside its process (its Dockerfile: COPY methods/gpu_process.py)."""
+view's frames and pinhole intrinsics, PyTorch on CUDA (or why not), the network's note, the TUM output. The standard
+library and NumPy only (PyTorch imported when asked for): each image copies this module beside its process (its
+Dockerfile: COPY methods/gpu_process.py)."""
 
 from __future__ import annotations
 
 import hashlib
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +55,25 @@ def frames(images: Path, times_file: Path, stride: int) -> tuple[list[Path], np.
 def intrinsics(camera: Path) -> tuple[np.ndarray, int, int]:
     cam = json.loads(camera.read_text())
     return np.array([cam["fx"], cam["fy"], cam["cx"], cam["cy"]], dtype=np.float32), cam["width"], cam["height"]
+
+
+def cuda_torch(name: str, title: str, weights: Path, seed: int | None):
+    """PyTorch with a CUDA device, seeded where `seed` is given: the module, or the process's exit code with its line
+    on stderr (1: the weights file or PyTorch missing; 3: no GPU, `NO GPU: <title> runs on CUDA only ...`)."""
+    if not weights.is_file():
+        print(f"{name}: weights {weights} not found", file=sys.stderr)
+        return 1
+    try:
+        import torch
+    except ImportError as exc:
+        print(f"{name}: PyTorch cannot be imported in {sys.executable} ({exc})", file=sys.stderr)
+        return 1
+    if not torch.cuda.is_available():
+        print(f"NO GPU: {title} runs on CUDA only and torch.cuda.is_available() is False", file=sys.stderr)
+        return 3
+    if seed is not None:
+        torch.manual_seed(seed)
+    return torch
 
 
 def weights_note(build: Path, weights: Path) -> str:

@@ -27,7 +27,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from slamrun.methods.gpu_process import frames, intrinsics, settings_over, weights_note, write_tum
+from slamrun.methods.gpu_process import cuda_torch, frames, intrinsics, settings_over, weights_note, write_tum
 
 # dpvo/config.py's settings (yacs is not needed for them): the ones slamrun's parameters set are overridden
 CONFIG = {
@@ -107,20 +107,10 @@ def run(argv: list[str] | None = None) -> int:
     except (OSError, ValueError, KeyError) as exc:
         print(f"dpvo: {exc}", file=sys.stderr)
         return 1
-    if not args.weights.is_file():
-        print(f"dpvo: weights {args.weights} not found", file=sys.stderr)
-        return 1
     sys.path.insert(0, str(import_root(args.build)))
-    try:
-        import torch
-    except ImportError as exc:
-        print(f"dpvo: PyTorch cannot be imported in {sys.executable} ({exc})", file=sys.stderr)
-        return 1
-    if not torch.cuda.is_available():
-        print("NO GPU: DPVO runs on CUDA only and torch.cuda.is_available() is False", file=sys.stderr)
-        return 3
-    if runner["seed"] is not None:
-        torch.manual_seed(runner["seed"])
+    torch = cuda_torch("dpvo", "DPVO", args.weights, runner["seed"])
+    if isinstance(torch, int):
+        return torch
     from dpvo.dpvo import DPVO  # DPVO's CUDA code: builds a CUDA tensor at import
 
     print(

@@ -30,7 +30,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from slamrun.methods.gpu_process import frames, intrinsics, settings_over, weights_note, write_tum
+from slamrun.methods.gpu_process import cuda_torch, frames, intrinsics, settings_over, weights_note, write_tum
 
 # demo.py's options and defaults (the ones slamrun's parameters set; tests compare them with demo.py)
 DEMO = {
@@ -137,20 +137,10 @@ def run(argv: list[str] | None = None) -> int:
     if not paths:
         print(f"droid_slam: {args.images}: no frames", file=sys.stderr)
         return 1
-    if not args.weights.is_file():
-        print(f"droid_slam: weights {args.weights} not found", file=sys.stderr)
-        return 1
     sys.path[:0] = search_path(args.build)
-    try:
-        import torch
-    except ImportError as exc:
-        print(f"droid_slam: PyTorch cannot be imported in {sys.executable} ({exc})", file=sys.stderr)
-        return 1
-    if not torch.cuda.is_available():
-        print("NO GPU: DROID-SLAM runs on CUDA only and torch.cuda.is_available() is False", file=sys.stderr)
-        return 3
-    if values["seed"] is not None:
-        torch.manual_seed(values["seed"])
+    torch = cuda_torch("droid_slam", "DROID-SLAM", args.weights, values["seed"])
+    if isinstance(torch, int):
+        return torch
     from droid import Droid  # DROID's modules: lietorch, droid_backends
 
     _, _, h, w = resized(height, width)
