@@ -30,7 +30,7 @@ def test_the_logs_are_dpvos_own_files(shared_data):
     """Byte for byte the logs of the pinned archive in ../shared/upstream."""
     archive = shared_data.parent / "upstream" / ARCHIVE
     if not archive.is_file():
-        pytest.skip(f"{archive} is not here")
+        pytest.skip(reason=f"{archive} not found: the pinned upstream archives live in shared/upstream beside the repo")
     manifest = yaml.safe_load((LOGS / "manifest.yaml").read_text())
     with tarfile.open(archive) as tar:
         for log in manifest["logs"]:
