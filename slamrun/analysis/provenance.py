@@ -79,6 +79,14 @@ def provenance(results: Path, df: pd.DataFrame) -> Provenance:
     )
 
 
+def recorded_spec(results: Path) -> RecordedSpec | None:
+    """The spec a results folder ran, as the report reads it (the ledger's record, else spec.resolved.yaml, bounded);
+    None where neither can be read."""
+    results = Path(results)
+    recorded, _, _ = _spec(results, _ledger_meta(results).get("spec"))
+    return RecordedSpec.read(recorded)
+
+
 def run_commits(df: pd.DataFrame) -> str:
     """The slamrun commits the finished runs were made with, each with its count, and a warning where there are
     several (figures made by different code); runs recorded before commits were kept are counted apart."""

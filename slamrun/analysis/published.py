@@ -57,15 +57,8 @@ def beside(df: pd.DataFrame, published: list[Published]) -> pd.DataFrame:
 
 
 def spec_files(results: Path) -> list[str]:
-    """The `published:` files the spec a results folder ran had (none where the folder has no spec)."""
-    import yaml
+    """The `published:` files the spec a results folder (or the folder of its results table) ran had."""
+    from slamrun.analysis.provenance import recorded_spec
 
-    from slamrun.engine.spec import RecordedSpec
-    from slamrun.results.files import CampaignFiles
-
-    path = CampaignFiles(Path(results) if Path(results).is_dir() else Path(results).parent).spec
-    try:
-        spec = RecordedSpec.read(yaml.safe_load(path.read_text()))
-    except (OSError, yaml.YAMLError):
-        return []
+    spec = recorded_spec(Path(results) if Path(results).is_dir() else Path(results).parent)
     return list(spec.published) if spec else []

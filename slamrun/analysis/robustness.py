@@ -226,16 +226,25 @@ def paired_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
 def summary_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
     """Per method, for each kind: its area (the mean of its levels' areas, each level weighing alike) and the
     level at which it breaks down (breakdown_table)."""
-    paired, rates = paired_table(df, metric), success_rates(df)
-    broken = breakdown_table(rates).set_index("method") if not rates.empty else pd.DataFrame()
+    paired, broken = paired_table(df, metric), breakdown_levels(success_rates(df))
     out: dict[str, dict] = {}
     for kind in kinds(df):
         areas = paired[paired["perturbation"] == kind].groupby("method")["area"].mean()
         for method in sorted(set(df["method"])):
             row = out.setdefault(method, {"method": method})
             row[f"{kind} area"] = float(areas.get(method, math.nan))
-            row[f"{kind} breakdown"] = broken[_column(kind)].get(method, "") if _column(kind) in broken else ""
+            row[f"{kind} breakdown"] = broken.get((kind, method), "")
     return pd.DataFrame(list(out.values()))
+
+
+def breakdown_levels(rates: pd.DataFrame) -> dict[tuple[str, str], str]:
+    """breakdown_table's levels by (kind, method)."""
+    table = breakdown_table(rates)
+    return {
+        (kind, m): level
+        for kind in dict.fromkeys(rates["perturbation"]) if _column(kind) in table
+        for m, level in zip(table["method"], table[_column(kind)], strict=True) if isinstance(level, str)
+    }  # fmt: skip
 
 
 def long_table(df: pd.DataFrame, metric: str, dataset: str = "") -> pd.DataFrame:
@@ -247,9 +256,6 @@ def long_table(df: pd.DataFrame, metric: str, dataset: str = "") -> pd.DataFrame
     out = rates.merge(paired, on=["perturbation", "level", "method"], how="left")
     out.insert(0, "dataset", dataset)
     out["metric"] = metric
-    broken = breakdown_table(rates).set_index("method") if not rates.empty else pd.DataFrame()
-    out["breakdown"] = [
-        broken.at[m, _column(k)] if m in broken.index and _column(k) in broken else ""
-        for k, m in zip(out["perturbation"], out["method"], strict=True)
-    ]  # the method's breakdown level of the kind, on each of its rows
+    broken = breakdown_levels(rates)
+    out["breakdown"] = [broken.get(km, "") for km in zip(out["perturbation"], out["method"], strict=True)]
     return out
