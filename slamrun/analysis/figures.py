@@ -402,8 +402,7 @@ def robustness_figure(
     rates = rates[rates.perturbation == kind]
     names = list(dict.fromkeys(rates.level)) or ["none"]
     metric = main_metric(df)
-    paired = paired_table(df, metric) if metric else pd.DataFrame(columns=["perturbation"])
-    paired = paired[paired.perturbation == kind]
+    paired = paired_table(df, metric, only=kind) if metric else pd.DataFrame(columns=["method"])
     panels = ["success", *(["area", "ratio"] if not paired.empty else []), *metrics]
     cols = min(len(panels), 3)
     rows = math.ceil(len(panels) / cols)

@@ -197,11 +197,11 @@ def area(ratios: np.ndarray, bound: float = AREA_BOUND) -> float:
 PAIRED_COLUMNS = ["perturbation", "level", "method", "pairs", "failed", "without baseline", "median ratio", "area"]
 
 
-def paired_table(df: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """Per kind, level (mildest first) and method: the pairs, how many the method failed, the runs without a
-    baseline figure, the median ratio (failures at infinity: inf when half or more failed) and the area."""
+def paired_table(df: pd.DataFrame, metric: str, only: str | None = None) -> pd.DataFrame:
+    """Per kind (`only` that one), level (mildest first) and method: the pairs, how many the method failed, the runs
+    without a baseline figure, the median ratio (failures at infinity: inf when half or more failed) and the area."""
     rows = []
-    for kind in kinds(df):
+    for kind in [k for k in kinds(df) if only in (None, k)]:
         p = pairs(df, kind, metric)
         for name, _ in series(df, kind)[1:]:
             at = p[p["level"] == name]
