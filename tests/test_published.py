@@ -168,3 +168,13 @@ def test_a_spec_naming_an_unreadable_reference_file_is_refused_before_anything_r
     path.write_text(yaml.safe_dump(spec))
     with pytest.raises(SlamRunError, match=r"published\[0\]: .*missing.csv: published figures: not readable"):
         load_spec(path)
+
+
+def test_stats_refuses_an_unreadable_reference_file_before_printing_anything(tmp_path, capsys):
+    from slamrun.cli import main
+
+    table = tmp_path / "results.csv"
+    pd.DataFrame(_runs("dpvo", "MH_01_easy", [0.05, 0.07])).to_csv(table, index=False)
+    assert main(["stats", str(table), "--published", str(tmp_path / "missing.csv")]) != 0
+    captured = capsys.readouterr()
+    assert "missing.csv: published figures: not readable" in captured.err and captured.out == ""

@@ -66,7 +66,10 @@ def cmd_stats(args) -> int:
     from slamrun.analysis.datasets import dataset_rows, per_dataset_statistics, pooled_json, statistics_json
     from slamrun.analysis.load import load_results
     from slamrun.analysis.robustness import baseline
+    from slamrun.results.published import read_table
 
+    for f in args.published:  # a file named on the command line is an error, checked before anything is computed
+        read_table(f)
     df = dataset_rows(baseline(load_results(args.results)), args.dataset, args.results)  # perturbed: in the report
     per = per_dataset_statistics(df, args.results, args.metrics, level=args.level, adjust=args.adjust, alpha=args.alpha)
     pooled = pooled_json(df)
@@ -90,10 +93,7 @@ def _published_lines(df, results: Path, extra: list[Path]) -> list[str]:
     """Published figures beside the campaign's medians, one line each: never part of the statistics above."""
     from slamrun.analysis.load import by_dataset
     from slamrun.analysis.published import beside, figures, spec_files
-    from slamrun.results.published import read_table
 
-    for f in extra:  # a file named on the command line is checked as the spec's are: an error, not a note
-        read_table(f)
     published, unread = figures([*spec_files(results), *extra])
     lines = [f"published figures left out: {why}" for why in unread]
     for name, part in by_dataset(df).items():
