@@ -125,7 +125,7 @@ def test_the_shared_stages_are_one_text_put_ahead_of_each_recipe_that_names_them
         own = (recipe(name) / "Dockerfile").read_text()
         assert "FROM debian" not in own and "pip install" not in own and "pypi/" not in own  # all of it shared
         assert recipe_text(recipe(name) / "Dockerfile") == shared + "\n" + own
-    for name in ("dso", "reference_vo", "orb_slam3"):
+    for name in ("reference_vo", "dynaslam"):
         assert recipe_text(recipe(name) / "Dockerfile") == (recipe(name) / "Dockerfile").read_text()
     listed = subprocess.run([sys.executable, "-m", "slamrun.cli", "images", "--list"], capture_output=True, text=True)
     line = "dpvo: slamrun/dpvo:latest <- dpvo/image/Dockerfile (+ recipes/torch_cuda/stages.Dockerfile)"

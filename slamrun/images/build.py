@@ -102,14 +102,19 @@ def shared_stages() -> dict[str, Path]:
 
 
 def stage_files(dockerfile: Path) -> list[Path]:
-    """The shared stage files a recipe starts FROM (naming one of their stages that it does not define itself)."""
-    own = dockerfile.read_text()
-    defined = {stage.lower() for _, stage in FROM_RE.findall(own) if stage}
+    """The shared stage files a recipe starts FROM (naming one of their stages that it does not define itself), with
+    the files those stages start FROM in turn, each ahead of the files that need it."""
     shared, parts = shared_stages(), []
-    for base, _ in FROM_RE.findall(own):
-        path = shared.get(base.lower())
-        if path is not None and base.lower() not in defined and path not in parts:
-            parts.append(path)
+
+    def need(text: str) -> None:
+        defined = {stage.lower() for _, stage in FROM_RE.findall(text) if stage}
+        for base, _ in FROM_RE.findall(text):
+            path = shared.get(base.lower())
+            if path is not None and base.lower() not in defined and path not in parts:
+                need(path.read_text())
+                parts.append(path)
+
+    need(dockerfile.read_text())
     return parts
 
 
