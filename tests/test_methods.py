@@ -25,6 +25,7 @@ from slamrun.methods.base import Method
 from tests.conftest import recipe
 
 ROOT = Path(__file__).resolve().parents[1]
+RECIPES = Path(slamrun.methods.__file__).parent / "recipes"
 # upstream commits, as methods.md pins them
 COMMITS = {
     "orb_slam2": "f2e6f51",
@@ -369,7 +370,9 @@ def test_dockerfile_pins_commit_and_portable_flags(name):
         var = name.upper()
         assert re.search(rf"^ARG {var}_REPO=https://github\.com/", text, re.M), f"{name}: no ARG {var}_REPO"
         assert re.search(rf"^ARG {var}_COMMIT={COMMITS[name]}\s*$", text, re.M), f"{name}: commit not pinned"
-    assert "portable-march.sh" in text  # every upstream CMakeLists says -march=native
+    # every upstream CMakeLists says -march=native: replaced by portable-march.sh, itself or through prepare-source.sh
+    assert "portable-march.sh" in text or "prepare-source.sh" in text
+    assert "portable-march.sh" in (RECIPES / "common" / "prepare-source.sh").read_text()
     for f in docker.rglob("*"):
         if f.is_file():
             assert "-march=native" not in f.read_text(errors="ignore").replace("s/-march=native", ""), f

@@ -9,9 +9,12 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 from slamrun.datasets.view import PreparedView
+
+if TYPE_CHECKING:
+    from slamrun.backends.monitor import ResourceSeries
 
 
 @dataclass(frozen=True)
@@ -125,6 +128,31 @@ def supervise(
             return False, False, exceeded
         if wait_step(remaining):  # ended: what it left counts too
             return False, False, output.check(force=True) if output is not None else None
+
+
+def supervised_result(
+    req: ExecRequest,
+    series: ResourceSeries,
+    exit_code: int | None,
+    wall_s: float,
+    stopped: tuple[bool, bool, str | None],
+    log_truncated: bool,
+    oom: bool = False,
+) -> ExecResult:
+    """The result of a run `supervise` waited for (`stopped`: what it returned), its resource samples written to
+    req.resources_path and summed up; out of memory only where neither its timeout nor a cancel stopped it."""
+    timed_out, cancelled, exceeded = stopped
+    series.write_csv(req.resources_path)
+    return ExecResult(
+        exit_code=exit_code,
+        wall_s=wall_s,
+        timed_out=timed_out,
+        cancelled=cancelled,
+        oom=oom and not timed_out and not cancelled,
+        log_truncated=log_truncated,
+        resources=series.summary(wall_s, req.view.n_frames),
+        output_exceeded=exceeded,
+    )
 
 
 def folder_bytes(root: Path) -> int:

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from slamrun.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise
+from slamrun.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise, supervised_result
 from slamrun.backends.logcap import CappedLog, Tap
 from slamrun.backends.monitor import Gpu, ResourceSeries, RunQueueWait, Sample, tree_pids
 from slamrun.datasets.view import PreparedView
@@ -303,17 +303,7 @@ class DockerBackend(Defaults):
         self._read_log_to_end(container, pump, tap, log)
         log.close()
         oom = self.out_of_memory(container, exit_code, req)
-        series.write_csv(req.resources_path)
-        return ExecResult(
-            exit_code=exit_code,
-            wall_s=wall_s,
-            timed_out=timed_out,
-            cancelled=cancelled,
-            oom=oom and not timed_out and not cancelled,
-            log_truncated=log.truncated,
-            resources=series.summary(wall_s, req.view.n_frames),
-            output_exceeded=exceeded,
-        )
+        return supervised_result(req, series, exit_code, wall_s, (timed_out, cancelled, exceeded), log.truncated, oom)
 
     @staticmethod
     def exit_status(container, timeout_s: float) -> int | None:

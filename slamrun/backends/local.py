@@ -11,7 +11,7 @@ import uuid
 
 import psutil
 
-from slamrun.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise
+from slamrun.backends.base import Defaults, ExecRequest, ExecResult, OutputWatch, supervise, supervised_result
 from slamrun.backends.logcap import CappedLog
 from slamrun.backends.monitor import Gpu, ProcessTreeMonitor, exited
 from slamrun.errors import InfraError
@@ -85,16 +85,7 @@ class LocalBackend(Defaults):
         if not pump.is_alive():
             proc.stdout.close()
         log.close()
-        series.write_csv(req.resources_path)
-        return ExecResult(
-            exit_code=exit_code,
-            wall_s=wall_s,
-            timed_out=timed_out,
-            cancelled=cancelled,
-            log_truncated=log.truncated,
-            resources=series.summary(wall_s, req.view.n_frames),
-            output_exceeded=exceeded,
-        )
+        return supervised_result(req, series, exit_code, wall_s, (timed_out, cancelled, exceeded), log.truncated)
 
 
 def kill_tree(proc: subprocess.Popen, known: list[psutil.Process]) -> None:

@@ -112,7 +112,7 @@ def prepare(
                 tmp,
                 workers,
                 frame_format,
-                whole_mirror(cache_dir, seq, direction, profile, frame_format, perturbation),
+                whole_view(cache_dir, seq, direction.opposite, profile, frame_format, perturbation),
                 perturbation,
             )
             _seal(tmp, build_id)
@@ -131,23 +131,11 @@ def whole_view(
     frame_format: str,
     perturbation: Perturbation = BASELINE,
 ) -> Path | None:
-    """The folder of the view if the cache holds it prepared and whole, else None."""
+    """The folder of the view if the cache holds it prepared and whole, else None. The whole view in the opposite
+    direction (same sequence, profile and perturbation) is this view's mirror: its frames are this view's in reverse
+    order (a perturbed frame depends on its index, not the direction)."""
     root = _latest_generation(Path(cache_dir), view_key(seq, direction, profile, frame_format, perturbation))
     return root if root is not None and verify_view(root) is None else None
-
-
-def whole_mirror(
-    cache_dir: Path,
-    seq: Sequence,
-    direction: Direction,
-    profile: Profile,
-    frame_format: str,
-    perturbation: Perturbation = BASELINE,
-) -> Path | None:
-    """The whole view of the same sequence, profile and perturbation in the other direction, if the cache holds
-    one: its frames are this view's in reverse order (a perturbed frame depends on its index, not the direction)."""
-    other = Direction.backward if direction is Direction.forward else Direction.forward
-    return whole_view(cache_dir, seq, other, profile, frame_format, perturbation)
 
 
 def _link_reversed(mirror: Path, images: Path, names: list[str]) -> bool:

@@ -30,19 +30,23 @@ from slamrun.datasets.sequence import (
     camera_problem,
     check_positions,
     check_regular,
-    finite_groundtruth,
     folder_sequence,
     frame_list_problem,
     interpolate_poses,
+    raise_problems,
+    read_groundtruth,
     read_text,
+    require_regular,
+    sequence_folder,
     transform_poses,
 )
-from slamrun.errors import DatasetError, TrajectoryFormatError
+from slamrun.errors import DatasetError
 
 if TYPE_CHECKING:
     from slamrun.datasets.synth import Synth
 
 CAM = Path("mav0/cam0")
+FRAME_LIST = CAM / "data.csv"  # the ASL layout's frames (#timestamp [ns],filename), EuRoC's and TUM-VI's
 GT_MAX_GAP_S = 0.02  # ground truth is interpolated between samples at most this far from a frame
 MAX_NS = 2**63 - 1  # EuRoC's stamps are int64 nanoseconds
 
@@ -61,12 +65,10 @@ def open_asl(
 ) -> Sequence:
     """A sequence of the ASL layout: its frames (mav0/cam0), the camera and its extrinsics T_body_cam read from
     `calib_rel` by `read_calib`, the body's ground truth `gt_rel` carried to the camera."""
-    if not root.is_dir():
-        raise DatasetError(f"{root}: sequence folder not found")
-    csv, calib, gt_path = root / CAM / "data.csv", root / calib_rel, root / gt_rel
-    problems = check_regular([csv, calib, gt_path], {csv, calib, gt_path})
-    if problems:
-        raise DatasetError(f"{root}: invalid {layout} sequence:\n  " + "\n  ".join(problems))
+    root = sequence_folder(root)
+    csv, calib, gt_path = root / FRAME_LIST, root / calib_rel, root / gt_rel
+    require_regular(root, layout, [csv, calib, gt_path])
+    problems: list[str] = []
     for p, what in ((csv, "the frame list (#timestamp [ns],filename)"), (calib, "the camera calibration")):
         if not p.is_file():
             problems.append(f"{p}: missing; expected {what}")
@@ -90,18 +92,14 @@ def open_asl(
         else:
             size = (camera.camera.width, camera.camera.height) if camera is not None else None
             frames.check_files(images, names, size, problems, calib.name)
-    if problems:
-        raise DatasetError(f"{root}: invalid {layout} sequence:\n  " + "\n  ".join(problems))
+    raise_problems(root, layout, problems)
     assert camera is not None and ns is not None and t_body_cam is not None
     times = (ns // 1_000_000_000).astype(float) + (ns % 1_000_000_000).astype(float) * 1e-9
 
     def groundtruth() -> Trajectory:
         if problem := check_regular([gt_path], {gt_path}):
             raise DatasetError(problem[0])
-        try:
-            body = finite_groundtruth(read_euroc_csv(gt_path), gt_path)
-        except TrajectoryFormatError as exc:
-            raise DatasetError(str(exc)) from None
+        body = read_groundtruth(gt_path, read_euroc_csv)
         check_positions(body, gt_path)
         return transform_poses(interpolate_poses(body, times, GT_MAX_GAP_S), t_body_cam)
 
@@ -311,7 +309,7 @@ LAYOUT = Layout(
     name="euroc",
     title="EuRoC MAV (ASL layout, cam0; body ground truth carried to the camera)",
     recognise=recognise,
-    frame_list="mav0/cam0/data.csv",
+    frame_list=str(FRAME_LIST),
     read=open_euroc,
     groundtruth_file=str(EUROC_GT),
     synth=write_synthetic,

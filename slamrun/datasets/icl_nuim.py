@@ -34,11 +34,12 @@ from slamrun.datasets.sequence import (
     FrameRow,
     Sequence,
     check_regular,
-    finite_groundtruth,
     folder_sequence,
+    raise_problems,
     read_frame_list,
+    read_groundtruth,
+    sequence_folder,
 )
-from slamrun.errors import DatasetError, TrajectoryFormatError
 
 if TYPE_CHECKING:
     from slamrun.datasets.synth import Synth
@@ -71,32 +72,25 @@ def groundtruth_files(root: Path) -> list[Path]:
 
 
 def open_icl_nuim(root: str | Path) -> Sequence:
-    root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"{root}: sequence folder not found")
+    root = sequence_folder(root)
     listing = root / ASSOCIATIONS
     gts = groundtruth_files(root)
     problems = check_regular([listing, *gts], {listing, *gts})
     if len(gts) > 1:
         problems.append(f"{root}: {len(gts)} *.gt.freiburg files ({', '.join(p.name for p in gts)}); expected one")
-    if problems:
-        raise DatasetError(f"{root}: invalid ICL-NUIM sequence:\n  " + "\n  ".join(problems))
+    raise_problems(root, "ICL-NUIM", problems)
     names, times = [], None
     if not listing.is_file():
         problems.append(f"{listing}: missing; expected 'k depth/k.png k rgb/k.png' rows")
     else:
         names, times = _read_associations(listing, problems)
     frames.check_listed(root, names, ASSOCIATIONS, (WIDTH, HEIGHT), problems, "ICL-NUIM's published camera")
-    if problems:
-        raise DatasetError(f"{root}: invalid ICL-NUIM sequence:\n  " + "\n  ".join(problems))
+    raise_problems(root, "ICL-NUIM", problems)
     assert times is not None
     gt_path = gts[0] if gts else root / "groundtruth.gt.freiburg"
 
     def groundtruth() -> Trajectory:
-        try:
-            gt = finite_groundtruth(read_tum(gt_path), gt_path)
-        except TrajectoryFormatError as exc:
-            raise DatasetError(str(exc)) from None
+        gt = read_groundtruth(gt_path, read_tum)
         in_seconds = Trajectory(gt.timestamps / FPS, gt.positions, gt.quaternions)
         return mirror_y(poses_at(in_seconds, times, 0.25 / FPS))
 

@@ -21,10 +21,13 @@ from slamrun.datasets.sequence import (
     MAX_POSITION_M,
     Sequence,
     camera_problem,
-    check_regular,
     folder_sequence,
     number_rows,
+    raise_problems,
     read_text,
+    require_regular,
+    row_count,
+    sequence_folder,
     time_problem,
 )
 from slamrun.errors import DatasetError
@@ -39,13 +42,10 @@ def poses_path(root: Path) -> Path:
 
 
 def open_kitti(root: str | Path) -> Sequence:
-    root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"{root}: sequence folder not found")
+    root = sequence_folder(root)
     times_path, calib, images, gt_path = root / "times.txt", root / "calib.txt", root / "image_0", poses_path(root)
-    problems = check_regular([times_path, calib, gt_path], {times_path, calib, gt_path})
-    if problems:
-        raise DatasetError(f"{root}: invalid KITTI sequence:\n  " + "\n  ".join(problems))
+    require_regular(root, "KITTI", [times_path, calib, gt_path])
+    problems: list[str] = []
     for p, what in ((times_path, "one time in seconds per frame"), (calib, "P0: the 12 numbers of camera 0")):
         if not p.is_file():
             problems.append(f"{p}: missing; expected {what}")
@@ -64,11 +64,10 @@ def open_kitti(root: str | Path) -> Sequence:
         size = (camera.camera.width, camera.camera.height) if camera is not None else None
         frames.check_files(images, names, size, problems, f"the first frame ({names[0]})")
     if gt_path.is_file() and times is not None and not problems:
-        n_poses = sum(1 for line in read_text(gt_path).splitlines() if line.strip())
+        n_poses = row_count(gt_path)
         if n_poses != len(times):
             problems.append(f"{gt_path}: {n_poses} poses but {len(times)} frames; KITTI's poses are one per frame")
-    if problems:
-        raise DatasetError(f"{root}: invalid KITTI sequence:\n  " + "\n  ".join(problems))
+    raise_problems(root, "KITTI", problems)
     assert camera is not None and times is not None
 
     def groundtruth() -> Trajectory:

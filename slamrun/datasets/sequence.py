@@ -17,7 +17,7 @@ from slamrun.core.inputs import read_bounded, read_text_bounded, regular_file_pr
 from slamrun.core.nearest import nearest
 from slamrun.core.trajectory import Trajectory
 from slamrun.datasets.frames import GRAYSCALE, decode, read_frame, read_head, read_member
-from slamrun.errors import DatasetError, SlamRunError
+from slamrun.errors import DatasetError, SlamRunError, TrajectoryFormatError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".pgm", ".bmp")
 # The text files' size limit: far above any real sequence's (a times.txt of a million frames is 40 MB), far below
@@ -166,6 +166,28 @@ def folder_sequence(
     )
 
 
+def sequence_folder(root: str | Path) -> Path:
+    """`root` as a Path, or DatasetError when it is not a folder (every reader's first check)."""
+    root = Path(root)
+    if not root.is_dir():
+        raise DatasetError(f"{root}: sequence folder not found")
+    return root
+
+
+def raise_problems(root: Path, layout: str, problems: list[str]) -> None:
+    """One DatasetError listing every problem found in the sequence at `root`, if there is any: "invalid KITTI
+    sequence" for `layout` KITTI, "invalid sequence" for ""."""
+    if problems:
+        kind = f"{layout} sequence" if layout else "sequence"
+        raise DatasetError(f"{root}: invalid {kind}:\n  " + "\n  ".join(problems))
+
+
+def require_regular(root: Path, layout: str, text_files: list[Path]) -> None:
+    """DatasetError (raise_problems) when a text file of the sequence exists but cannot be read to an end
+    (check_regular), before anything reads it."""
+    raise_problems(root, layout, check_regular(text_files, set(text_files)))
+
+
 def check_regular(paths: list[Path], text_files: set[Path]) -> list[str]:
     """The files among `paths` that exist but cannot be read to an end: not regular files (a device such as
     /dev/zero, a pipe, a folder) or text files beyond MAX_TEXT_BYTES. Never opens them."""
@@ -185,6 +207,11 @@ def check_regular(paths: list[Path], text_files: set[Path]) -> list[str]:
 def read_text(path: Path) -> str:
     """A sequence's text file (a regular file of at most MAX_TEXT_BYTES, UTF-8), or DatasetError naming it."""
     return read_text_bounded(path, MAX_TEXT_BYTES, "a text file", DatasetError)
+
+
+def row_count(path: Path) -> int:
+    """The number of non-blank lines of a sequence's text file (read_text): its rows, one a pose or frame."""
+    return sum(1 for line in read_text(path).splitlines() if line.strip())
 
 
 def number_rows(path: Path, count: int, expected: str) -> Iterator[tuple[int, list[float]]]:
@@ -291,6 +318,15 @@ def finite_groundtruth(traj: Trajectory, path: Path) -> Trajectory:
             "time without a pose)"
         )
     return traj
+
+
+def read_groundtruth(path: Path, read: Callable[[Path], Trajectory]) -> Trajectory:
+    """The ground truth `read` reads from `path`, every row finite (finite_groundtruth); a format error as a
+    DatasetError."""
+    try:
+        return finite_groundtruth(read(path), path)
+    except TrajectoryFormatError as exc:
+        raise DatasetError(str(exc)) from None
 
 
 def nonfinite_line(path: Path) -> int | None:

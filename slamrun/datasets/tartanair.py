@@ -24,7 +24,15 @@ from slamrun.core.trajectory import Trajectory, quat_to_rotmat, rotmat_to_quat
 from slamrun.datasets import file_notes, frames
 from slamrun.datasets.file_notes import TARTANAIR_FPS, TARTANAIR_POSES
 from slamrun.datasets.protocol import Layout, Placed
-from slamrun.datasets.sequence import Sequence, check_regular, folder_sequence, number_rows, read_text
+from slamrun.datasets.sequence import (
+    Sequence,
+    folder_sequence,
+    number_rows,
+    raise_problems,
+    require_regular,
+    row_count,
+    sequence_folder,
+)
 from slamrun.errors import DatasetError
 
 if TYPE_CHECKING:
@@ -52,22 +60,18 @@ def ned_to_camera(traj: Trajectory) -> Trajectory:
 
 
 def open_tartanair(root: str | Path) -> Sequence:
-    root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"{root}: sequence folder not found")
+    root = sequence_folder(root)
     images, gt_path = root / IMAGES, root / POSES
-    problems = check_regular([gt_path], {gt_path})
-    if problems:
-        raise DatasetError(f"{root}: invalid TartanAir sequence:\n  " + "\n  ".join(problems))
+    require_regular(root, "TartanAir", [gt_path])
+    problems: list[str] = []
     names = _frame_names(images, problems)
     if names:
         frames.check_files(images, names, (WIDTH, HEIGHT), problems, "TartanAir's published camera")
     if names and gt_path.is_file():
-        n_poses = sum(1 for line in read_text(gt_path).splitlines() if line.strip())
+        n_poses = row_count(gt_path)
         if n_poses != len(names):
             problems.append(f"{gt_path}: {n_poses} poses but {len(names)} frames; TartanAir's are one per frame")
-    if problems:
-        raise DatasetError(f"{root}: invalid TartanAir sequence:\n  " + "\n  ".join(problems))
+    raise_problems(root, "TartanAir", problems)
     times = np.arange(len(names)) / FPS
 
     def groundtruth() -> Trajectory:

@@ -29,7 +29,9 @@ from slamrun.datasets.sequence import (
     check_positions,
     check_regular,
     key_bytes,
+    raise_problems,
     read_text,
+    sequence_folder,
     time_problem,
 )
 from slamrun.errors import DatasetError
@@ -67,16 +69,14 @@ def read_groundtruth_sync(p: Path) -> Trajectory:
 
 def open_sequence(root: str | Path) -> Sequence:
     """Open a sequence folder and validate it; raises one DatasetError listing every problem."""
-    root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"{root}: sequence folder not found")
+    root = sequence_folder(root)
     problems: list[str] = []
     for name in REQUIRED:
         if not (root / name).exists():
             problems.append(f"{root / name}: missing")
     unusable = unusable_files(root)
     if unusable:  # reading them would never end, or exhaust memory
-        raise DatasetError(f"{root}: invalid sequence:\n  " + "\n  ".join(problems + unusable))
+        raise_problems(root, "", problems + unusable)
 
     names, zip_path = _frame_names(root, problems)
     timestamps, exposures = _read_times(root / "times.txt", problems)
@@ -103,8 +103,7 @@ def open_sequence(root: str | Path) -> Sequence:
     _check_pcalib(root / "pcalib.txt", problems)
     if camera is not None:
         _check_vignette(root / "vignette.png", camera, problems)
-    if problems:
-        raise DatasetError(f"{root}: invalid sequence:\n  " + "\n  ".join(problems))
+    raise_problems(root, "", problems)
     assert names is not None and timestamps is not None and camera is not None
     gt = root / "groundtruthSync.txt"
     return Sequence(

@@ -22,12 +22,14 @@ from slamrun.datasets.protocol import Download, Layout, Placed
 from slamrun.datasets.sequence import (
     FrameRow,
     Sequence,
-    check_regular,
-    finite_groundtruth,
     folder_sequence,
+    raise_problems,
     read_frame_list,
+    read_groundtruth,
+    require_regular,
+    sequence_folder,
 )
-from slamrun.errors import DatasetError, TrajectoryFormatError
+from slamrun.errors import DatasetError
 
 if TYPE_CHECKING:
     from slamrun.datasets.synth import Synth
@@ -57,13 +59,10 @@ def camera_for(root: Path) -> CameraFile:
 
 
 def open_tum_rgbd(root: str | Path) -> Sequence:
-    root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"{root}: sequence folder not found")
+    root = sequence_folder(root)
     listing, gt_path = root / "rgb.txt", root / "groundtruth.txt"
-    problems = check_regular([listing, gt_path], {listing, gt_path})
-    if problems:
-        raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
+    require_regular(root, "TUM RGB-D", [listing, gt_path])
+    problems: list[str] = []
     camera = None
     try:
         camera = camera_for(root)
@@ -75,16 +74,12 @@ def open_tum_rgbd(root: str | Path) -> Sequence:
     else:
         names, times = _read_listing(listing, problems)
     frames.check_listed(root, names, "rgb.txt", (WIDTH, HEIGHT), problems, "the TUM RGB-D camera")
-    if problems:
-        raise DatasetError(f"{root}: invalid TUM RGB-D sequence:\n  " + "\n  ".join(problems))
+    raise_problems(root, "TUM RGB-D", problems)
     assert camera is not None and times is not None
 
     def groundtruth() -> Trajectory:
-        try:
-            gt = finite_groundtruth(read_tum(gt_path), gt_path)
-        except TrajectoryFormatError as exc:
-            raise DatasetError(str(exc)) from None
-        return poses_at(gt, times, ASSOCIATION_S)  # evo's association: a repeated time's rows kept
+        # evo's association: a repeated time's rows kept
+        return poses_at(read_groundtruth(gt_path, read_tum), times, ASSOCIATION_S)
 
     return folder_sequence(root, "tum-rgbd", names, times, camera, root, (listing,), gt_path, groundtruth)
 

@@ -18,6 +18,7 @@ from slamrun.core.camera import CameraFile, EquidistantCamera, PinholeCamera
 from slamrun.datasets import file_notes
 from slamrun.datasets.euroc import (
     CAM,
+    FRAME_LIST,
     body_rows,
     calibration_yaml,
     make_camera,
@@ -127,7 +128,7 @@ LAYOUT = Layout(
     name="tum-vi",
     title="TUM-VI (ASL export, 512x512 fisheye cam0; ground truth at the start and end)",
     recognise=recognise,
-    frame_list="mav0/cam0/data.csv",
+    frame_list=str(FRAME_LIST),
     read=open_tum_vi,
     groundtruth_file=str(TUMVI_GT),
     synth=write_synthetic,

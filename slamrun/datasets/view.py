@@ -25,6 +25,11 @@ class Direction(StrEnum):
     forward = "forward"
     backward = "backward"
 
+    @property
+    def opposite(self) -> Direction:
+        """The other direction (its views play the same frames in reverse order)."""
+        return Direction.backward if self is Direction.forward else Direction.forward
+
 
 class Profile(StrEnum):
     native = "native"  # original frames + FOV camera.txt, pcalib, vignette (DSO family, LSD-SLAM, SVO)

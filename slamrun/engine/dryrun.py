@@ -11,7 +11,7 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from slamrun.datasets.cache import whole_mirror, whole_view
+from slamrun.datasets.cache import whole_view
 from slamrun.datasets.layouts import holds_sequence, open_sequence
 from slamrun.datasets.perturb import BASELINE, Perturbation, kept_frames
 from slamrun.datasets.view import Profile
@@ -190,8 +190,8 @@ def _view_bytes_if_missing(
         return None
     if whole_view(spec.cache, seq, direction, profile, spec.frame_format, perturbation) is not None:
         return 0
-    if whole_mirror(spec.cache, seq, direction, profile, spec.frame_format, perturbation) is not None:
-        return 1  # its frames are links to the other direction's: a few small files
+    if whole_view(spec.cache, seq, direction.opposite, profile, spec.frame_format, perturbation) is not None:
+        return 1  # its frames are links to the other direction's (its mirror): a few small files
     frames = len(kept_frames(seq.n_frames, perturbation))
     pixels = seq.camera.out_width * seq.camera.out_height * perturbation.scale**2
     if perturbation.kind in NOISE:  # noise does not compress: PNG keeps every byte, and its framing

@@ -10,10 +10,10 @@ import shutil
 import sys
 from abc import ABC, abstractmethod
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.core.trajectory import Trajectory, read_tum
 from slamrun.datasets.view import PreparedView, Profile
@@ -33,6 +33,14 @@ def image_tag(name: str) -> str:
 
 class NoParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
+
+
+def trial_seed_param(seeds: str, fixed: str) -> Any:
+    """A method's `seed` parameter (its seed_param), None by default: each trial then gets its own seed
+    (engine.plan.trial_seed). `seeds` says what it seeds, `fixed` what a value the spec fixes does."""
+    return Field(
+        None, description=f"{seeds}; default: one per trial, from the trial and the campaign's seed ({fixed})."
+    )
 
 
 class Method(ABC):

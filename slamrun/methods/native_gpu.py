@@ -8,9 +8,12 @@ import json
 import os
 import sys
 from pathlib import Path
+from typing import Any
+
+from pydantic import Field
 
 from slamrun.datasets.view import PreparedView
-from slamrun.methods.base import Method, PythonProcess
+from slamrun.methods.base import Method, PythonProcess, trial_seed_param
 
 
 def native_root() -> Path:
@@ -66,6 +69,26 @@ def native_problems(build: Path, weights: str | None, method: str, weights_name:
             f"--standin-model for plumbing tests), or give params.weights"
         ]
     return []
+
+
+def weights_param(weights_name: str) -> Any:
+    """The `weights` parameter of a method whose network is `weights_name` (NativeGpuMethod.weights reads it)."""
+    return Field(
+        None, description=f"The network ({weights_name}); default: the one the native build (or the image) holds."
+    )
+
+
+def build_param(name: str) -> Any:
+    """The `build` parameter of method `name` (NativeGpuMethod.build_dir reads it)."""
+    return Field(None, description=f"Folder of a native build (default: where `slamrun native-build {name}` puts it).")
+
+
+def torch_seed_param() -> Any:
+    """The `seed` parameter of a method whose randomness is PyTorch's (its seed_param)."""
+    return trial_seed_param(
+        "Seed of PyTorch's generators",
+        "a fixed value makes every trial the same seed; the GPU's own order still varies",
+    )
 
 
 class NativeGpuMethod(PythonProcess, Method):

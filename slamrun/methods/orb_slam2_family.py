@@ -10,10 +10,39 @@ from pathlib import Path
 from pydantic import Field
 
 from slamrun.datasets.view import PreparedView, Profile
+from slamrun.methods.declare import Vocabulary
 from slamrun.methods.upstream import UpstreamMethod, UpstreamParams, fps_of, pinhole_of
 
+# Where the ORB-SLAM2 family's trees (and ORB-SLAM3's) keep the ORB vocabulary; the stored archives lack it
+ORB_VOCABULARY = "Vocabulary/ORBvoc.txt.tar.gz"
 
-class OrbSlam2Params(UpstreamParams):
+
+# The viewer's settings, the same for ORB-SLAM2 and ORB-SLAM3 (whose images run without a viewer)
+VIEWER = {
+    "Viewer.KeyFrameSize": 0.05,
+    "Viewer.KeyFrameLineWidth": 1,
+    "Viewer.GraphLineWidth": 0.9,
+    "Viewer.PointSize": 2,
+    "Viewer.CameraSize": 0.08,
+    "Viewer.CameraLineWidth": 3,
+    "Viewer.ViewpointX": 0,
+    "Viewer.ViewpointY": -0.7,
+    "Viewer.ViewpointZ": -1.8,
+    "Viewer.ViewpointF": 500,
+}
+
+
+def orb_vocabulary(source: str) -> Vocabulary:
+    """The ORB vocabulary (ORBvoc.txt, DBoW2 text) at ORB_VOCABULARY in the tree of source archive `source`."""
+    return Vocabulary(source, ORB_VOCABULARY, "dbow2-text")
+
+
+def pinhole_settings(view: PreparedView, camera: str) -> dict[str, float]:
+    """A rectified view's pinhole intrinsics as ORB-SLAM's settings name them: `camera`.fx, .fy, .cx and .cy."""
+    return dict(zip((f"{camera}.{k}" for k in ("fx", "fy", "cx", "cy")), pinhole_of(view), strict=True))
+
+
+class OrbSlam2Params(UpstreamParams):  # its vocabulary and ORB extractor (ORB-SLAM3 keeps the extractor's settings)
     vocabulary: str = Field("/opt/ORB_SLAM2/Vocabulary/ORBvoc.txt", description="ORB vocabulary (ORBvoc.txt).")
     n_features: int = Field(2000, ge=100, description="ORBextractor.nFeatures (TUM-Mono: 2000).")
     scale_factor: float = Field(1.2, gt=1.0, description="ORBextractor.scaleFactor.")
@@ -24,12 +53,8 @@ class OrbSlam2Params(UpstreamParams):
 
 def orb_settings_yaml(view: PreparedView, p: OrbSlam2Params, extra: dict | None = None) -> str:
     """ORB-SLAM2's OpenCV YAML settings for a rectified pinhole view (zero distortion)."""
-    fx, fy, cx, cy = pinhole_of(view)
     values = {
-        "Camera.fx": fx,
-        "Camera.fy": fy,
-        "Camera.cx": cx,
-        "Camera.cy": cy,
+        **pinhole_settings(view, "Camera"),
         "Camera.k1": 0.0,
         "Camera.k2": 0.0,
         "Camera.p1": 0.0,
@@ -44,16 +69,7 @@ def orb_settings_yaml(view: PreparedView, p: OrbSlam2Params, extra: dict | None 
         "ORBextractor.nLevels": p.n_levels,
         "ORBextractor.iniThFAST": p.ini_th_fast,
         "ORBextractor.minThFAST": p.min_th_fast,
-        "Viewer.KeyFrameSize": 0.05,
-        "Viewer.KeyFrameLineWidth": 1,
-        "Viewer.GraphLineWidth": 0.9,
-        "Viewer.PointSize": 2,
-        "Viewer.CameraSize": 0.08,
-        "Viewer.CameraLineWidth": 3,
-        "Viewer.ViewpointX": 0,
-        "Viewer.ViewpointY": -0.7,
-        "Viewer.ViewpointZ": -1.8,
-        "Viewer.ViewpointF": 500,
+        **VIEWER,
         **(extra or {}),
     }
     lines = ["%YAML:1.0", "---"]

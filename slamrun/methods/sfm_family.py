@@ -6,12 +6,12 @@ original timestamps, no model is `not_initialized`. Each member's folder declare
 from __future__ import annotations
 
 from pathlib import Path
-from typing import ClassVar
+from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import PreparedView, Profile
-from slamrun.methods.base import Method, PythonProcess, strided
+from slamrun.methods.base import Method, PythonProcess, strided, trial_seed_param
 
 PROCESS = "slamrun.methods.sfm_process"
 
@@ -23,6 +23,12 @@ class SfmParams(BaseModel):
     overlap: int = Field(5, ge=1, description="Sequential matching: neighbours matched per image.")
     max_image_size: int = Field(640, ge=160, description="Images are downscaled to this size for SIFT.")
     first_octave: int = Field(0, ge=-1, le=2, description="SIFT first octave (-1 doubles the image: slower).")
+
+
+def mapper_seed_param(seeds: str) -> Any:
+    """A member's `seed` parameter (the family's seed_param), `seeds` its mapper's seed: the family is deterministic,
+    a fixed one makes its trials identical."""
+    return trial_seed_param(seeds, "a fixed value makes every trial the same: identical runs")
 
 
 class SfmFamily(PythonProcess, Method):

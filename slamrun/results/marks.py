@@ -61,23 +61,30 @@ def marked(name: str, found: dict[str, Flags]) -> str:
 def notes(found: dict[str, Flags]) -> list[str]:
     """What the marks of `found` mean, one line per mark in use ([] where no method is marked)."""
     out = []
-    low = {m: f for m, f in found.items() if f.low_coverage}
-    if low:
-        share = _shares({v for f in low.values() for v in f.coverage_mark}, "the dataset's coverage_mark")
-        parts = [f"{m} {f.low_coverage} of {f.done}" for m, f in low.items()]
+    if low := _flagged(found, "low_coverage", "coverage_mark", "the dataset's coverage_mark"):
+        share, parts = low
         out.append(
             f"{LOW_COVERAGE} low coverage: done runs with poses for fewer than {share} of the frames their method was "
-            f"given ({', '.join(parts)}): their figures are of what they tracked, not of the sequence."
+            f"given ({parts}): their figures are of what they tracked, not of the sequence."
         )
-    div = {m: f for m, f in found.items() if f.diverged}
-    if div:
-        at = _shares({v for f in div.values() for v in f.diverged_at}, "0.5")
-        parts = [f"{m} {f.diverged} of {f.done}" for m, f in div.items()]
+    if div := _flagged(found, "diverged", "diverged_at", "0.5"):
+        at, parts = div
         out.append(
             f"{DIVERGED} diverged: done runs whose ATE exceeds {at} of the ground truth's spread (ate_rel; the "
-            f"dataset sets no max_ate_rel that would make them failures) ({', '.join(parts)})."
+            f"dataset sets no max_ate_rel that would make them failures) ({parts})."
         )
     return out
+
+
+def _flagged(found: dict[str, Flags], count: str, thresholds: str, default: str) -> tuple[str, str] | None:
+    """What a mark's note says of the methods with runs it flags (`count`, a Flags field), or None where it flags
+    none: the thresholds their runs were judged by (the Flags field `thresholds`; `default` where none is recorded)
+    and each method's flagged runs of its done ones ("colmap 2 of 10, dpvo 1 of 10")."""
+    flagged = {m: f for m, f in found.items() if getattr(f, count)}
+    if not flagged:
+        return None
+    at = _shares({v for f in flagged.values() for v in getattr(f, thresholds)}, default)
+    return at, ", ".join(f"{m} {getattr(f, count)} of {f.done}" for m, f in flagged.items())
 
 
 def _shares(values: set, default: str) -> str:

@@ -11,16 +11,12 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from slamrun.methods.sfm_family import SfmFamily, SfmParams
+from slamrun.methods.sfm_family import SfmFamily, SfmParams, mapper_seed_param
 
 
 class ColmapParams(SfmParams):
     global_ba_every: int = Field(20, ge=1, description="Global bundle adjustment after this many new images.")
-    seed: int | None = Field(
-        None,
-        description="Mapper random seed; default: one per trial, from the trial and the campaign's seed "
-        "(a fixed value makes every trial the same: identical runs).",
-    )
+    seed: int | None = mapper_seed_param("Mapper random seed")
 
 
 class Colmap(SfmFamily):

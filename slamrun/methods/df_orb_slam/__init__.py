@@ -21,8 +21,14 @@ from typing import Literal
 from pydantic import Field
 
 from slamrun.datasets.view import PreparedView
-from slamrun.methods.declare import Source, Vocabulary
-from slamrun.methods.orb_slam2_family import OrbSlam2Family, OrbSlam2Params, orb_settings_yaml
+from slamrun.methods.declare import Source
+from slamrun.methods.orb_slam2_family import (
+    ORB_VOCABULARY,
+    OrbSlam2Family,
+    OrbSlam2Params,
+    orb_settings_yaml,
+    orb_vocabulary,
+)
 
 
 class DfOrbSlamParams(OrbSlam2Params):
@@ -42,10 +48,10 @@ class DfOrbSlam(OrbSlam2Family):
             "462425d61903fa6efc71dde3011cbc3c920c2c16",
             sha256="d071d346217e4e1612cd441f16cfca8eb32cf39f33e68d3bcf3ebe84a61cc8cb",
             tree="e627762c09476849fe5a6d674039716e105898936eacc425f82967ef6911bc6e",
-            absent=("Vocabulary/ORBvoc.txt.tar.gz",),
+            absent=(ORB_VOCABULARY,),
         ),
     )
-    vocabulary = Vocabulary("df_orb_slam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text")
+    vocabulary = orb_vocabulary("df_orb_slam")
     binary = "/opt/DF-ORB-SLAM/Examples/Monocular/mono_tum_df"
     Params = DfOrbSlamParams
     loop_closure_switch = "env ORB_SLAM2_NO_LOOP=1 (patch in slamrun/methods/df_orb_slam/image)"

@@ -24,7 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from slamrun.datasets.view import Profile
 from slamrun.methods.base import strided
 from slamrun.methods.declare import NativeMethod, Source, Weights
-from slamrun.methods.native_gpu import NativeGpuMethod
+from slamrun.methods.native_gpu import NativeGpuMethod, build_param, torch_seed_param, weights_param
 
 IMAGE_WEIGHTS = (
     "/opt/dpvo/weights/dpvo.pth"  # where the image holds its network (slamrun/methods/dpvo/image/network.sh)
@@ -41,12 +41,8 @@ IMAGE = Path(__file__).resolve().parent / "image"  # its image's recipe; the nat
 
 class DpvoParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    weights: str | None = Field(
-        None, description="The network (dpvo.pth); default: the one the native build (or the image) holds."
-    )
-    build: str | None = Field(
-        None, description="Folder of a native build (default: where `slamrun native-build dpvo` puts it)."
-    )
+    weights: str | None = weights_param(WEIGHTS_NAME)
+    build: str | None = build_param("dpvo")
     stride: int = Field(2, ge=1, description="Feed every n-th frame (demo.py --stride: 2); poses of the fed frames.")
     patches_per_frame: int = Field(96, ge=4, le=1024, description="PATCHES_PER_FRAME (config/default.yaml: 96).")
     removal_window: int = Field(22, ge=2, description="REMOVAL_WINDOW: frames an edge lives (default.yaml: 22).")
@@ -63,11 +59,7 @@ class DpvoParams(BaseModel):
         "RANDOM", description="CENTROID_SEL_STRAT: where patches are taken (default.yaml: RANDOM)."
     )
     buffer_size: int = Field(4096, ge=16, description="BUFFER_SIZE: most keyframes kept (config.py: 4096).")
-    seed: int | None = Field(
-        None,
-        description="Seed of PyTorch's generators; default: one per trial, from the trial and the campaign's seed "
-        "(a fixed value makes every trial the same seed; the GPU's own order still varies).",
-    )
+    seed: int | None = torch_seed_param()
 
 
 class Dpvo(NativeGpuMethod):

@@ -25,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import Profile
 from slamrun.methods.declare import NativeMethod, Source, Weights
-from slamrun.methods.native_gpu import NativeGpuMethod
+from slamrun.methods.native_gpu import NativeGpuMethod, build_param, torch_seed_param, weights_param
 
 IMAGE_BUILD = "/opt/droid_slam"
 WEIGHTS_NAME = "droid.pth"
@@ -39,12 +39,8 @@ IMAGE_WEIGHTS = f"{IMAGE_BUILD}/weights/{WEIGHTS_NAME}"  # where the image holds
 
 class DroidSlamParams(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    weights: str | None = Field(
-        None, description="The network (droid.pth); default: the one the native build (or the image) holds."
-    )
-    build: str | None = Field(
-        None, description="Folder of a native build (default: where `slamrun native-build droid_slam` puts it)."
-    )
+    weights: str | None = weights_param(WEIGHTS_NAME)
+    build: str | None = build_param("droid_slam")
     stride: int = Field(3, ge=1, description="Track every n-th frame (demo.py --stride: 3); every frame gets a pose.")
     buffer: int = Field(512, ge=16, description="Most keyframes held on the GPU (demo.py --buffer: 512).")
     beta: float = Field(0.3, ge=0, description="Weight of translation against rotation in frame distances (0.3).")
@@ -62,11 +58,7 @@ class DroidSlamParams(BaseModel):
     motion_damping: float = Field(
         0.0, ge=0, le=1, description="Damped constant-velocity guess of the next pose (demo.py sets none: 0)."
     )
-    seed: int | None = Field(
-        None,
-        description="Seed of PyTorch's generators; default: one per trial, from the trial and the campaign's seed "
-        "(a fixed value makes every trial the same seed; the GPU's own order still varies).",
-    )
+    seed: int | None = torch_seed_param()
 
 
 class DroidSlam(NativeGpuMethod):

@@ -14,8 +14,8 @@ from pydantic import Field
 
 from slamrun.datasets.view import PreparedView
 from slamrun.errors import MethodFailure
-from slamrun.methods.declare import Source, VerifyScope, Vocabulary, Weights
-from slamrun.methods.orb_slam2_family import OrbSlam2Family, OrbSlam2Params
+from slamrun.methods.declare import Source, VerifyScope, Weights
+from slamrun.methods.orb_slam2_family import ORB_VOCABULARY, OrbSlam2Family, OrbSlam2Params, orb_vocabulary
 
 
 class DynaSlamParams(OrbSlam2Params):
@@ -31,10 +31,10 @@ class DynaSlam(OrbSlam2Family):
             "8f894a8b9d63c0a608fd871d63c10796491b9312",
             sha256="c99080b422cf68887f8fb98705b46279a899267a243f96bf35185d8c15ea7f34",
             tree="87c56f71a912a1152dfd44d3fbdef9d7171dccc94d8e90619da01c54281c00a9",
-            absent=("Vocabulary/ORBvoc.txt.tar.gz",),
+            absent=(ORB_VOCABULARY,),
         ),
     )
-    vocabulary = Vocabulary("dynaslam", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text")
+    vocabulary = orb_vocabulary("dynaslam")
     network = Weights(
         "mask_rcnn_coco.h5",
         "the matterport/Mask_RCNN GitHub release v2.0 (mask_rcnn_coco.h5)",

@@ -13,18 +13,14 @@ from __future__ import annotations
 
 from pydantic import Field
 
-from slamrun.methods.sfm_family import SfmFamily, SfmParams
+from slamrun.methods.sfm_family import SfmFamily, SfmParams, mapper_seed_param
 
 
 class GlomapParams(SfmParams):
     overlap: int = Field(10, ge=1, description="Sequential matching: neighbours matched per image.")
     min_num_matches: int = Field(15, ge=5, description="Image pairs with fewer inlier matches are left out.")
     ba_iterations: int = Field(3, ge=1, le=20, description="Rounds of bundle adjustment and retriangulation.")
-    seed: int | None = Field(
-        None,
-        description="Random seed of the global mapper; default: one per trial, from the trial and the campaign's seed "
-        "(a fixed value makes every trial the same: identical runs).",
-    )
+    seed: int | None = mapper_seed_param("Random seed of the global mapper")
 
 
 class Glomap(SfmFamily):

@@ -29,21 +29,24 @@ from slamrun.core.inputs import read_text_bounded
 from slamrun.core.trajectory import ReadReport, Trajectory, read_tum
 from slamrun.datasets.view import PreparedView, Profile
 from slamrun.errors import MethodFailure, SlamRunError, TrajectoryFormatError
-from slamrun.methods.declare import Source, Vocabulary
-from slamrun.methods.upstream import UpstreamMethod, UpstreamParams, fps_of, pinhole_of
+from slamrun.methods.declare import Source
+from slamrun.methods.orb_slam2_family import (
+    ORB_VOCABULARY,
+    VIEWER,
+    OrbSlam2Params,
+    orb_vocabulary,
+    pinhole_settings,
+)
+from slamrun.methods.upstream import UpstreamMethod, fps_of
 
 PREFIX = "FrameTrajectory"
 INDEX = f"{PREFIX}.maps.txt"
 INDEX_LIMIT = 1 << 20  # bytes: an index line per map; a million bytes is tens of thousands of maps
 
 
-class OrbSlam3Params(UpstreamParams):
+class OrbSlam3Params(OrbSlam2Params):  # ORB-SLAM2's extractor settings; its own vocabulary; several maps
     vocabulary: str = Field("/opt/ORB_SLAM3/Vocabulary/ORBvoc.txt", description="ORB vocabulary (ORBvoc.txt).")
     n_features: int = Field(2000, ge=100, description="ORBextractor.nFeatures (as ORB-SLAM2 on TUM-Mono: 2000).")
-    scale_factor: float = Field(1.2, gt=1.0, description="ORBextractor.scaleFactor.")
-    n_levels: int = Field(8, ge=1, description="ORBextractor.nLevels.")
-    ini_th_fast: int = Field(20, ge=1, description="ORBextractor.iniThFAST.")
-    min_th_fast: int = Field(7, ge=1, description="ORBextractor.minThFAST.")
     maps: Literal["largest", "refuse"] = Field(
         "largest",
         description="A run that made several maps: evaluate the largest (marked lost and relocalised, the map "
@@ -63,24 +66,7 @@ class MapsReport(ReadReport):
 def settings_yaml(view: PreparedView, p: OrbSlam3Params) -> str:
     """ORB-SLAM3's settings (File.version 1.0) for a rectified pinhole view: no distortion key, so none is applied.
     ORB-SLAM3 checks each value's type (`must be a real number`): reals are written with a decimal point."""
-    fx, fy, cx, cy = pinhole_of(view)
-    reals = {
-        "Camera1.fx": fx,
-        "Camera1.fy": fy,
-        "Camera1.cx": cx,
-        "Camera1.cy": cy,
-        "ORBextractor.scaleFactor": p.scale_factor,
-        "Viewer.KeyFrameSize": 0.05,
-        "Viewer.KeyFrameLineWidth": 1.0,
-        "Viewer.GraphLineWidth": 0.9,
-        "Viewer.PointSize": 2.0,
-        "Viewer.CameraSize": 0.08,
-        "Viewer.CameraLineWidth": 3.0,
-        "Viewer.ViewpointX": 0.0,
-        "Viewer.ViewpointY": -0.7,
-        "Viewer.ViewpointZ": -1.8,
-        "Viewer.ViewpointF": 500.0,
-    }
+    reals = {**pinhole_settings(view, "Camera1"), "ORBextractor.scaleFactor": p.scale_factor, **VIEWER}
     integers = {
         "Camera.width": view.width,
         "Camera.height": view.height,
@@ -174,7 +160,7 @@ class OrbSlam3(UpstreamMethod):
             sha256="b1cdb64a70f5e2443d1db8ced2a2ae3f4980eda237776ddb51e9c511720147ff",
             tree="6654390006ae4d273a344f485958a454790a6b6dbb00a98465424d410a0832bf",
             absent=(
-                "Vocabulary/ORBvoc.txt.tar.gz",
+                ORB_VOCABULARY,
                 "Examples_old/",
                 "Examples/Monocular-Inertial/EuRoC_IMU/",
                 "Examples/Monocular-Inertial/TUM_IMU/",
@@ -184,7 +170,7 @@ class OrbSlam3(UpstreamMethod):
             ),
         ),
     )
-    vocabulary = Vocabulary("orb_slam3", "Vocabulary/ORBvoc.txt.tar.gz", "dbow2-text")  # the same as ORB-SLAM2's
+    vocabulary = orb_vocabulary("orb_slam3")  # the same as ORB-SLAM2's
     binary = "/opt/ORB_SLAM3/Examples/Monocular/mono_tum"
     profile = Profile.rectified
     loop_closure_switch = (
