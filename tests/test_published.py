@@ -13,7 +13,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from slamrun.analysis.published import beside
+from slamrun.analysis.published import beside, default_params
 from slamrun.errors import SlamRunError
 from slamrun.results.published import Published, built_in, read_dpvo_log, read_table, same_sequence
 
@@ -40,15 +40,20 @@ def test_the_logs_are_dpvos_own_files(shared_data):
 
 def test_dpvos_euroc_medians_equal_the_logs_own_summary_lines():
     figures = built_in()
-    euroc = {f.sequence: f for f in figures if f.method == "dpvo" and f.dataset == "euroc"}
+    dpvo = [f for f in figures if f.method == "dpvo" and not f.settings["loop_closure"]]
+    euroc = {f.sequence: f for f in dpvo if f.dataset == "euroc"}
     stated = _stated_medians((LOGS / "euroc.txt").read_text())
     assert len(euroc) == 11 and set(euroc) == set(stated)
     for name, value in stated.items():
         assert euroc[name].value == value and euroc[name].runs == 5
-    assert euroc["MH_01_easy"].protocol() == "published, 5 runs, median ATE RMSE (m), Sim(3), all frames"
+    protocol = "published, 5 runs, median ATE RMSE (m), Sim(3), all frames, loop_closure=False"
+    assert euroc["MH_01_easy"].protocol() == protocol
     assert euroc["MH_01_easy"].source.endswith("@859bbbfdac6c6185f345003b3c473901fcd13ace/logs/euroc.txt")
-    slam = {f.sequence: f.value for f in figures if f.method == "dpv_slam" and f.dataset == "euroc"}
-    assert slam == _stated_medians((LOGS / "dpv_slam" / "euroc.txt").read_text())
+    assert {f.settings["loop_closure"] for f in euroc.values()} == {False}
+    slam = {f.sequence: f for f in figures if f.settings.get("loop_closure") and f.dataset == "euroc"}
+    assert {s: f.value for s, f in slam.items()} == _stated_medians((LOGS / "dpv_slam" / "euroc.txt").read_text())
+    assert slam["MH_01_easy"].method == "dpvo"
+    assert slam["MH_01_easy"].protocol().endswith("all frames, loop_closure=True")
     assert {f.dataset for f in figures} == {"euroc", "tum-rgbd", "tartanair", "icl-nuim"}
 
 
@@ -87,6 +92,36 @@ def test_a_campaigns_median_stands_beside_the_published_figure_with_the_protocol
     assert row["published as"].startswith("published, 5 runs, median ATE") and row["protocol differs"] == "-"
     se3 = beside(pd.DataFrame(_runs("dpvo", "MH_01_easy", [0.05], "se3")), built_in()).iloc[0]
     assert se3["protocol differs"] == "aligned by SE(3) here"
+
+
+def test_dpv_slams_figures_stand_beside_dpvo_run_with_its_loop_closure_only():
+    """DPV-SLAM is DPVO with loop_closure: true. A campaign running both (labels dpvo and dpv_slam) sees each beside
+    its own published figure; DPVO's figure is never set beside the loop-closing runs, nor DPV-SLAM's beside DPVO's."""
+    runs = _runs("dpvo", "MH_01_easy", [0.05, 0.07]) + [
+        r | {"method": "dpv_slam"} for r in _runs("dpvo", "MH_01_easy", [0.02, 0.04])
+    ]
+    params = {"dpvo": default_params("dpvo"), "dpv_slam": default_params("dpvo") | {"loop_closure": True}}
+    table = beside(pd.DataFrame(runs), built_in(), params).set_index("method")
+    slam_log = _stated_medians((LOGS / "dpv_slam" / "euroc.txt").read_text())
+    assert table.loc["dpvo", "published"] == pytest.approx(0.08683937293607617)
+    assert table.loc["dpv_slam", "published"] == pytest.approx(slam_log["MH_01_easy"])
+    assert table.loc["dpv_slam", "this campaign, median"] == pytest.approx(0.03)
+    assert table.loc["dpv_slam", "published as"].endswith("loop_closure=True")
+    assert len(table) == 2
+
+
+def test_a_lab_figure_names_its_settings_in_one_cell(tmp_path):
+    path = tmp_path / "ours.csv"
+    header = "method,dataset,sequence,metric,value,runs,statistic,alignment,frames,source,settings"
+    row = "dpvo,euroc,MH_01_easy,ate_rmse,0.02,3,median,sim3,all,our paper"
+    path.write_text(f"{header}\n{row},loop_closure=true; stride=1\n")
+    (figure,) = read_table(path)
+    assert figure.settings == {"loop_closure": True, "stride": 1}
+    assert figure.made_with({"loop_closure": True, "stride": 1, "seed": None})
+    assert not figure.made_with({"loop_closure": True, "stride": 2}) and not figure.made_with(None)
+    path.write_text(f"{header}\n{row},loop_closure\n")
+    with pytest.raises(SlamRunError, match=r"line 2: settings: .*expected name=value pairs"):
+        read_table(path)
 
 
 @pytest.mark.parametrize(

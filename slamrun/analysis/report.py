@@ -21,7 +21,7 @@ from slamrun.analysis.left_out import left_out, section_flags, shown_in
 from slamrun.analysis.load import NO_DATASET, by_dataset, counted, evaluated, load_results, main_metric, metrics_for
 from slamrun.analysis.paths import sequence_paths
 from slamrun.analysis.provenance import provenance
-from slamrun.analysis.published import beside
+from slamrun.analysis.published import beside, method_params
 from slamrun.analysis.published import figures as published_figures
 from slamrun.analysis.robustness import (
     AREA_BOUND,
@@ -139,6 +139,7 @@ def _write_report(
     prov = provenance(results, df)
     options |= {"measurement": prov.measurement, "contention_pct": prov.contention_pct}
     published, unread = published_figures(prov.published)
+    params = method_params(results)
     prov.notes += [f"published figures left out: {why}" for why in unread]
     stats_options = {k: options[k] for k in ("level", "adjust", "alpha", "colours")}
     sections = [Section("Provenance", page.provenance_html(prov, out, results))]
@@ -146,7 +147,7 @@ def _write_report(
         name, part = next(iter(groups.items()))
         label = name if name != NO_DATASET else ""
         body = dataset_report(part, out, out, label, **options)
-        body += published_section(part, published, out, out, label)
+        body += published_section(part, published, params, out, out, label)
         body += robustness_report(everything[name], out, out, label, **stats_options)
         intro = Section(f"Dataset {name}" if label else "Results", "", body)
         sections.append(intro)
@@ -154,7 +155,7 @@ def _write_report(
         sections.append(Section("All datasets (pooled)", "", pooled_report(baseline(df), out)))
         for name, folder in _folders(groups).items():
             body = dataset_report(groups[name], out / "datasets" / folder, out, name, **options)
-            body += published_section(groups[name], published, out / "datasets" / folder, out, name)
+            body += published_section(groups[name], published, params, out / "datasets" / folder, out, name)
             body += robustness_report(everything[name], out / "datasets" / folder, out, name, **stats_options)
             sections.append(Section(f"Dataset {name}", "", body))
     robust = robustness_csv(everything)
@@ -411,9 +412,12 @@ PUBLISHED_CAPTION = (
 )
 
 
-def published_section(df: pd.DataFrame, published, out: Path, root: Path, dataset: str = "") -> list[Section]:
-    """The published figures matching this dataset's runs, beside the campaign's medians; none where none match."""
-    table = beside(df, published)
+def published_section(
+    df: pd.DataFrame, published, params: dict[str, dict], out: Path, root: Path, dataset: str = ""
+) -> list[Section]:
+    """The published figures matching this dataset's runs (and their methods' `params`, by label), beside the
+    campaign's medians; none where none match."""
+    table = beside(df, published, params)
     if table.empty:
         return []
     title = "Published figures beside this campaign's"

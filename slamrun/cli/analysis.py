@@ -92,12 +92,13 @@ def cmd_stats(args) -> int:
 def _published_lines(df, results: Path, extra: list[Path]) -> list[str]:
     """Published figures beside the campaign's medians, one line each: never part of the statistics above."""
     from slamrun.analysis.load import by_dataset
-    from slamrun.analysis.published import beside, figures, spec_files
+    from slamrun.analysis.published import beside, figures, method_params, spec_files
 
     published, unread = figures([*spec_files(results), *extra])
+    params = method_params(results)
     lines = [f"published figures left out: {why}" for why in unread]
     for name, part in by_dataset(df).items():
-        table = beside(part, published)
+        table = beside(part, published, params)
         if table.empty:
             continue
         lines.append(f"published figures beside this campaign's ({name}; shown, never tested):")

@@ -349,6 +349,19 @@ MAX_RUNS = 200_000
 MAX_VIEWS = 10_000
 
 
+class RecordedMethod(BaseModel):
+    """A method entry of a recorded spec: its name, label and parameters as given (defaults not filled in)."""
+
+    model_config = ConfigDict(extra="ignore")
+    name: str
+    label: str | None = None
+    params: dict = {}
+
+    @property
+    def run_label(self) -> str:
+        return self.label or self.name
+
+
 class RecordedSpec(BaseModel):
     """The spec as run (the ledger's record, else spec.resolved.yaml), read back for what the report, the live page
     and the session say of it: the campaign's settings they read, typed as CampaignSpec types them. Any other key is
@@ -364,6 +377,7 @@ class RecordedSpec(BaseModel):
     cpus_per_lane: int | None = None
     contention_pct: float | None = None
     published: list[str] = []
+    methods: list[RecordedMethod] = []
 
     @classmethod
     def read(cls, recorded: object) -> RecordedSpec | None:

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from slamrun.errors import SlamRunError
 from slamrun.results.catalogue import CATALOGUE, label
@@ -40,12 +40,37 @@ class Published(BaseModel):
     alignment: Literal["sim3", "se3", "none"]
     frames: Literal["all", "keyframes"]
     source: str = Field(min_length=1, description="where it is published: repository@commit/file, or paper and table")
+    settings: dict[str, bool | int | float | str] = Field(
+        default_factory=dict,
+        description="the method's parameters the figure was made with, by slamrun's names (DPV-SLAM's: loop_closure: "
+        "true); only a campaign's runs with those parameters are set beside it. In a CSV: `name=value; ...`",
+    )
+
+    @field_validator("settings", mode="before")
+    @classmethod
+    def _pairs(cls, value):
+        """A CSV cell `loop_closure=true; stride=2` (YAML values), or nothing."""
+        if not isinstance(value, str):
+            return value
+        pairs = [p.partition("=") for p in value.split(";") if p.strip()]
+        if any(not sep or not k.strip() for k, sep, _ in pairs):
+            raise ValueError(f"expected name=value pairs separated by ';', got {value!r}")
+        return {k.strip(): yaml.safe_load(v.strip()) for k, _, v in pairs}
 
     def protocol(self) -> str:
-        """`published, 5 runs, median ATE RMSE (m), Sim(3), all frames`."""
+        """`published, 5 runs, median ATE RMSE (m), Sim(3), all frames` (and its settings: `, loop_closure=True`)."""
         runs = "1 run" if self.runs == 1 else f"{self.runs} runs"
         frames = "keyframes only" if self.frames == "keyframes" else "all frames"
-        return f"published, {runs}, {self.statistic} {label(self.metric)}, {ALIGNMENTS[self.alignment]}, {frames}"
+        settings = "".join(f", {k}={v}" for k, v in self.settings.items())
+        how = f"{self.statistic} {label(self.metric)}, {ALIGNMENTS[self.alignment]}"
+        return f"published, {runs}, {how}, {frames}{settings}"
+
+    def made_with(self, params: dict | None) -> bool:
+        """Whether a campaign's method ran with this figure's settings (its params with their defaults; None where
+        they are not known, which only a figure without settings accepts)."""
+        if not self.settings:
+            return True
+        return params is not None and all(params.get(k) == v for k, v in self.settings.items())
 
 
 COLUMNS = tuple(Published.model_fields)
@@ -103,6 +128,14 @@ def read_dpvo_log(text: str, *, method: str, dataset: str, source: str, **protoc
     return out
 
 
+class _Log(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    file: str
+    method: str
+    dataset: str
+    settings: dict[str, bool | int | float | str] = {}
+
+
 class _Manifest(BaseModel):
     model_config = ConfigDict(extra="forbid")
     source: str
@@ -110,7 +143,7 @@ class _Manifest(BaseModel):
     statistic: Literal["median", "mean", "single"]
     alignment: Literal["sim3", "se3", "none"]
     frames: Literal["all", "keyframes"]
-    logs: list[dict[str, str]]
+    logs: list[_Log]
 
 
 def built_in() -> list[Published]:
@@ -120,10 +153,9 @@ def built_in() -> list[Published]:
         m = _Manifest(**yaml.safe_load(manifest.read_text()))
         protocol = {"metric": m.metric, "statistic": m.statistic, "alignment": m.alignment, "frames": m.frames}
         for log in m.logs:
-            path = manifest.parent / log["file"]
-            source = f"{m.source}/logs/{log['file']}"
-            out += read_dpvo_log(path.read_text(), method=log["method"], dataset=log["dataset"], source=source,
-                                 **protocol)  # fmt: skip
+            text = (manifest.parent / log.file).read_text()
+            out += read_dpvo_log(text, method=log.method, dataset=log.dataset, source=f"{m.source}/logs/{log.file}",
+                                 settings=log.settings, **protocol)  # fmt: skip
     return out
 
 
