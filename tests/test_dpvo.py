@@ -268,12 +268,12 @@ def test_every_parameter_is_written_once_and_reaches_dpvo():
     (stride, seed) or DPVO's cfg under its config.py name. The params model is the one place a parameter is written:
     the command hands them all as one JSON object, the process knows DPVO's names."""
     values = changed(DpvoParams)
-    assert len(values) == 13
+    assert len(values) == 17
     runner, cfg = dpvo_process.config(Dpvo(values).settings())
     got = runner | {key.lower(): value for key, value in vars(cfg).items()}
     assert {name: got[name] for name in values} == values
     untouched = {key: value for key, value in vars(cfg).items() if key.lower() not in values}
-    assert untouched == {key: dpvo_process.CONFIG[key] for key in untouched}  # config.py's: loop closure off
+    assert untouched == {key: dpvo_process.CONFIG[key] for key in untouched}  # config.py's: the classical one off
 
 
 @pytest.mark.parametrize(
@@ -331,6 +331,12 @@ def test_runner_reads_the_view_and_stops_at_the_missing_gpu(tmp_path, room_view,
     assert res.returncode == 1 and "40 frames but 39 timestamps" in res.stderr
     res = subprocess.run([*argv, "--settings", '{"patch_count": 3}'], capture_output=True, text=True, cwd=tmp_path)
     assert res.returncode == 1 and "dpvo: unknown setting 'patch_count'" in res.stderr, res.stderr
+    missing = dpvo_process.missing_for_loop_closure()  # DPV-SLAM's modules: in the image, not in this environment
+    res = subprocess.run([*argv, "--settings", '{"loop_closure": true}'], capture_output=True, text=True, cwd=tmp_path)
+    if missing:  # refused before PyTorch or the GPU is looked at: bad input, named
+        assert res.returncode == 1 and f"loop_closure (DPV-SLAM) needs {', '.join(missing)}" in res.stderr
+    else:
+        assert res.returncode in (1, 3) and "loop_closure" not in res.stderr, res.stderr
 
 
 def test_runner_output_reads_back_at_the_original_timestamps(tmp_path, room_view):

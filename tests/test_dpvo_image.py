@@ -46,7 +46,8 @@ def stages(text: str) -> list[str]:
 
 def test_every_file_the_recipe_installs_is_pinned_by_hash_and_generated_from_the_table():
     torch_files, tool_files = src.pypi_table(src.DPVO_TORCH), src.pypi_table(src.DPVO_TOOLCHAIN)
-    assert pypi_files_of(DOCKERFILE) == [f.filename for f in (*torch_files, *tool_files)]  # nothing else copied
+    loop_files = src.pypi_table(src.DPVO_LOOP_CLOSURE)  # DPV-SLAM's (tests/test_dpv_slam.py)
+    assert pypi_files_of(DOCKERFILE) == [f.filename for f in (*torch_files, *tool_files, *loop_files)]
     assert all(src.PYPI_FILES[f.filename] == f for f in (*torch_files, *tool_files))
     for name, table in (("requirements.txt", torch_files), ("requirements-build.txt", tool_files)):
         lines = pins(TORCH_CUDA / name)
@@ -59,7 +60,7 @@ def test_every_file_the_recipe_installs_is_pinned_by_hash_and_generated_from_the
     assert {f.project for f in tool_files} == TOOLCHAIN | {"ninja"}
     text = recipe_text(DOCKERFILE)
     installs = [i for i in re.sub(r"\\\n", " ", text).splitlines() if "pip install" in i]
-    assert len(installs) == 2 and all("--no-index" in i for i in installs)
+    assert len(installs) == 3 and all("--no-index" in i for i in installs)  # runtime, compiler, loop closure
     assert all(i.count("--require-hashes") == 1 for i in installs if "-r /opt" in i)
 
 
@@ -130,7 +131,9 @@ def test_the_shared_stages_are_one_text_put_ahead_of_each_recipe_that_names_them
     listed = subprocess.run([sys.executable, "-m", "slamrun.cli", "images", "--list"], capture_output=True, text=True)
     line = "dpvo: slamrun/dpvo:latest <- dpvo/image/Dockerfile (+ recipes/torch_cuda/stages.Dockerfile)"
     assert line in listed.stdout
-    assert "dso: slamrun/dso:latest <- dso/image/Dockerfile\n" in listed.stdout
+    stages = "recipes/debian/stages.Dockerfile, recipes/pangolin/stages.Dockerfile"
+    assert f"dso: slamrun/dso:latest <- dso/image/Dockerfile (+ {stages})\n" in listed.stdout
+    assert "reference_vo: slamrun/reference_vo:latest <- reference_vo/image/Dockerfile\n" in listed.stdout
 
 
 def test_the_extension_build_script_compiles_with_the_wheels_toolkit_for_the_given_targets():

@@ -54,9 +54,8 @@ def test_the_torch_stages_are_dpvos():
         and mine[4].startswith("FROM torch-runtime\n")
     )
     assert pypi_files_of(DOCKERFILE) == pypi_files_of(DPVO)
-    assert [f.filename for f in (*src.pypi_table(src.DPVO_TORCH), *src.pypi_table(src.DPVO_TOOLCHAIN))] == (
-        pypi_files_of(DOCKERFILE)
-    )
+    tables = (src.DPVO_TORCH, src.DPVO_TOOLCHAIN, src.DPVO_LOOP_CLOSURE)
+    assert [f.filename for table in tables for f in src.pypi_table(table)] == (pypi_files_of(DOCKERFILE))
     assert not (RECIPE / "requirements.txt").exists()  # no second copy of the pins
 
 

@@ -126,7 +126,8 @@ def cmd_images(args) -> int:
         for name, (tag, dockerfile) in buildable().items():
             gpu = " (GPU optional, CPU by default)" if slamrun.methods.REGISTRY[name].gpu_capable else ""
             where = dockerfile.relative_to(METHODS) if dockerfile.is_relative_to(METHODS) else dockerfile
-            stages = "".join(f" (+ {path.relative_to(METHODS)})" for path in stage_files(dockerfile))
+            parts = ", ".join(str(path.relative_to(METHODS)) for path in stage_files(dockerfile))
+            stages = f" (+ {parts})" if parts else ""
             console.print(f"{name}: {tag} <- {where}{stages}{gpu}")
         return 0
     opts = BuildOptions(

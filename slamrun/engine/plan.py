@@ -14,6 +14,7 @@ from slamrun.datasets.perturb import BASELINE, NONE, Perturbation
 from slamrun.datasets.view import Direction, Profile
 from slamrun.engine.run_evaluation import EvalSettings
 from slamrun.engine.spec import CampaignSpec, DatasetSpec, MethodSpec
+from slamrun.methods.declare import ADDED
 
 
 @dataclass(frozen=True)
@@ -77,13 +78,25 @@ def settings_hash(m: MethodSpec, campaign_seed: int = 0) -> str:
     these)."""
     cls = slamrun.methods.get(m.name)
     params = cls.Params.model_validate(m.params).model_dump(mode="json")
-    settings: dict = {"method": m.name, "params": params}
+    settings: dict = {"method": m.name, "params": hashed(cls.Params, params)}
     if derives_seed(cls, params):
         settings["seeds"] = f"per trial from campaign seed {campaign_seed}"
     if (provider := slamrun.methods.PLUGINS.get(m.name)) is not None:
         settings["provider"] = [provider.distribution, provider.version]
     blob = json.dumps(settings, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:10]
+
+
+def hashed(model: type, params: dict) -> dict:
+    """The parameters that name a configuration: all of them, except that a parameter added to a method after runs
+    were made (Field(json_schema_extra={"added": DATE})) is left out while it has its default, which is how those runs
+    ran: adding a setting never renames, and so never re-runs, what was made before it."""
+    fields = model.model_fields
+    return {
+        k: v
+        for k, v in params.items()
+        if not (k in fields and ADDED in (fields[k].json_schema_extra or {}) and v == fields[k].get_default())
+    }
 
 
 def derives_seed(cls, params: dict) -> bool:

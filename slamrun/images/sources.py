@@ -390,6 +390,29 @@ ninja-1.13.0-py3-none-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
     fb46acf6b93b8dd0322adc3a4945452a4e774b75b91293bafcc7b7f8e6517dfa
 """
 
+# What DPV-SLAM's loop closure imports beside PyTorch (DPVO's dpvo/loop_closure/optim_utils.py, imported by
+# PatchGraph.edges_loop when `loop_closure: true`): installed into the same environment with pip --no-index
+# --require-hashes --no-deps (slamrun/methods/recipes/torch_cuda/requirements-loop-closure.txt): pypose declares pytest
+# as a requirement, for its own tests, and imports only torch and packaging. Found with `pip download
+# --only-binary=:all: --python-version 3.11 --no-deps` on the pins below; numba 0.61.2 takes numpy < 2.3 (2.2.6 here).
+DPVO_LOOP_CLOSURE = """
+# numba: reduce_edges (the loop edges' non-maximum suppression) is @njit; llvmlite is its compiler
+numba-0.61.2-cp311-cp311-manylinux2014_x86_64.manylinux_2_17_x86_64.whl
+    3945615cd73c2c7eba2a85ccc9c1730c21cd3958bfcf5a44302abae0fb07bb60
+llvmlite-0.44.0-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl
+    c5d22c3bfc842668168a786af4205ec8e3ad29fb1bc03fd11fd48460d0df64c1
+# pypose: the Sim(3) poses of the classical loop closure's pose graph (imported by the module); packaging: its import
+pypose-0.9.5-py3-none-any.whl
+    ba9e8babbf5b54b1d54168fb030458d8ef84e66f7d5d013d5263eec27b70bed1
+packaging-25.0-py3-none-any.whl
+    29572ef2b1f17581046b3a2227d5c611fb25ec70ca1ba8554b24b0e69331a484
+# einops: the patch graph's reductions; scipy: the module's Rotation import (the same file as the reference VO's)
+einops-0.8.2-py3-none-any.whl
+    54058201ac7087911181bfec4af6091bb59380360f069276601256a76af08193
+scipy-1.15.3-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl
+    39cb9c62e471b1bb3750066ecc3a3f3052b37751c7c3dfd0fd7e48900ed52982
+"""
+
 
 def pypi_file(filename: str, sha256: str) -> PypiFile:
     """A PyPI file named by the conventions of wheels (`<project>-<version>-<tags>.whl`) and sdists
@@ -448,6 +471,7 @@ PYPI_FILES: dict[str, PypiFile] = {
         *pypi_table(PY27_DYNASLAM),
         *pypi_table(DPVO_TORCH),
         *pypi_table(DPVO_TOOLCHAIN),
+        *pypi_table(DPVO_LOOP_CLOSURE),
     )
 }
 

@@ -100,3 +100,12 @@ class VerifyScope:
 def declared(cls: type, attr: str, default=None):
     """What `cls` itself declares as `attr` (its class body), never what a base class does."""
     return vars(cls).get(attr, default)
+
+
+ADDED = "added"  # a parameter's json_schema_extra key: the date it was added to a method that had runs before
+
+
+def added(date: str) -> dict:
+    """json_schema_extra of a parameter added to a method after runs were made with it: left out of the settings'
+    name while at its default (engine.plan.hashed), so those runs keep theirs."""
+    return {ADDED: date}

@@ -23,7 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import Profile
 from slamrun.methods.base import strided
-from slamrun.methods.declare import NativeMethod, Source, Weights
+from slamrun.methods.declare import NativeMethod, Source, Weights, added
 from slamrun.methods.native_gpu import NativeGpuMethod, build_param, torch_seed_param, weights_param
 
 IMAGE_WEIGHTS = (
@@ -37,6 +37,7 @@ STANDIN_SEED = 0  # the same as image/network.sh's
 # so that its updates are a few pixels and the whole pipeline runs (patches, BA, keyframes, terminate).
 STANDIN_FLOW_GAIN = 16.0
 IMAGE = Path(__file__).resolve().parent / "image"  # its image's recipe; the native build's patches are the image's
+SINCE_DPV_SLAM = added("2026-11-29")  # DPVO's runs made before keep their settings' name (engine.plan.hashed)
 
 
 class DpvoParams(BaseModel):
@@ -60,6 +61,25 @@ class DpvoParams(BaseModel):
     )
     buffer_size: int = Field(4096, ge=16, description="BUFFER_SIZE: most keyframes kept (config.py: 4096).")
     seed: int | None = torch_seed_param()
+    # DPV-SLAM (ECCV 2024) is DPVO with its proximity loop closure: `--opts LOOP_CLOSURE True` (README: DPV-SLAM)
+    loop_closure: bool = Field(
+        False,
+        description="LOOP_CLOSURE: DPV-SLAM's proximity loop closure and global BA (config.py: false); "
+        "the classical, image-retrieval loop closure (CLASSIC_LOOP_CLOSURE) is not offered.",
+        json_schema_extra=SINCE_DPV_SLAM,
+    )
+    backend_thresh: float = Field(
+        64.0, gt=0, description="BACKEND_THRESH: flow (px) under which an old patch makes a loop edge (config.py: 64).",
+        json_schema_extra=SINCE_DPV_SLAM,
+    )  # fmt: skip
+    max_edge_age: int = Field(
+        1000, ge=1, description="MAX_EDGE_AGE: frames back a loop edge may reach (config.py: 1000).",
+        json_schema_extra=SINCE_DPV_SLAM,
+    )  # fmt: skip
+    global_opt_freq: int = Field(
+        15, ge=1, description="GLOBAL_OPT_FREQ: frames between loop-edge searches (config.py: 15).",
+        json_schema_extra=SINCE_DPV_SLAM,
+    )  # fmt: skip
 
 
 class Dpvo(NativeGpuMethod):

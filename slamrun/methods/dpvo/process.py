@@ -50,6 +50,7 @@ CONFIG = {
     "LOOP_CLOSE_WINDOW_SIZE": 3,
     "LOOP_RETR_THRESH": 0.04,
 }
+LOOP_CLOSURE_MODULES = ("numba", "pypose", "einops", "scipy")  # what DPV-SLAM's loop closure imports (optim_utils.py)
 RUNNER = {"stride": 2, "seed": None}  # this runner's settings: demo.py's --stride; PyTorch's generators unseeded
 PREFETCH = 8  # frames read ahead by a reader thread, as demo.py's reader process does
 
@@ -98,6 +99,13 @@ def import_root(build: Path) -> Path:
         return build
 
 
+def missing_for_loop_closure() -> list[str]:
+    """The modules DPV-SLAM's loop closure imports that this environment lacks (an image built before it had them)."""
+    import importlib.util
+
+    return [name for name in LOOP_CLOSURE_MODULES if importlib.util.find_spec(name) is None]
+
+
 def run(argv: list[str] | None = None) -> int:
     args = parse(argv)
     try:
@@ -106,6 +114,13 @@ def run(argv: list[str] | None = None) -> int:
         k, width, height = intrinsics(args.camera)
     except (OSError, ValueError, KeyError) as exc:
         print(f"dpvo: {exc}", file=sys.stderr)
+        return 1
+    if cfg.LOOP_CLOSURE and (missing := missing_for_loop_closure()):
+        print(
+            f"dpvo: loop_closure (DPV-SLAM) needs {', '.join(missing)}, which this environment lacks (an image built "
+            "before slamrun installed them: build it again with `slamrun images --method dpvo`)",
+            file=sys.stderr,
+        )
         return 1
     sys.path.insert(0, str(import_root(args.build)))
     torch = cuda_torch("dpvo", "DPVO", args.weights, runner["seed"])

@@ -74,6 +74,22 @@ RUN cd /opt/slamrun-build/pypi-build \
  && /opt/venv/bin/python -m pip install --no-index --no-cache-dir --find-links . \
       --require-hashes --no-deps -r /opt/slamrun-build/requirements-build.txt \
  && cd / && rm -rf /opt/slamrun-build/pypi-build
+# DPV-SLAM's loop closure (DPVO with `loop_closure: true`): numba, pypose, einops and scipy, beside PyTorch, without
+# their declared but unimported requirements (pypose's pytest)
+COPY \
+     pypi/numba-0.61.2-cp311-cp311-manylinux2014_x86_64.manylinux_2_17_x86_64.whl \
+     pypi/llvmlite-0.44.0-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl \
+     pypi/pypose-0.9.5-py3-none-any.whl \
+     pypi/packaging-25.0-py3-none-any.whl \
+     pypi/einops-0.8.2-py3-none-any.whl \
+     pypi/scipy-1.15.3-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl \
+     /opt/slamrun-build/pypi-loop-closure/
+COPY recipes/torch_cuda/requirements-loop-closure.txt /opt/slamrun-build/
+RUN cd /opt/slamrun-build/pypi-loop-closure \
+ && /opt/venv/bin/python -m pip install --no-index --no-cache-dir --find-links . \
+      --require-hashes --no-deps -r /opt/slamrun-build/requirements-loop-closure.txt \
+ && cd / && rm -rf /opt/slamrun-build/pypi-loop-closure \
+ && /opt/venv/bin/python -c "import numba, pypose, einops, scipy.spatial.transform; print('numba', numba.__version__)"
 
 FROM torch-cuda AS torch-venv
 RUN /opt/venv/bin/python -m pip uninstall -y --no-cache-dir \
@@ -86,7 +102,7 @@ RUN apt-get update \
  && rm -rf /var/lib/apt/lists/*
 COPY --from=torch-venv /opt/venv /opt/venv
 ENV PATH=/opt/venv/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin \
-    PYTHONPATH=/opt/slamrun PYTHONDONTWRITEBYTECODE=1
+    PYTHONPATH=/opt/slamrun PYTHONDONTWRITEBYTECODE=1 NUMBA_CACHE_DIR=/tmp/numba
 # no compiler left: torch imports without it
 RUN ! ls /opt/venv/lib/python3.11/site-packages/nvidia/cu13/bin/nvcc 2>/dev/null \
  && python3 -c "import torch, numpy, cv2" \
