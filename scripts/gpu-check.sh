@@ -116,7 +116,16 @@ find "$BUILD" -name .ninja_log -exec awk -v OFS='\t' '!/^#/ {print ($2 - $1) / 1
 cp "$BUILD/build.json" "$OUT_DIR/native-build.json"
 cp "$BUILD/build.log" "$OUT_DIR/logs/native-build-compiler.log"
 
-step campaign "slamrun campaign: $METHOD (stand-in network), backend local, forward and backward, $TRIALS trial(s) each"
+# the method's published variants (its declaration: DPV-SLAM is dpvo with loop_closure: true), each one more method
+# entry of the campaign, with the same stand-in network
+variant_entries() {
+  "${SLAMRUN[@]}" list-methods --json | "$PYTHON" -c '
+import json, sys
+for label, params in json.load(sys.stdin)[sys.argv[1]].get("variants", {}).items():
+    print(f"  - name: {sys.argv[1]}\n    label: {label}-standin\n    params: {json.dumps(params)}")' "$METHOD"
+}
+VARIANTS=$(variant_entries | grep -c 'label:' || true)
+step campaign "slamrun campaign: $METHOD and its $VARIANTS published variant(s) (stand-in network), backend local, forward and backward, $TRIALS trial(s) each"
 SPEC="$OUT_DIR/gpu-check.yaml"
 cat >"$SPEC" <<EOF
 # written by scripts/gpu-check.sh
@@ -130,6 +139,7 @@ datasets:
 methods:
   - name: $METHOD
     label: $METHOD-standin   # an untrained stand-in network: plumbing and resources only, accuracy meaningless
+$(variant_entries)
 directions: [forward, backward]
 trials: $TRIALS
 timeout_s: 300

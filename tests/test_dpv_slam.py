@@ -5,7 +5,11 @@ parameters renamed none of the DPVO configurations that had runs before (their s
 from __future__ import annotations
 
 import re
+import subprocess
+import sys
+from pathlib import Path
 
+import yaml
 from pydantic import BaseModel, Field
 
 from slamrun.engine.plan import hashed, settings_hash
@@ -17,6 +21,7 @@ from slamrun.methods.dpvo import Dpvo, DpvoParams
 from slamrun.methods.dpvo import process as dpvo_process
 from tests.conftest import recipe
 
+ROOT = Path(__file__).resolve().parents[1]
 TORCH_CUDA = recipe("torch_cuda")
 LOOP = ("loop_closure", "backend_thresh", "max_edge_age", "global_opt_freq")
 
@@ -65,3 +70,18 @@ def test_the_loop_closure_modules_are_in_the_torch_stage_pinned_by_hash():
     assert re.search(r"--require-hashes --no-deps -r /opt/slamrun-build/requirements-loop-closure.txt", stages)
     check = (recipe("dpvo") / "check_image.py").read_text()
     assert "from dpvo.loop_closure.optim_utils import reduce_edges" in check
+
+
+def test_gpu_check_runs_dpv_slam_beside_dpvo(tmp_path):
+    """scripts/gpu-check.sh's campaign holds each published variant of its method (the declaration's, through
+    `slamrun list-methods --json`) as one more method entry: dpvo's is dpv_slam, loop closure on."""
+    script = (ROOT / "scripts" / "gpu-check.sh").read_text()
+    start = script.index("variant_entries() {")
+    function = script[start : script.index("\n}\n", start) + 3]
+    bash = f"SLAMRUN=({sys.executable} -m slamrun.cli); PYTHON={sys.executable}; METHOD=dpvo\n{function}variant_entries"
+    res = subprocess.run(["bash", "-c", bash], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    (entry,) = yaml.safe_load(res.stdout)
+    assert entry == {"name": "dpvo", "label": "dpv_slam-standin", "params": {"loop_closure": True}}
+    assert MethodSpec(**entry).run_label == "dpv_slam-standin" and DpvoParams(**entry["params"]).loop_closure
+    assert Dpvo.variants == {"dpv_slam": {"loop_closure": True}}

@@ -100,7 +100,7 @@ def cmd_list_methods(args) -> int:
 
 def methods_json() -> dict:
     """Each method as scripts read it (scripts/gpu-check.sh, gpu-wheels.sh): its image, GPU needs, the file names of
-    the pinned archives its image builds from, and its native build's (null without one)."""
+    the pinned archives its image builds from, its native build's (null without one) and its published variants."""
     import slamrun.methods
     from slamrun.images.sources import SOURCES
     from slamrun.methods.declare import declared
@@ -114,6 +114,7 @@ def methods_json() -> dict:
             "native": bool(cls.native),
             "archives": [s.filename for s in declared(cls, "sources", ())],
             "native_build": {"archives": [SOURCES[s].filename for s in native.archives]} if native else None,
+            "variants": cls.variants,
         }
     return out
 

@@ -73,6 +73,10 @@ class Method(ABC):
     verify_scope: ClassVar[VerifyScope | None] = None  # `slamrun verify` runs less than its default (why, in it)
     verified: ClassVar[bool] = True  # `slamrun verify` checks its image (slamrun's own reference method: its tests)
     native_build: ClassVar[NativeMethod | None] = None  # how `slamrun native-build` makes it
+    # Configurations its authors publish as methods of their own, by the name they publish (DPV-SLAM: DPVO with
+    # loop_closure: true): a spec runs one as {name: <this>, label: <variant>, params: ...}; scripts/gpu-check.sh runs
+    # each beside the default (slamrun list-methods --json)
+    variants: ClassVar[dict[str, dict]] = {}
     # The parameter that seeds its randomness (None: it takes no seed). Unless the spec fixes it, each trial gets its
     # own seed, derived from the trial and the campaign's `seed` (engine.plan.trial_seed), recorded in run.json.
     seed_param: ClassVar[str | None] = None

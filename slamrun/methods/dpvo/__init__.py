@@ -119,6 +119,7 @@ class Dpvo(NativeGpuMethod):
     process = f"{__name__}.process"  # its folder's process.py (`python -m`), given these params as one JSON object
     image_build = IMAGE_BUILD
     weights_name = WEIGHTS_NAME
+    variants = {"dpv_slam": {"loop_closure": True}}  # DPV-SLAM (ECCV 2024): DPVO with its proximity loop closure
 
     def frames_given(self, n: int):
         """Every `stride`-th frame of the view and its last (its process takes those): coverage is of them."""
