@@ -85,3 +85,12 @@ def test_gpu_check_runs_dpv_slam_beside_dpvo(tmp_path):
     assert entry == {"name": "dpvo", "label": "dpv_slam-standin", "params": {"loop_closure": True}}
     assert MethodSpec(**entry).run_label == "dpv_slam-standin" and DpvoParams(**entry["params"]).loop_closure
     assert Dpvo.variants == {"dpv_slam": {"loop_closure": True}}
+
+
+def test_the_dpv_slam_config_runs_both_as_their_authors_evaluate_them():
+    from slamrun.engine.spec_file import load_spec
+
+    spec = load_spec(ROOT / "configs" / "dpv-slam.yaml", check_files=False, check_gpu=False)
+    assert [(m.run_label, m.params) for m in spec.methods] == [("dpvo", {}), ("dpv_slam", {"loop_closure": True})]
+    assert spec.trials == 5 and [d.value for d in spec.directions] == ["forward"]
+    assert spec.datasets[0].layout == "euroc" and spec.datasets[0].metrics == ["ate"]
