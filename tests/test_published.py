@@ -213,3 +213,21 @@ def test_stats_refuses_an_unreadable_reference_file_before_printing_anything(tmp
     assert main(["stats", str(table), "--published", str(tmp_path / "missing.csv")]) != 0
     captured = capsys.readouterr()
     assert "missing.csv: published figures: not readable" in captured.err and captured.out == ""
+
+
+def test_each_labels_parameters_come_from_the_recorded_spec_with_their_defaults(tmp_path):
+    """The spec as run names each label's method and parameters; method_params fills in the defaults, and a method
+    not registered here (a plug-in since removed) is left out rather than guessed."""
+    from slamrun.analysis.published import method_params
+
+    methods = [
+        {"name": "dpvo"},
+        {"name": "dpvo", "label": "dpv_slam", "params": {"loop_closure": True}},
+        {"name": "a_plugin_not_installed_here"},
+    ]
+    (tmp_path / "spec.resolved.yaml").write_text(yaml.safe_dump({"name": "c", "methods": methods}))
+    params = method_params(tmp_path)
+    assert set(params) == {"dpvo", "dpv_slam"}
+    assert params["dpvo"] == default_params("dpvo") and params["dpvo"]["loop_closure"] is False
+    assert params["dpv_slam"] == default_params("dpvo") | {"loop_closure": True}
+    assert method_params(tmp_path / "results.csv") == params  # a results table names its folder

@@ -110,5 +110,8 @@ def test_the_stored_spec_is_read_back_through_the_spec_model():
         15,
     )
     assert measurement_conditions(recorded) == "parallel: 2 lane(s) of 1 CPU(s) each side by side"
+    assert [(m.run_label, m.params) for m in spec.methods] == [("a_plugin_not_installed_here", None)]
+    both = RecordedSpec.read({"methods": [{"name": "dpvo", "label": "dpv_slam", "params": {"loop_closure": True}}]})
+    assert both.methods[0].run_label == "dpv_slam" and both.methods[0].params == {"loop_closure": True}
     assert RecordedSpec.read({"lanes": "two"}) is None and RecordedSpec.read(["not", "a", "mapping"]) is None
     assert measurement_conditions({"lanes": "two"}) == "" and measurement_conditions(None) == ""

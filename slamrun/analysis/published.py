@@ -88,7 +88,7 @@ def method_params(results: Path) -> dict[str, dict]:
     for m in spec.methods if spec else []:
         cls = slamrun.methods.REGISTRY.get(m.name)
         try:
-            out[m.run_label] = cls.Params.model_validate(m.params).model_dump(mode="json")
+            out[m.run_label] = cls.Params.model_validate(m.params or {}).model_dump(mode="json")
         except (AttributeError, ValidationError):  # not registered here, or parameters of another version
             continue
     return out

@@ -355,7 +355,7 @@ class RecordedMethod(BaseModel):
     model_config = ConfigDict(extra="ignore")
     name: str
     label: str | None = None
-    params: dict = {}
+    params: dict | None = None  # as given (None: none given)
 
     @property
     def run_label(self) -> str:
