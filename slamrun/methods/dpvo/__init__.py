@@ -60,7 +60,6 @@ class DpvoParams(BaseModel):
         "RANDOM", description="CENTROID_SEL_STRAT: where patches are taken (default.yaml: RANDOM)."
     )
     buffer_size: int = Field(4096, ge=16, description="BUFFER_SIZE: most keyframes kept (config.py: 4096).")
-    seed: int | None = torch_seed_param()
     # DPV-SLAM (ECCV 2024) is DPVO with its proximity loop closure: `--opts LOOP_CLOSURE True` (README: DPV-SLAM)
     loop_closure: bool = Field(
         False,
@@ -80,6 +79,7 @@ class DpvoParams(BaseModel):
         15, ge=1, description="GLOBAL_OPT_FREQ: frames between loop-edge searches (config.py: 15).",
         json_schema_extra=SINCE_DPV_SLAM,
     )  # fmt: skip
+    seed: int | None = torch_seed_param()
 
 
 class Dpvo(NativeGpuMethod):
