@@ -24,6 +24,7 @@ from slamrun.results.catalogue import CATALOGUE, label
 
 METHODS = Path(__file__).resolve().parent.parent / "methods"
 ALIGNMENTS = {"sim3": "Sim(3)", "se3": "SE(3)", "none": "no alignment"}
+Settings = dict[str, bool | int | float | str]  # a method's parameters by slamrun's names (loop_closure: true)
 
 
 class Published(BaseModel):
@@ -40,7 +41,7 @@ class Published(BaseModel):
     alignment: Literal["sim3", "se3", "none"]
     frames: Literal["all", "keyframes"]
     source: str = Field(min_length=1, description="where it is published: repository@commit/file, or paper and table")
-    settings: dict[str, bool | int | float | str] = Field(
+    settings: Settings = Field(
         default_factory=dict,
         description="the method's parameters the figure was made with, by slamrun's names (DPV-SLAM's: loop_closure: "
         "true); only a campaign's runs with those parameters are set beside it. In a CSV: `name=value; ...`",
@@ -133,7 +134,7 @@ class _Log(BaseModel):
     file: str
     method: str
     dataset: str
-    settings: dict[str, bool | int | float | str] = {}
+    settings: Settings = {}
 
 
 class _Manifest(BaseModel):
