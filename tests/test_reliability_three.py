@@ -106,3 +106,23 @@ def test_a_spec_that_is_a_fifo_is_refused_at_once(tmp_path):
     os.mkfifo(spec)
     with pytest.raises(SpecError, match="FIFO"):
         load_spec(spec)
+
+
+# ------------------------------------------------------------ the machine lacks what the method needs
+
+
+def test_a_method_that_says_the_machine_lacks_what_it_needs_is_not_charged(tmp_path, tiny_dataset):
+    """A GPU method's process that finds too little GPU memory says so (`GPU MEMORY: ...`, its infra_pattern) and
+    exits: the run is the machine's failure (retried, then `infra`), never the method's; the same exit without the
+    pattern declared is the method's crash."""
+    said = fake_method("gpu-memory", label="declares", infra_pattern=r"^(NO GPU|GPU MEMORY):")
+    silent = fake_method("gpu-memory", label="silent")
+    spec = write_spec(
+        tmp_path, tiny_dataset, [said, silent], datasets=one_sequence(tiny_dataset), directions=["forward"], retries=1
+    )
+    rows = {r["method"]: r for r in ledger_rows(campaign(spec).results)}
+    assert (rows["declares"]["status"], rows["declares"]["failure"]) == ("failed", "infra"), rows["declares"]
+    assert "GPU MEMORY: needs about 9.9 GiB" in rows["declares"]["message"]
+    assert rows["declares"]["attempts"] == 2  # retried once, as infrastructure is
+    assert (rows["silent"]["status"], rows["silent"]["failure"]) == ("failed", "crashed"), rows["silent"]
+    assert rows["silent"]["attempts"] == 1

@@ -178,7 +178,7 @@ def finish_attempt(
         log_tail = tail(RunPaths.log(stage))
         extra = dict(extra)
         failure, message, traj = _judged(extra.pop(METHOD_ERROR, None), result, method, raw, view, log_tail)
-        _not_the_methods_fault(run, view, stage, failure, message, log_tail)
+        _not_the_methods_fault(run, method, view, stage, failure, message, log_tail)
         values: dict = {"exit_code": result.exit_code, **result.resources, "method_failure": failure}
         values["host"] = (extra.get("machine") or {}).get("name")
         values["packages"] = packages_text(extra.get("package_versions") or {})
@@ -222,12 +222,19 @@ def _judged(refused, result: ExecResult, method: Method, raw: Path, view: Prepar
     return failure, message, traj
 
 
-def _not_the_methods_fault(run: PlannedRun, view: PreparedView, stage: Path, failure, message, log_tail: str) -> None:
+def _not_the_methods_fault(
+    run: PlannedRun, method: Method, view: PreparedView, stage: Path, failure, message, log_tail: str
+) -> None:
     """A failure the machine caused is raised as such, never charged: the disk full under the method (StorageError),
-    its input view changed during the run (InfraError)."""
+    the machine lacking what the method needs, as its log says (its infra_pattern), or its input view changed during
+    the run (InfraError)."""
     if failure and failure != "output_limit" and _out_of_space(RunPaths.raw(stage), log_tail):
         shutil.rmtree(stage, ignore_errors=True)
         raise StorageError(f"{run.key.id}: the disk is full ({failure}: {message})")
+    lacking = method.infra_from_log(log_tail) if failure and failure not in ("timeout", "output_limit") else None
+    if lacking:  # the method said the machine lacks what it needs (no GPU, too little GPU memory)
+        shutil.rmtree(stage, ignore_errors=True)
+        raise InfraError(f"{run.key.id}: {lacking[:300]}; not charged to the method")
     if failure and failure != "timeout":  # failed on an input that went missing or changed under it?
         damaged = verify_view(view.root, view.build_id)  # the build it started with, whole
         if damaged:

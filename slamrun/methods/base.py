@@ -65,6 +65,9 @@ class Method(ABC):
     # Log lines that tell why a run produced nothing usable (case-insensitive regular expressions).
     not_initialized_pattern: ClassVar[str | None] = None
     lost_pattern: ClassVar[str | None] = None
+    # Log lines that say the machine lacks what the method needs (no GPU, too little GPU memory): the run is an
+    # infrastructure failure (retried, never charged to the method)
+    infra_pattern: ClassVar[str | None] = None
     # Its declaration for the toolchain (slamrun/images/), each read from the class that writes it (declare.declared):
     sources: ClassVar[tuple[Source, ...]] = ()  # the pinned archives its image (or native build) builds from
     vocabulary: ClassVar[Vocabulary | None] = None  # the vocabulary its image needs
@@ -182,6 +185,12 @@ class Method(ABC):
         """Whether this exit code still means the output is complete (LDSO exits 139 after writing)."""
         return exit_code == 0
 
+    def infra_from_log(self, log_tail: str) -> str | None:
+        """The log's line saying the machine lacks what the method needs (its infra_pattern), if there is one."""
+        if self.infra_pattern and (m := re.search(self.infra_pattern + ".*", log_tail, re.I | re.M)):
+            return m.group(0).strip()
+        return None
+
     def failure_from_log(self, log_tail: str) -> str | None:
         """`not_initialized` or `lost` when the log says so."""
         if self.not_initialized_pattern and re.search(self.not_initialized_pattern, log_tail, re.I | re.M):
@@ -246,6 +255,7 @@ GUARDED_CALLS = (
     "environment",
     "accepts_exit",
     "failure_from_log",
+    "infra_from_log",
     "for_backend",
     "problems",
     "launch_problems",
@@ -320,7 +330,13 @@ def not_a_trajectory(value) -> str | None:
     return None
 
 
-RETURN_CHECKS = {"read_trajectory": not_a_trajectory, "busy_threads": threads_problem}  # guarded: what a call returns
+def not_a_line(value) -> str | None:
+    """Why infra_from_log's value is no line of the log (None or a string expected)."""
+    return None if value is None or isinstance(value, str) else f"{type(value).__name__} {value!r}: not a line of text"
+
+
+# guarded: what a call returns
+RETURN_CHECKS = {"read_trajectory": not_a_trajectory, "busy_threads": threads_problem, "infra_from_log": not_a_line}
 
 
 class PythonProcess:

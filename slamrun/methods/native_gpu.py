@@ -96,6 +96,9 @@ class NativeGpuMethod(PythonProcess, Method):
 
     needs_gpu = True
     native = True
+    # its process says the machine lacks what it needs (gpu_process.cuda_torch: no CUDA device; MASt3R-SLAM's: too
+    # little GPU memory): the run is not the method's failure
+    infra_pattern = r"^(NO GPU|GPU MEMORY):"
     modules = ("torch", "numpy", "cv2")
     process: str  # its process's module (`python -m`), which reads the settings as one JSON object
     image_build: str  # where the image holds the build (its network in weights/)

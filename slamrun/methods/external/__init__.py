@@ -40,6 +40,9 @@ class ExternalParams(BaseModel):
     )
     not_initialized_pattern: str | None = Field(None, description="Log regex meaning 'never initialised'.")
     lost_pattern: str | None = Field(None, description="Log regex meaning 'lost'.")
+    infra_pattern: str | None = Field(
+        None, description="Log regex meaning the machine lacks what it needs (not charged to the method)."
+    )
 
 
 class External(Method):
@@ -89,6 +92,10 @@ class External(Method):
     @property
     def lost_pattern(self) -> str | None:  # type: ignore[override]
         return self.params.lost_pattern
+
+    @property
+    def infra_pattern(self) -> str | None:  # type: ignore[override]
+        return self.params.infra_pattern
 
     def placeholders(self, view: PreparedView, workdir: Path) -> dict[str, str]:
         v = view
