@@ -3,7 +3,7 @@
 # the wheels slamrun needs that such a machine lacks (Python 3.12, manylinux x86_64; PyTorch, NumPy, SciPy, pandas,
 # pyarrow, OpenCV, matplotlib, psutil, rich, PyYAML and requests are there already), ninja (PyTorch's parallel
 # extension build), Eigen 3.4's headers (the extensions include them) and the GPU methods' pinned source archives
-# (DPVO; DROID-SLAM with its lietorch submodule).
+# (DPVO; DROID-SLAM with its lietorch submodule; MASt3R-SLAM, with lietorch too).
 # usage: scripts/gpu-wheels.sh [DIR] [PYTHON_VERSION]      (make gpu-wheels [WHEELS=DIR] [GPU_PY=3.12])
 set -euo pipefail
 DIR=${1:-.whl}
@@ -20,11 +20,16 @@ print(*sorted({a for m in json.load(sys.stdin).values() if m["native_build"] for
 # setuptools: installed there only when its own cannot build an editable wheel (older than 70.1, no `wheel`)
 WHEELS=(pydantic==2.14.4 pydantic-core==2.50.5 annotated-types==0.8.0 typing-inspection==0.4.5
         typing-extensions==4.16.0 ninja==1.13.2 setuptools==80.9.0)
+# MASt3R-SLAM's modules import these beside PyTorch (its image's pins, slamrun/images/sources.py MAST3R_SLAM): faiss-cpu
+# (its retrieval index), natsort and plyfile; torchvision must be the one built with the machine's PyTorch (its own),
+# and Pillow, tqdm and PyYAML are there with it
+WHEELS+=(faiss-cpu==1.15.1 natsort==8.4.0 plyfile==1.1.5)
 
 mkdir -p "$DIR"
 rm -f "$DIR"/*.whl
 "$PY" -m pip download --quiet --no-deps --only-binary=:all: --python-version "$PYVER" --implementation cp \
-  --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d "$DIR" "${WHEELS[@]}"
+  --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d "$DIR" \
+  "${WHEELS[@]}"
 
 # Eigen's headers: the system's (Debian's libeigen3-dev), else the package itself, unpacked here
 if [ ! -s "$DIR/eigen3-headers.tar.gz" ]; then

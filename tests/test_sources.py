@@ -67,8 +67,8 @@ def test_every_recorded_source_matches_its_archive(upstream):
     table, apart = readme_archives((upstream / "README.md").read_text())
     assert SOURCES["orb_slam3"].filename in apart and SOURCES["mono_dataset_code"].filename in apart
     # the study's table lists exactly what is pinned of the study; the others are pinned from the README's
-    # sections apart (DROID-SLAM's with its two submodules)
-    apart_names = ("mono_dataset_code", "orb_slam3", "dpvo", "droid_slam", "lietorch", "pytorch_scatter")
+    # sections apart (DROID-SLAM's with its two submodules, MASt3R-SLAM's)
+    apart_names = ("mono_dataset_code", "orb_slam3", "dpvo", "droid_slam", "lietorch", "pytorch_scatter", "mast3r_slam")
     pinned_apart = {SOURCES[n].filename for n in apart_names}
     assert {s.filename for s in SOURCES.values()} == set(table) | pinned_apart
     for s in SOURCES.values():

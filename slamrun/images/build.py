@@ -163,12 +163,19 @@ def model_choice(name: str, opts: BuildOptions) -> tuple[str, str]:
     if w is None:
         return "none", ""
     if w.name in opts.weights:
-        return "given", w.name
+        missing = [f for f in w.companions if f not in opts.weights]
+        if missing:
+            raise SlamRunError(
+                f"{name} needs {', '.join(w.files)} together: give {' and '.join(missing)} too, each with "
+                f"--weights NAME=FILE (or =URL#sha256=HEX). They are published in {w.published}"
+            )
+        return "given", ", ".join(w.files)
     if w.standin and opts.standin_model:
         return "standin", f"untrained stand-in with {w.name}'s interface: plumbing only, NOT the trained network"
     how = " (or --standin-model for an untrained stand-in that tests the plumbing only)" if w.standin else ""
     raise SlamRunError(
-        f"{name} needs {w.name}, which cannot be downloaded here: give it with --weights {w.name}=FILE "
+        f"{name} needs {', '.join(w.files)}, which cannot be downloaded here: give "
+        f"{'each with --weights NAME=FILE' if w.companions else f'it with --weights {w.name}=FILE'} "
         f"(or =URL#sha256=HEX){how}. It is published in {w.published}"
     )
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import slamrun.methods
 from slamrun.errors import SlamRunError
 from slamrun.images import sources as src
-from slamrun.images.build import ROOT, BuildOptions, _weights_file, model_choice
+from slamrun.images.build import ROOT, BuildOptions, _weights_file, model_choice, weights_of
 from slamrun.methods.declare import NativeMethod, declared
 from slamrun.methods.native_gpu import native_build_folder
 
@@ -143,7 +143,7 @@ def build(name: str, opts: NativeOptions, log: Callable[[str], None] = print) ->
     try:
         tree = unpack_and_patch(m, archives, stage, log)
         compile_extensions(m, opts.python, tree, env, stage / "build.log", log)
-        weights = place_weights(m, opts, model, tree, stage, log)
+        weights = place_weights(m, opts, model, tree, stage, log, weights_of(name).companions)
         record = {
             "method": name,
             "source": sources[0],
@@ -259,17 +259,25 @@ def compile_extensions(
 
 
 def place_weights(
-    m: NativeMethod, opts: NativeOptions, model: str, tree: Path, stage: Path, log: Callable[[str], None]
+    m: NativeMethod,
+    opts: NativeOptions,
+    model: str,
+    tree: Path,
+    stage: Path,
+    log: Callable[[str], None],
+    companions: tuple[str, ...] = (),
 ) -> str:
-    """The network into stage/weights/<name>: the file given, or an untrained stand-in; returns what it is."""
+    """The network into stage/weights/<name> (the files given with it beside it, by their names): the files given, or
+    an untrained stand-in (its script makes the companions too); returns what it is."""
     dest = stage / "weights" / m.weights_name
     dest.parent.mkdir()
     if model == "given":
-        given = _weights_file(
-            m.weights_name, str(opts.weights[m.weights_name]), BuildOptions(source_cache=opts.source_cache)
-        )
-        shutil.copyfile(given, dest)
-        note = f"{m.weights_name}: {given.name} sha256 {src.file_sha256(dest)}"
+        notes = []
+        for name in (m.weights_name, *companions):  # the network, then the files given with it
+            given = _weights_file(name, str(opts.weights[name]), BuildOptions(source_cache=opts.source_cache))
+            shutil.copyfile(given, dest.parent / name)
+            notes.append(f"{name}: {given.name} sha256 {src.file_sha256(dest.parent / name)}")
+        note = "; ".join(notes)
     else:
         said = standin_network(opts.python, tree, dest, m)
         note = (

@@ -413,6 +413,37 @@ scipy-1.15.3-cp311-cp311-manylinux_2_17_x86_64.manylinux2014_x86_64.whl
     39cb9c62e471b1bb3750066ecc3a3f3052b37751c7c3dfd0fd7e48900ed52982
 """
 
+# MASt3R-SLAM's image (slamrun/methods/mast3r_slam/image/Dockerfile): what its modules import beside PyTorch, NumPy,
+# OpenCV, einops, scipy and packaging (the torch-cuda stage's), installed into its runtime with --require-hashes
+# --no-deps (slamrun/methods/mast3r_slam/image/requirements.txt). Not pinned by upstream (its pyproject names numpy
+# 1.26.4, which today's PyTorch wheels are not built for, and no versions for the rest): today's releases for
+# Python 3.11, found with `pip download --only-binary=:all: --python-version 3.11 --no-deps`. Left out: pyrealsense2
+# and torchcodec (a camera and videos: imported only for them, patches.py), huggingface_hub (the Hub mixin, removed
+# by patches.py), evo, pykdtree, roma and trimesh (neither the SLAM nor its network imports them), the viewer's imgui
+# and moderngl.
+MAST3R_SLAM = """
+# torchvision: dust3r's image normalisation (torchvision.transforms), the release built with PyTorch 2.11.0 (CUDA 13.0)
+torchvision-0.26.0-cp311-cp311-manylinux_2_28_x86_64.whl
+    fd10b5f994c210f4f6d6761cf686f82d748554adf486cb0979770c3252868c8f
+# Pillow: MASt3R's resize (mast3r_utils.resize_img) and torchvision's
+pillow-13.0.0-cp311-cp311-manylinux_2_27_x86_64.manylinux_2_28_x86_64.whl
+    a625df9a2a5597fa5e5266e01aefc82604bb85d291e3547981e863560d75da6c
+# faiss-cpu: asmk's codebook index (the retrieval of loop candidates; faiss-gpu is not on PyPI, and processor.py
+# falls back to the CPU index)
+faiss_cpu-1.15.1-cp310-abi3-manylinux_2_27_x86_64.manylinux_2_28_x86_64.whl
+    f2c31b7f2f6647eb76829a5cfe3c398fb9346df9f26b1d4db35269c91eb58c33
+# PyYAML: its config files and asmk's parameters; tqdm, natsort, plyfile: imported at the top of main.py, the retrieval
+# model, the dataloader and evaluate.py
+pyyaml-6.0.4-cp311-cp311-manylinux2014_x86_64.manylinux_2_17_x86_64.manylinux_2_28_x86_64.whl
+    622aa875fa6533f25fedcffe23079357d65a690d462200afed5d8e9d0e01ebee
+tqdm-4.70.1-py3-none-any.whl
+    c293e525e6fef9c20e8728fd4612df02a0aa31bb5fe91ecd93e123b1b7bffa73
+natsort-8.4.0-py3-none-any.whl
+    4732914fb471f56b5cce04d7bae6f164a592c7712e1c85f9ef585e197299521c
+plyfile-1.1.5-py3-none-any.whl
+    675c0fc22b949c49398f5ed6725a1d781f6a9f7625b42232c02198f6509c4ae3
+"""
+
 
 def pypi_file(filename: str, sha256: str) -> PypiFile:
     """A PyPI file named by the conventions of wheels (`<project>-<version>-<tags>.whl`) and sdists
@@ -472,6 +503,7 @@ PYPI_FILES: dict[str, PypiFile] = {
         *pypi_table(DPVO_TORCH),
         *pypi_table(DPVO_TOOLCHAIN),
         *pypi_table(DPVO_LOOP_CLOSURE),
+        *pypi_table(MAST3R_SLAM),
     )
 }
 

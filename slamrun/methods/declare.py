@@ -54,6 +54,13 @@ class Weights:
     published: str
     standin: bool = False
     arg: str = "MONODEPTH_MODEL"  # the build argument that says given or standin
+    # files given with it, each by its own --weights NAME=FILE (MASt3R-SLAM's retrieval head and codebook); a stand-in
+    # makes them too
+    companions: tuple[str, ...] = ()
+
+    @property
+    def files(self) -> tuple[str, ...]:
+        return (self.name, *self.companions)
 
 
 @dataclass(frozen=True)
