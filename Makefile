@@ -55,7 +55,8 @@ clean:
 
 # The GPU check (scripts/gpu-check.sh): `make gpu-wheels` here fills .whl/ with what a GPU machine without network
 # lacks (wheels for Python $(GPU_PY), Eigen's headers, the GPU methods' archives); there, `make gpu-check OUT=DIR`
-# (METHOD=droid_slam for DROID-SLAM, METHOD=all for both, their builds side by side; dpvo by default).
+# (METHOD=droid_slam or mast3r_slam for one of those, METHOD=all for every GPU method, their builds side by side;
+# dpvo by default).
 WHEELS ?= .whl
 GPU_PY ?= 3.12
 OUT ?= gpu-check-out

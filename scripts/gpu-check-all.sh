@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Both GPU methods' checks in one go, on the machine scripts/gpu-check.sh is written for. From the repository root:
+# Every GPU method's check in one go (DPVO, with DPV-SLAM; DROID-SLAM; MASt3R-SLAM), on the machine scripts/gpu-check.sh is written for. From the repository root:
 #   bash scripts/gpu-check-all.sh [OUT]          (make gpu-check METHOD=all [OUT=DIR])
 # The install, Eigen, the synthetic room and the unpack run once (gpu-check.sh --until-gpu, into OUT/setup); DPVO's
 # and DROID-SLAM's native builds run side by side (each is a few nvcc jobs one after another: together they take

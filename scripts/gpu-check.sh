@@ -3,7 +3,7 @@
 # the working tree copied there with .whl/ (`make gpu-wheels` fills it here) beside it. From the repository root:
 #   bash scripts/gpu-check.sh [OUT] [--until-gpu]          (make gpu-check [OUT=DIR] [METHOD=droid_slam])
 # It installs slamrun into $PYTHON's environment from the tree with the carried wheels, generates a synthetic room,
-# compiles the GPU method $METHOD (dpvo, else droid_slam) natively (all cores, this GPU's architecture only) with an
+# compiles the GPU method $METHOD (dpvo; droid_slam, mast3r_slam) natively (all cores, this GPU's architecture only) with an
 # untrained stand-in network, runs `slamrun campaign` with backend: local, forward and backward, and leaves in OUT
 # (default $OUT, else ./gpu-check-out): results.csv, the runs' resource series (resources/), the runs' logs and run.json (runs/), the
 # native build's record and log, the spec, the step logs (logs/) and a one-page summary.txt. Each step is printed
@@ -58,6 +58,10 @@ if [ $UNTIL_GPU = 0 ]; then
   logged "$PYTHON" -c 'import torch; print("torch", torch.__version__, "cuda", torch.version.cuda); assert torch.cuda.is_available(), "no CUDA device"; print(torch.cuda.get_device_name(0), torch.cuda.get_device_capability(0))' \
     || fail "PyTorch with a CUDA device is needed in $PYTHON (see $STEP_LOG)"
   logged nvidia-smi || fail "nvidia-smi does not answer"
+  if [ "$METHOD" = mast3r_slam ]; then  # its image pins torchvision for its PyTorch; here the machine's own must serve
+    logged "$PYTHON" -c 'import torchvision; print("torchvision", torchvision.__version__)' \
+      || fail "MASt3R-SLAM needs torchvision, built with this machine's PyTorch, in $PYTHON (see $STEP_LOG)"
+  fi
   logged nvcc --version || logged "${CUDA_HOME:-/usr/local/cuda}/bin/nvcc" --version || fail "no nvcc on PATH nor in \$CUDA_HOME"
   say "$(grep -m1 -E '^torch ' "$STEP_LOG" || true); $(nvidia-smi --query-gpu=name,driver_version,memory.total,compute_cap --format=csv,noheader 2>/dev/null | head -n1 || true)"
 fi

@@ -236,6 +236,7 @@ def test_images_and_what_their_builds_take():
         "orb_slam3",
         "dpvo",
         "droid_slam",
+        "mast3r_slam",
     }
 
 

@@ -22,7 +22,7 @@ SEEDS = {
     "dpvo": f"Seed of PyTorch's generators; {PER_TRIAL} (a fixed value makes every trial the same seed; the GPU's own "
     "order still varies).",
 }
-SEEDS["droid_slam"] = SEEDS["dpvo"]
+SEEDS["droid_slam"] = SEEDS["mast3r_slam"] = SEEDS["dpvo"]
 
 
 @pytest.mark.parametrize("name", sorted(SEEDS))
@@ -33,7 +33,11 @@ def test_the_seed_parameter_says_each_trial_gets_its_own(name):
     assert list(cls.Params.model_fields)[-1] == "seed"  # declared last, as before
 
 
-@pytest.mark.parametrize("name, network", [("dpvo", "dpvo.pth"), ("droid_slam", "droid.pth")])
+@pytest.mark.parametrize(
+    "name, network",
+    [("dpvo", "dpvo.pth"), ("droid_slam", "droid.pth"),
+     ("mast3r_slam", "MASt3R_ViTLarge_BaseDecoder_512_catmlpdpt_metric.pth")],
+)  # fmt: skip
 def test_a_native_gpu_method_names_its_network_and_build_folder(name, network):
     fields = slamrun.methods.get(name).Params.model_fields
     assert list(fields)[:2] == ["weights", "build"]

@@ -153,7 +153,7 @@ def test_every_typo_gets_the_name_it_was_meant_to_be_in_line_order(tmp_path):
         "line 15: datasets[2].layout: unknown layout 'EuRoC'; did you mean 'euroc'? (known: tum-mono, euroc, kitti, "
         "tum-rgbd, tum-vi, icl-nuim, tartanair)",
         f"line 18: methods[0].name: unknown method 'reference_v0'; did you mean 'reference_vo'? (known: {known}, "
-        "lsd_slam, orb_slam2, orb_slam3, reference_vo, svo)",
+        "lsd_slam, mast3r_slam, orb_slam2, orb_slam3, reference_vo, svo)",
         "line 20: methods[1].params.strid: unknown parameter; did you mean 'stride'?",
         "line 21: directions[0]: Input should be 'forward' or 'backward'; did you mean 'forward'?",
     ]

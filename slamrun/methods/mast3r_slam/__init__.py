@@ -67,6 +67,8 @@ class Mast3rSlamParams(BaseModel):
 class Mast3rSlam(NativeGpuMethod):
     seed_param = "seed"
     threads = 2  # the frontend and its backend's thread, beside the GPU
+    # what decides its results natively beside PyTorch: the image normalisation and resize, the retrieval index
+    modules = ("torch", "torchvision", "numpy", "cv2", "PIL", "faiss")
     sources = (
         Source(
             "mast3r_slam",

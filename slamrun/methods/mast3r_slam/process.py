@@ -12,11 +12,14 @@ and resized to 512 pixels as it does), the frontend loop is main.py's without th
 own run_backend, in a thread of this process instead of a second process (single_thread makes the frontend wait for
 it after every new keyframe and relocalisation, so the order of their steps is main.py's; one process shares its
 tensors without /dev/shm, so SharedKeyframes' share_memory_() is skipped and a plain lock and values stand in for the
-multiprocessing Manager's). MASt3R-SLAM writes its keyframes only; this process also records, for every frame it
-tracked, its pose relative to the keyframe it was tracked against (Sim(3), at tracking time), and writes at the end:
-each keyframe's optimised pose, each tracked frame's keyframe pose times its relative pose, as SE(3) (upstream's
-as_SE3: the scale dropped, as its save_traj writes keyframes) camera-to-world TUM at the frames' view timestamps. A
-frame skipped while relocalising has no pose.
+multiprocessing Manager's; PyTorch's TF32 matmuls, which main.py turns on in its own process, are on for the
+backend's thread too, where upstream's second process ran without them).
+
+MASt3R-SLAM writes its keyframes only; this process also records, for every frame it tracked, its pose relative to
+the keyframe it was tracked against (Sim(3), at tracking time), and writes at the end: each keyframe's optimised pose,
+each tracked frame's keyframe pose times its relative pose, as SE(3) (upstream's as_SE3: the scale dropped, as its
+save_traj writes keyframes) camera-to-world TUM at the frames' view timestamps. A frame skipped while relocalising
+has no pose.
 
 Before the network loads, the GPU memory it needs at the sequence's resolution (the network, the keyframe buffer,
 a working margin) is checked against what the GPU has free: too little is `GPU MEMORY: ...`, exit 5.
