@@ -313,3 +313,143 @@ def test_the_process_in_the_image_reads_a_view_and_stops_at_the_missing_gpu(tmp_
     argv[argv.index("--settings") + 1] = '{"subsampel": 3}'
     status, out = images.run_in_image(api, IMAGE, argv, {view.root: "/data"})
     assert status == 1 and "mast3r_slam: unknown setting 'subsampel'" in out, out[-3000:]
+
+
+LOOP = """
+import json, sys, time
+record = json.load(open('/opt/mast3r_slam/build.json'))
+tree = '/opt/mast3r_slam/' + record['tree']
+sys.path[:0] = [tree, tree + '/thirdparty/mast3r', tree + '/thirdparty/mast3r/asmk', tree + '/thirdparty/lietorch']
+from pathlib import Path
+import torch, lietorch
+from mast3r_slam.frame import Frame, Mode, SharedKeyframes, SharedStates
+from mast3r_slam.lietorch_utils import as_SE3
+from slamrun.methods.mast3r_slam import process as proc
+
+proc.configured(Path(tree), proc.SETTINGS)  # its evaluation config (the pointmap filter the frames use)
+H = W = 16
+SCRIPT = json.loads(sys.argv[1])  # per frame: kf, track or lost (the tracker's outcome)
+RELOC_AT, BUFFER, DIE = json.loads(sys.argv[2])  # the first frame a relocalisation succeeds at; buffer; backend dies
+
+
+def sim3(x, z=0.0):
+    return lietorch.Sim3(torch.tensor([[x, 0.0, z, 0.0, 0.0, 0.0, 1.0, 1.0]]))
+
+
+def create_frame(i, img, T_WC, img_size=512, device=None):
+    frame = Frame(i, torch.zeros(3, H, W), torch.tensor([[H, W]]), torch.tensor([[H, W]]), torch.zeros(H, W, 3), T_WC)
+    frame.feat, frame.pos = torch.zeros(1, 1, 1024), torch.zeros(1, 1, 2, dtype=torch.long)
+    return frame
+
+
+def mono(model, frame):
+    return torch.ones(H * W, 3), torch.ones(H * W, 1)
+
+
+class Tracker:  # the tracker's outcomes as scripted; a tracked camera at x = frame / 10
+    def track(self, frame):
+        frame.update_pointmap(*mono(None, frame))  # as FrameTracker.track: before it judges the matches
+        if SCRIPT[frame.frame_id] == 'lost':
+            return False, [], True
+        frame.T_WC = sim3(frame.frame_id / 10)
+        return SCRIPT[frame.frame_id] == 'kf', [], False
+
+
+class Dataset:
+    img_size = 512
+    def __len__(self):
+        return len(SCRIPT)
+    def __getitem__(self, i):
+        return float(i), None
+
+
+log = []
+
+
+def backend(states, keyframes):  # main.py's run_backend's protocol with the solver scripted: a task moves its keyframe
+    while states.get_mode() is not Mode.TERMINATED:  # 1 up in z (task 0 has no factors: no move); a relocalisation
+        mode = states.get_mode()                     # succeeds from frame RELOC_AT on, adding the frame as keyframe
+        if mode == Mode.INIT:
+            time.sleep(0.01)
+            continue
+        if mode == Mode.RELOC:
+            if states.reloc_sem.value:
+                frame = states.get_frame()
+                ok = frame.frame_id >= RELOC_AT
+                if ok:
+                    keyframes.append(frame)
+                    states.set_mode(Mode.TRACKING)
+                log.append(['reloc', frame.frame_id, ok])
+                states.dequeue_reloc()
+            time.sleep(0.001)
+            continue
+        with states.lock:
+            idx = states.global_optimizer_tasks[0] if len(states.global_optimizer_tasks) else -1
+        if idx == -1:
+            time.sleep(0.001)
+            continue
+        if DIE:
+            raise RuntimeError('CUDA error: an illegal memory access was encountered')
+        if idx > 0:
+            keyframes.T_WC[idx] = (sim3(0.0, 1.0) * lietorch.Sim3(keyframes.T_WC[idx])).data
+        log.append(['task', idx])
+        with states.lock:
+            states.global_optimizer_tasks.pop(0)
+
+
+manager = proc.LocalManager()
+with proc.unshared(torch):
+    keyframes = SharedKeyframes(manager, H, W, buffer=BUFFER, device='cpu')
+    states = SharedStates(manager, H, W, device='cpu')
+thread = proc.Backend(backend, (states, keyframes))
+thread.start()
+relative = {}
+try:
+    proc.frontend(Dataset(), None, Tracker(), keyframes, states, thread, relative, BUFFER, 'cpu', Mode, lietorch,
+                  create_frame, mono)
+    error = None
+except (proc.BufferFull, proc.BackendDied) as exc:
+    error = f'{type(exc).__name__}: {exc}'
+states.set_mode(Mode.TERMINATED)
+thread.join(5)
+poses = proc.final_poses(keyframes, relative, lietorch, as_SE3)
+print(json.dumps({'error': error, 'log': log, 'alive': thread.is_alive(), 'keyframes': len(keyframes),
+                  'poses': {i: [round(float(v), 6) for v in p[:3]] for i, p in poses.items()}}))
+"""
+# frames 0-11: keyframes at 0 (its first), 3 and 9; frame 5 loses the camera, 6 fails to relocalise, 7 succeeds
+SCRIPT = ["kf", "track", "track", "kf", "track", "lost", "track", "track", "track", "kf", "track", "track"]
+
+
+def frontend_loop(api, script, reloc_at=7, buffer=16, die=False):
+    args = [json.dumps(script), json.dumps([reloc_at, buffer, die])]
+    status, out = images.run_in_image(api, IMAGE, ["python3", "-c", LOOP, *args])
+    assert status == 0, out[-3000:]
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def test_the_frontend_loop_keeps_main_pys_order_and_poses_every_tracked_frame_inside_the_image():
+    """slamrun's frontend (main.py's loop) with real SharedKeyframes, SharedStates, Frames and lietorch on the CPU,
+    its tracker's outcomes and its backend's solver scripted (the GPU's parts): every new keyframe waits for its
+    backend task, a lost frame waits for each relocalisation; a tracked frame's pose is its keyframe's final
+    (optimised) pose times its pose relative to it at tracking time, a keyframe's its own, and the frames lost or
+    relocalising unsuccessfully have none."""
+    api, _ = built_image()
+    got = frontend_loop(api, SCRIPT)
+    assert got["error"] is None and not got["alive"], got
+    assert got["log"] == [["task", 0], ["task", 1], ["reloc", 6, False], ["reloc", 7, True], ["task", 3]], got["log"]
+    assert got["keyframes"] == 4  # frames 0, 3, 7 (relocalised) and 9
+    poses = {int(i): p for i, p in got["poses"].items()}
+    assert sorted(poses) == [0, 1, 2, 3, 4, 7, 8, 9, 10, 11]  # 5 lost the camera, 6 did not relocalise
+    for i in (1, 2, 4, 8, 10, 11):  # tracked: where the tracker put it, whatever its keyframe's optimisation did
+        assert poses[i] == pytest.approx([i / 10, 0.0, 0.0], abs=1e-6), (i, poses[i])
+    assert poses[3] == pytest.approx([0.3, 0.0, 1.0]) and poses[9] == pytest.approx([0.9, 0.0, 1.0])  # optimised
+    assert poses[0] == pytest.approx([0.0, 0.0, 0.0])
+
+
+def test_a_full_buffer_and_a_dead_backend_stop_the_frontend_saying_so_inside_the_image():
+    api, _ = built_image()
+    got = frontend_loop(api, SCRIPT, buffer=4)
+    assert got["error"] == "BufferFull: 3 keyframes fill the buffer of 4 at frame 8: raise params.buffer", got
+    got = frontend_loop(api, SCRIPT, die=True)
+    assert got["error"].startswith("BackendDied: its backend stopped: RuntimeError('CUDA error: an illegal"), got
+    assert got["log"] == [] and got["keyframes"] == 2  # frame 3's keyframe waited for a backend that had died
