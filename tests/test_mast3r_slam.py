@@ -453,3 +453,26 @@ def test_a_full_buffer_and_a_dead_backend_stop_the_frontend_saying_so_inside_the
     got = frontend_loop(api, SCRIPT, die=True)
     assert got["error"].startswith("BackendDied: its backend stopped: RuntimeError('CUDA error: an illegal"), got
     assert got["log"] == [] and got["keyframes"] == 2  # frame 3's keyframe waited for a backend that had died
+
+
+def test_a_native_runs_record_names_its_build_and_what_its_weights_are(tmp_path):
+    """run.json of a run on `backend: local` records the native build it ran (source, patches, targets, PyTorch) and
+    what its network is (build.json's note: a stand-in says plumbing only), as an image's labels do for `docker`."""
+    from slamrun.backends.base import ExecResult
+    from slamrun.backends.local import LocalBackend
+    from slamrun.engine.execute import _launch_record
+
+    build = tmp_path / "build"
+    build.mkdir()
+    note = f"untrained stand-ins with {WEIGHTS_NAME}'s interface (...): plumbing only, NOT the trained network"
+    record = {"method": "mast3r_slam", "source": "rmurai0610/MASt3R-SLAM@b0ae540", "patches": "p sha256 1",
+              "tree": "t", "torch": "2.11.0+cu130", "cuda": "13.0", "arch": "9.0", "weights": note,
+              "weights_file": f"weights/{WEIGHTS_NAME}", "python": "/usr/bin/python3", "seconds": 300.0}  # fmt: skip
+    (build / "build.json").write_text(json.dumps(record))
+    method = Mast3rSlam({"build": str(build)})
+    extra = _launch_record(["python3"], None, LocalBackend(), method, ExecResult(exit_code=0, wall_s=1.0))
+    assert extra["native_build"] == {"folder": str(build), **{k: record[k] for k in (
+        "source", "patches", "torch", "cuda", "arch", "weights")}}  # fmt: skip
+    assert "native_build" not in _launch_record(
+        ["python3"], None, LocalBackend(), Mast3rSlam({"build": str(tmp_path / "none")}), ExecResult(0, 1.0)
+    )  # no build there: nothing to say (the run fails, its log says why)

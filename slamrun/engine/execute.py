@@ -145,13 +145,16 @@ def _write_config(raw: Path, files: list[tuple[Path, str | bytes]]) -> None:
 
 
 def _launch_record(argv: list[str], cpus, backend: Backend, method: Method, result: ExecResult) -> dict:
-    """What ran where, for run.json: the argv, CPUs, backend and engine, the machine, the packages or image."""
+    """What ran where, for run.json: the argv, CPUs, backend and engine, the machine, the packages, native build or
+    image."""
     extra = {"argv": argv, "cpus": list(cpus) if cpus else None, "backend": backend.name}
     extra["engine"] = backend.engine
     extra["machine"] = result.machine or machine()  # a Dask worker's own, else this one
     if backend.name == "local" and method.modules:  # in an image, the image's labels say what it holds
         versions = result.packages if result.packages is not None else package_versions(method.modules)
         extra["package_versions"] = versions
+    if backend.name == "local" and (built := method.build_record()) is not None:
+        extra["native_build"] = built  # its source, patches, targets, network
     if method.image and (image := backend.describe_image(method.image)) is not None:
         extra["image"] = image  # its sources, vocabulary, weights
     return extra

@@ -185,6 +185,11 @@ class Method(ABC):
         """Whether this exit code still means the output is complete (LDSO exits 139 after writing)."""
         return exit_code == 0
 
+    def build_record(self) -> dict | None:
+        """What its native build is, for run.json (source, patches, targets, what its network is), when it runs one
+        on the local backend; None: nothing to say (an image's labels say it for a container)."""
+        return None
+
     def infra_from_log(self, log_tail: str) -> str | None:
         """The log's line saying the machine lacks what the method needs (its infra_pattern), if there is one."""
         if self.infra_pattern and (m := re.search(self.infra_pattern + ".*", log_tail, re.I | re.M)):
@@ -256,6 +261,7 @@ GUARDED_CALLS = (
     "accepts_exit",
     "failure_from_log",
     "infra_from_log",
+    "build_record",
     "for_backend",
     "problems",
     "launch_problems",
@@ -335,8 +341,18 @@ def not_a_line(value) -> str | None:
     return None if value is None or isinstance(value, str) else f"{type(value).__name__} {value!r}: not a line of text"
 
 
+def not_a_record(value) -> str | None:
+    """Why build_record's value is no record for run.json (None or a dict expected)."""
+    return None if value is None or isinstance(value, dict) else f"{type(value).__name__} {value!r}: not a dict"
+
+
 # guarded: what a call returns
-RETURN_CHECKS = {"read_trajectory": not_a_trajectory, "busy_threads": threads_problem, "infra_from_log": not_a_line}
+RETURN_CHECKS = {
+    "read_trajectory": not_a_trajectory,
+    "busy_threads": threads_problem,
+    "infra_from_log": not_a_line,
+    "build_record": not_a_record,
+}
 
 
 class PythonProcess:

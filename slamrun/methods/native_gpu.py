@@ -127,6 +127,14 @@ class NativeGpuMethod(PythonProcess, Method):
         record = read_build_record(Path(self.build_dir())) or {}
         return str(Path(self.build_dir()) / record.get("weights_file", f"weights/{self.weights_name}"))
 
+    def build_record(self) -> dict | None:
+        """The native build it runs on the local backend: its folder, and its build.json's source, patches, PyTorch,
+        CUDA, targets and network (given, or a stand-in: plumbing only)."""
+        if self.backend != "local" or (record := read_build_record(Path(self.build_dir()))) is None:
+            return None
+        keys = ("source", "parts", "patches", "torch", "cuda", "arch", "weights")
+        return {"folder": self.build_dir(), **{k: record[k] for k in keys if k in record}}
+
     def settings(self) -> str:
         """Its parameters as one JSON object, as its process reads them (`--settings`): every one but where the build
         and the network are, by its name in the params model, the one place each is written."""
