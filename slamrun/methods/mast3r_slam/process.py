@@ -185,79 +185,76 @@ def configured(tree: Path, values: dict) -> dict:
     return config
 
 
-def run(argv: list[str] | None = None) -> int:
-    args = parse(argv)
+class BadInput(Exception):
+    pass
+
+
+def read_inputs(args: argparse.Namespace) -> tuple[dict, list[Path], np.ndarray, np.ndarray, int, int]:
+    """(settings, the view's frames, their timestamps, fx fy cx cy, width, height); BadInput names what is wrong."""
     try:
         values = settings(args.settings)
         paths, times = frames(args.images, args.times, 1)
         k, width, height = intrinsics(args.camera)
     except (OSError, ValueError, KeyError) as exc:
-        print(f"mast3r_slam: {exc}", file=sys.stderr)
-        return 1
+        raise BadInput(str(exc)) from None
     if not paths:
-        print(f"mast3r_slam: {args.images}: no frames", file=sys.stderr)
-        return 1
+        raise BadInput(f"{args.images}: no frames")
     missing = [str(p) for p in companions(args.weights) if not p.is_file()]
     if missing and args.weights.is_file():
-        print(f"mast3r_slam: the network's retrieval files are not beside it: {', '.join(missing)}", file=sys.stderr)
-        return 1
-    sys.path[:0] = search_path(args.build)
-    torch = cuda_torch("mast3r_slam", "MASt3R-SLAM", args.weights, values["seed"])
-    if isinstance(torch, int):
-        return torch
-    tree = Path(search_path(args.build)[0])
-    config = configured(tree, values)
-    import lietorch
-    from main import run_backend  # MASt3R-SLAM's main.py (its viewer imported only when it runs as a program)
-    from mast3r_slam.dataloader import Intrinsics, MonocularDataset
-    from mast3r_slam.frame import Mode, SharedKeyframes, SharedStates, create_frame
-    from mast3r_slam.lietorch_utils import as_SE3
-    from mast3r_slam.mast3r_utils import load_mast3r, mast3r_inference_mono
-    from mast3r_slam.tracker import FrameTracker
+        raise BadInput(f"the network's retrieval files are not beside it: {', '.join(missing)}")
+    return values, paths, times, k, width, height
 
-    torch.backends.cuda.matmul.allow_tf32 = True  # as main.py
-    torch.set_grad_enabled(False)
-    device = "cuda:0"
+
+def dataset_of(paths: list[Path], times: np.ndarray, k: np.ndarray, width: int, height: int, values: dict):
+    """Upstream's MonocularDataset of the view's frames (every `subsample`-th), undistorted with the view's pinhole
+    camera when calibrated; and its frames' size after the resize (h, w). BadInput for an unreadable first frame."""
+    from mast3r_slam.dataloader import Intrinsics, MonocularDataset
 
     dataset = MonocularDataset()
-    dataset.dataset_path = args.images
+    dataset.dataset_path = paths[0].parent
     dataset.rgb_files = [str(p) for p in paths]
     dataset.timestamps = times
     dataset.subsample(values["subsample"])
     try:
         h, w = dataset.get_img_shape()[0]
-    except Exception as exc:  # noqa: BLE001 - an unreadable first frame
-        print(f"mast3r_slam: {paths[0]}: not a readable image ({exc})", file=sys.stderr)
-        return 1
+    except Exception as exc:  # noqa: BLE001 - cv2 and PIL say it their own ways
+        raise BadInput(f"{paths[0]}: not a readable image ({exc})") from None
     if values["calibrated"]:
         dataset.use_calibration = True
         dataset.camera_intrinsics = Intrinsics.from_calib(dataset.img_size, width, height, [float(v) for v in k])
+    return dataset, (int(h), int(w))
 
-    need = gpu_bytes_needed(int(h), int(w), values["buffer"], args.weights.stat().st_size)
+
+def memory_refusal(torch, shape: tuple[int, int], values: dict, weights: Path) -> tuple[str | None, str]:
+    """(the `GPU MEMORY: ...` line when the GPU has too little free, else None; what is needed and free)."""
+    (h, w), buffer = shape, values["buffer"]
+    need = gpu_bytes_needed(h, w, buffer, weights.stat().st_size)
     free, total = torch.cuda.mem_get_info()
-    if need > free:
-        print(
-            f"GPU MEMORY: MASt3R-SLAM needs about {need / 2**30:.1f} GiB at {w}x{h} with a buffer of "
-            f"{values['buffer']} keyframes; the GPU has {free / 2**30:.1f} GiB free of {total / 2**30:.1f} "
-            "(a smaller params.buffer, or a GPU with more free memory)",
-            file=sys.stderr,
-        )
-        return 5
-    n = len(dataset)
-    print(
-        f"mast3r_slam: {n} of {len(paths)} frames (subsample {values['subsample']}), {width}x{height} resized to "
-        f"{w}x{h}, {'calibrated' if values['calibrated'] else 'uncalibrated'}; about {need / 2**30:.1f} GiB of GPU "
-        f"memory needed, {free / 2**30:.1f} free; settings {json.dumps(values)}",
-        flush=True,
-    )
-    print(f"mast3r_slam: network {weights_note(args.build, args.weights)}", flush=True)
+    said = f"about {need / 2**30:.1f} GiB of GPU memory needed, {free / 2**30:.1f} free"
+    if need <= free:
+        return None, said
+    return (
+        f"GPU MEMORY: MASt3R-SLAM needs about {need / 2**30:.1f} GiB at {w}x{h} with a buffer of {buffer} keyframes; "
+        f"the GPU has {free / 2**30:.1f} GiB free of {total / 2**30:.1f} (a smaller params.buffer, or a GPU with "
+        "more free memory)"
+    ), said
 
-    t0 = time.perf_counter()
+
+def slam(torch, dataset, shape: tuple[int, int], values: dict, config: dict, weights: Path):
+    """MASt3R-SLAM over the dataset: (its keyframes, each tracked frame's keyframe and relative pose). BackendDied or
+    BufferFull stop it."""
+    import lietorch
+    from main import run_backend  # MASt3R-SLAM's main.py (its viewer imported only when it runs as a program)
+    from mast3r_slam.frame import Mode, SharedKeyframes, SharedStates, create_frame
+    from mast3r_slam.mast3r_utils import load_mast3r, mast3r_inference_mono
+    from mast3r_slam.tracker import FrameTracker
+
+    device = "cuda:0"
     with unshared(torch):
         manager = LocalManager()
-        keyframes = SharedKeyframes(manager, h, w, buffer=values["buffer"])
-        states = SharedStates(manager, h, w)
-    model = load_mast3r(path=str(args.weights), device=device)
+        keyframes = SharedKeyframes(manager, *shape, buffer=values["buffer"])
+        states = SharedStates(manager, *shape)
+    model = load_mast3r(path=str(weights), device=device)
     K = None
     if values["calibrated"]:
         K = torch.from_numpy(dataset.camera_intrinsics.K_frame).to(device, dtype=torch.float32)
@@ -268,25 +265,64 @@ def run(argv: list[str] | None = None) -> int:
     backend = Backend(run_backend, (config, model, states, keyframes, K))
     relative: dict[int, tuple[int, object]] = {}  # frame -> (its keyframe, its pose relative to it: Sim(3) data)
     try:
-        with retrieval_folder(args.weights):
+        with retrieval_folder(weights):
             backend.start()
             frontend(dataset, model, tracker, keyframes, states, backend, relative, values["buffer"], device,
                      Mode, lietorch, create_frame, mast3r_inference_mono)  # fmt: skip
-            states.set_mode(Mode.TERMINATED)
-            backend.join()
-    except (BackendDied, BufferFull) as exc:
+    finally:
         states.set_mode(Mode.TERMINATED)
+    backend.join()
+    return keyframes, relative
+
+
+def run(argv: list[str] | None = None) -> int:
+    args = parse(argv)
+    try:
+        values, paths, times, k, width, height = read_inputs(args)
+    except BadInput as exc:
+        print(f"mast3r_slam: {exc}", file=sys.stderr)
+        return 1
+    sys.path[:0] = search_path(args.build)
+    torch = cuda_torch("mast3r_slam", "MASt3R-SLAM", args.weights, values["seed"])
+    if isinstance(torch, int):
+        return torch
+    config = configured(Path(search_path(args.build)[0]), values)
+    torch.backends.cuda.matmul.allow_tf32 = True  # as main.py
+    torch.set_grad_enabled(False)
+    try:
+        dataset, shape = dataset_of(paths, times, k, width, height, values)
+    except BadInput as exc:
+        print(f"mast3r_slam: {exc}", file=sys.stderr)
+        return 1
+    refusal, memory = memory_refusal(torch, shape, values, args.weights)
+    if refusal:
+        print(refusal, file=sys.stderr)
+        return 5
+    print(
+        f"mast3r_slam: {len(dataset)} of {len(paths)} frames (subsample {values['subsample']}), {width}x{height} "
+        f"resized to {shape[1]}x{shape[0]}, {'calibrated' if values['calibrated'] else 'uncalibrated'}; {memory}; "
+        f"settings {json.dumps(values)}",
+        flush=True,
+    )
+    print(f"mast3r_slam: network {weights_note(args.build, args.weights)}", flush=True)
+    t0 = time.perf_counter()
+    try:
+        keyframes, relative = slam(torch, dataset, shape, values, config, args.weights)
+    except (BackendDied, BufferFull) as exc:
         print(f"mast3r_slam: {exc}", file=sys.stderr)
         return 4 if isinstance(exc, BufferFull) else 1
     torch.cuda.synchronize()
     seconds = time.perf_counter() - t0
+    import lietorch
+    from mast3r_slam.lietorch_utils import as_SE3
+
     poses = final_poses(keyframes, relative, lietorch, as_SE3)
     index = np.array(sorted(poses), dtype=int)
     write_tum(args.out, np.asarray(dataset.timestamps, dtype=np.float64)[index], np.array([poses[i] for i in index]))
-    peak_mb = torch.cuda.max_memory_allocated() / 2**20
     print(
-        f"mast3r_slam: {len(index)} poses of {n} frames ({len(keyframes)} keyframes, {len(index) - len(keyframes)} "
-        f"tracked frames) in {seconds:.2f} s ({n / seconds:.1f} fps); PyTorch's peak allocation {peak_mb:.0f} MB",
+        f"mast3r_slam: {len(index)} poses of {len(dataset)} frames ({len(keyframes)} keyframes, "
+        f"{len(index) - len(keyframes)} tracked frames) in {seconds:.2f} s ({len(dataset) / seconds:.1f} fps); "
+        f"PyTorch's peak allocation {torch.cuda.max_memory_allocated() / 2**20:.0f} MB",
         flush=True,
     )
     return 0
