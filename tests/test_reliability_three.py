@@ -126,3 +126,20 @@ def test_a_method_that_says_the_machine_lacks_what_it_needs_is_not_charged(tmp_p
     assert rows["declares"]["attempts"] == 2  # retried once, as infrastructure is
     assert (rows["silent"]["status"], rows["silent"]["failure"]) == ("failed", "crashed"), rows["silent"]
     assert rows["silent"]["attempts"] == 1
+
+
+def test_a_log_pattern_that_is_no_regular_expression_is_refused_before_any_run(tmp_path, tiny_dataset):
+    """An external method's infra_pattern (or its other log patterns) that Python cannot compile is a spec error
+    naming the key, before anything runs, not a traceback when a run ends."""
+    import pytest
+
+    from slamrun.errors import SpecError
+
+    bad = fake_method("gpu-memory", infra_pattern="^(GPU MEMORY", lost_pattern="[lost")
+    spec = write_spec(tmp_path, tiny_dataset, [bad], datasets=one_sequence(tiny_dataset), directions=["forward"])
+    with pytest.raises(SpecError) as err:
+        load_spec(spec)
+    said = "\n".join(err.value.problems)
+    assert "methods[0].params.infra_pattern" in said and "not a regular expression" in said, said
+    assert "methods[0].params.lost_pattern" in said, said
+    assert not (tmp_path / "results").exists()

@@ -7,12 +7,13 @@ directory: {python} {view} {images} {times} {rgb} {images_list} {times_single} {
 
 from __future__ import annotations
 
+import re
 import sys
 from enum import StrEnum
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from slamrun.core.trajectory import Trajectory, read_4x4_matrices, read_kitti, read_timestamped_3x4
 from slamrun.datasets.view import PreparedView, Profile
@@ -43,6 +44,16 @@ class ExternalParams(BaseModel):
     infra_pattern: str | None = Field(
         None, description="Log regex meaning the machine lacks what it needs (not charged to the method)."
     )
+
+    @field_validator("not_initialized_pattern", "lost_pattern", "infra_pattern")
+    @classmethod
+    def _a_regular_expression(cls, value: str | None) -> str | None:
+        if value is not None:
+            try:
+                re.compile(value)
+            except re.error as exc:
+                raise ValueError(f"{value!r} is not a regular expression ({exc})") from None
+        return value
 
 
 class External(Method):
