@@ -6,6 +6,16 @@ from __future__ import annotations
 
 from slamrun.methods.declare import Source, Weights
 
+# Lie groups on PyTorch (SE3, Sim3), compiled into each GPU image that takes it: DROID-SLAM's submodule (at the
+# commit it records) and what MASt3R-SLAM's pyproject installs
+LIETORCH = Source(
+    "lietorch",
+    "princeton-vl/lietorch",
+    "7f687644fcea81ab337831749445224503c1290d",
+    sha256="2c9c9be882509068e5ec78721d33ebd1258d1311cae2ee82ab399fc77cb94863",
+    tree="15a27b463eaa0afe8b81101f338c899604d98d1c2c6fe22d9ce100357482fdcb",
+)
+
 LIBRARIES: tuple[Source, ...] = (
     Source(
         "pangolin-0.6",
@@ -49,6 +59,7 @@ LIBRARIES: tuple[Source, ...] = (
         sha256="f538a24032c14f1d7d25cf55fd27c5134d3e27b8e005952e2dfe03fb818c2696",
         tree="ce43a2595cc78ee27ca5032022c3773984ef2aad97ec3acb66a80e28647dfac0",
     ),
+    LIETORCH,
     # the TUM-Mono benchmark's own code: its MATLAB evaluator, run under Octave beside slamrun's (bench, tests)
     Source(
         "mono_dataset_code",

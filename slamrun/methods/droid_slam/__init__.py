@@ -25,6 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import Profile
 from slamrun.methods.declare import NativeMethod, Source, Weights
+from slamrun.methods.libraries import LIETORCH
 from slamrun.methods.native_gpu import NativeGpuMethod, build_param, torch_seed_param, weights_param
 
 IMAGE_BUILD = "/opt/droid_slam"
@@ -75,13 +76,7 @@ class DroidSlam(NativeGpuMethod):
             sha256="03488a61c5741994523bee7a52ec1a9c0b17175e8fd5a8cf16de4c5fdebd8d91",
             tree="e7828067e7d5343e85473a5bda4f9b62b5dbcd19cfeb83ca8512334ea717e6ea",
         ),
-        Source(
-            "lietorch",
-            "princeton-vl/lietorch",
-            "7f687644fcea81ab337831749445224503c1290d",
-            sha256="2c9c9be882509068e5ec78721d33ebd1258d1311cae2ee82ab399fc77cb94863",
-            tree="15a27b463eaa0afe8b81101f338c899604d98d1c2c6fe22d9ce100357482fdcb",
-        ),
+        LIETORCH,
         Source(
             "pytorch_scatter",
             "rusty1s/pytorch_scatter",

@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from slamrun.datasets.view import Profile
 from slamrun.methods.declare import NativeMethod, Source, Weights
+from slamrun.methods.libraries import LIETORCH
 from slamrun.methods.native_gpu import NativeGpuMethod, build_param, torch_seed_param, weights_param
 
 IMAGE_BUILD = "/opt/mast3r_slam"
@@ -87,13 +88,7 @@ class Mast3rSlam(NativeGpuMethod):
                 "thirdparty/in3d/thirdparty/pyimgui/",
             ),
         ),
-        Source(
-            "lietorch",
-            "princeton-vl/lietorch",
-            "7f687644fcea81ab337831749445224503c1290d",
-            sha256="2c9c9be882509068e5ec78721d33ebd1258d1311cae2ee82ab399fc77cb94863",
-            tree="15a27b463eaa0afe8b81101f338c899604d98d1c2c6fe22d9ce100357482fdcb",
-        ),
+        LIETORCH,
     )
     network = Weights(
         WEIGHTS_NAME,
