@@ -192,7 +192,7 @@ class Method(ABC):
 
     def infra_from_log(self, log_tail: str) -> str | None:
         """The log's line saying the machine lacks what the method needs (its infra_pattern), if there is one."""
-        if self.infra_pattern and (m := re.search(self.infra_pattern + ".*", log_tail, re.I | re.M)):
+        if self.infra_pattern and (m := re.search(f"(?:{self.infra_pattern}).*", log_tail, re.I | re.M)):
             return m.group(0).strip()
         return None
 
